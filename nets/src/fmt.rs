@@ -1,0 +1,230 @@
+//! The canonical text of a net file: what `petrel fmt` writes, and what PNML import writes.
+//!
+//! Printing a parsed file and parsing the result gives the same model, and printing that again
+//! gives the same text: formatting twice changes nothing.
+
+use crate::model::*;
+use std::fmt::Write as _;
+
+const INDENT: &str = "    ";
+
+/// The canonical text of a whole net file.
+pub fn format_file(file: &NetFile) -> String {
+    let mut out = String::new();
+    for (i, net) in file.nets.iter().enumerate() {
+        if i > 0 {
+            out.push('\n');
+        }
+        format_net(&mut out, net);
+    }
+    if !file.end_comments.is_empty() && !file.nets.is_empty() {
+        out.push('\n');
+    }
+    comments(&mut out, "", &file.end_comments);
+    out
+}
+
+fn comments(out: &mut String, indent: &str, list: &[String]) {
+    for c in list {
+        out.push_str(indent);
+        out.push_str(&comment(c));
+        out.push('\n');
+    }
+}
+
+fn comment(text: &str) -> String {
+    if text.is_empty() {
+        "//".to_string()
+    } else {
+        format!("// {text}")
+    }
+}
+
+fn trailing(out: &mut String, c: &Option<String>) {
+    if let Some(c) = c {
+        out.push_str("  ");
+        out.push_str(&comment(c));
+    }
+}
+
+fn format_net(out: &mut String, net: &NetDecl) {
+    comments(out, "", &net.trivia.comments);
+    let _ = writeln!(out, "net {} {{", net.name);
+    for (i, item) in net.items.iter().enumerate() {
+        if i > 0 && item.trivia.blank_before {
+            out.push('\n');
+        }
+        comments(out, INDENT, &item.trivia.comments);
+        out.push_str(INDENT);
+        match &item.kind {
+            ItemKind::Place(p) => {
+                out.push_str(&format_place(p));
+                trailing(out, &item.trailing);
+                out.push('\n');
+            }
+            ItemKind::Transition(t) => {
+                out.push_str(&format_transition_header(t));
+                let block = !t.actions.is_empty() || !t.end_comments.is_empty();
+                if block {
+                    out.push_str(" {");
+                }
+                trailing(out, &item.trailing);
+                out.push('\n');
+                if block {
+                    let inner = format!("{INDENT}{INDENT}");
+                    for (j, a) in t.actions.iter().enumerate() {
+                        if j > 0 && a.trivia.blank_before {
+                            out.push('\n');
+                        }
+                        comments(out, &inner, &a.trivia.comments);
+                        out.push_str(&inner);
+                        out.push_str(&format_action(&a.action));
+                        trailing(out, &a.trailing);
+                        out.push('\n');
+                    }
+                    comments(out, &inner, &t.end_comments);
+                    out.push_str(INDENT);
+                    out.push_str("}\n");
+                }
+            }
+        }
+    }
+    comments(out, INDENT, &net.end_comments);
+    out.push_str("}\n");
+}
+
+/// `place NAME` or `place NAME = N`.
+pub fn format_place(p: &PlaceDecl) -> String {
+    if p.tokens == 0 {
+        format!("place {}", p.name)
+    } else {
+        format!("place {} = {}", p.name, p.tokens)
+    }
+}
+
+/// `transition NAME on EVENT(bindings): INPUTS -> OUTPUTS`, without the action block.
+pub fn format_transition_header(t: &TransitionDecl) -> String {
+    let mut s = format!("transition {}", t.name);
+    if let Some(trigger) = &t.trigger {
+        s.push_str(" on ");
+        s.push_str(&format_trigger(trigger));
+    }
+    s.push(':');
+    if !t.inputs.is_empty() {
+        s.push(' ');
+        s.push_str(&join_names(&t.inputs));
+    }
+    s.push_str(" ->");
+    if !t.outputs.is_empty() {
+        s.push(' ');
+        s.push_str(&join_names(&t.outputs));
+    }
+    s
+}
+
+/// `EVENT` or `EVENT(a, b: text)`.
+pub fn format_trigger(trigger: &Trigger) -> String {
+    let mut s = trigger.event.text.clone();
+    if !trigger.bindings.is_empty() {
+        let b: Vec<String> = trigger
+            .bindings
+            .iter()
+            .map(|b| match &b.ty {
+                Some((ty, _)) => format!("{}: {}", b.name, ty),
+                None => b.name.text.clone(),
+            })
+            .collect();
+        let _ = write!(s, "({})", b.join(", "));
+    }
+    s
+}
+
+fn join_names(names: &[Name]) -> String {
+    names
+        .iter()
+        .map(|n| n.text.as_str())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// One action as written in a net, such as `call GUI.goto(x, 3.5)`.
+pub fn format_action(a: &Action) -> String {
+    match a {
+        Action::Activate(n) => format!("activate {n}"),
+        Action::Deactivate(n) => format!("deactivate {n}"),
+        Action::CancelTimer(n) => format!("cancel {n}"),
+        Action::StartTimer { timer, after } => {
+            format!("start {timer} after {}", format_duration(after))
+        }
+        Action::Call {
+            program,
+            function,
+            args,
+            ..
+        } => format!("call {program}.{function}({})", format_args(args)),
+        Action::Emit { event, args, .. } => {
+            if args.is_empty() {
+                format!("emit {event}")
+            } else {
+                format!("emit {event}({})", format_args(args))
+            }
+        }
+    }
+}
+
+fn format_duration(d: &DurationExpr) -> String {
+    match d {
+        DurationExpr::Literal { value, unit, .. } => {
+            format!("{}{}", format_number(*value), unit.suffix())
+        }
+        DurationExpr::Seconds(n) => n.text.clone(),
+    }
+}
+
+/// A number without a needless `.0` (durations), exact to the bit.
+fn format_number(v: f64) -> String {
+    if v.fract() == 0.0 && v.abs() < 1e15 {
+        format!("{}", v as i64)
+    } else {
+        format!("{v:?}")
+    }
+}
+
+/// A float that reads back as a float: always with a `.` or an exponent.
+pub fn format_float(v: f64) -> String {
+    // Debug prints the shortest text that reads back to the same bits, and keeps `.0`.
+    format!("{v:?}")
+}
+
+fn format_args(args: &[Expr]) -> String {
+    args.iter().map(format_expr).collect::<Vec<_>>().join(", ")
+}
+
+/// An argument as written.
+pub fn format_expr(e: &Expr) -> String {
+    match e {
+        Expr::Int(v, _) => v.to_string(),
+        Expr::Float(v, _) => format_float(*v),
+        Expr::Bool(b, _) => b.to_string(),
+        Expr::Text(s, _) => quote(s),
+        Expr::List(items, _) => format!("[{}]", format_args(items)),
+        Expr::Var(n) => n.text.clone(),
+    }
+}
+
+/// A text literal with its escapes.
+pub fn quote(s: &str) -> String {
+    let mut out = String::with_capacity(s.len() + 2);
+    out.push('"');
+    for c in s.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            '\n' => out.push_str("\\n"),
+            '\t' => out.push_str("\\t"),
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
+}

@@ -1,0 +1,16 @@
+//! The Petrel net language: the model of a mission project, its parser, checker and formatter,
+//! and its PNML and DOT interchange.
+//!
+//! Pure library: it reads files and nothing else. Every other Petrel crate builds on it, and it
+//! builds on none of them.
+
+pub mod check;
+pub mod compiled;
+pub mod diag;
+pub mod dot;
+pub mod fmt;
+pub mod manifest;
+pub mod model;
+pub mod project;
+pub mod source;
+pub mod syntax;

@@ -1,0 +1,179 @@
+//! Reading a mission project from its directory, and writing one.
+
+use crate::check;
+use crate::compiled::CompiledProject;
+use crate::diag::{Diagnostic, Diagnostics};
+use crate::fmt::format_file;
+use crate::manifest::{format_manifest, parse_manifest};
+use crate::model::Project;
+use crate::source::{FileId, SourceMap};
+use crate::syntax::parse_file;
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// The manifest's file name.
+pub const MANIFEST: &str = "petrel.toml";
+
+/// A project that cannot even be read: a usage or I/O problem (`petrel` exits 2).
+#[derive(Debug)]
+pub enum LoadError {
+    /// The directory has no `petrel.toml`.
+    NoManifest(PathBuf),
+    /// A file could not be read.
+    Io(PathBuf, std::io::Error),
+}
+
+impl fmt::Display for LoadError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            LoadError::NoManifest(dir) => write!(
+                f,
+                "{} is not a Petrel project: it has no {MANIFEST} (give the project directory, the one holding {MANIFEST})",
+                dir.display()
+            ),
+            LoadError::Io(p, e) => write!(f, "cannot read {}: {e}", p.display()),
+        }
+    }
+}
+
+impl std::error::Error for LoadError {}
+
+/// A project read from disk, with its sources (for diagnostics) and what reading found.
+#[derive(Debug)]
+pub struct LoadedProject {
+    /// The project directory.
+    pub dir: PathBuf,
+    /// The model.
+    pub project: Project,
+    /// Text of the manifest and of every net file read.
+    pub sources: SourceMap,
+    /// The manifest's file id.
+    pub manifest_file: FileId,
+    /// For each entry of `project.files`, its file id.
+    pub file_ids: Vec<FileId>,
+    /// Problems found while reading (syntax, missing files).
+    pub diagnostics: Diagnostics,
+}
+
+fn display(dir: &Path, rel: &str) -> String {
+    if dir == Path::new(".") || dir.as_os_str().is_empty() {
+        rel.to_string()
+    } else {
+        dir.join(rel).display().to_string()
+    }
+}
+
+/// Reads the manifest and every net file it names. Syntax errors and missing net files are
+/// diagnostics; only a missing or unreadable manifest is a [`LoadError`].
+pub fn load(dir: &Path) -> Result<LoadedProject, LoadError> {
+    let manifest_path = dir.join(MANIFEST);
+    if !manifest_path.is_file() {
+        return Err(LoadError::NoManifest(dir.to_path_buf()));
+    }
+    let text = std::fs::read_to_string(&manifest_path)
+        .map_err(|e| LoadError::Io(manifest_path.clone(), e))?;
+    let mut sources = SourceMap::new();
+    let mut diagnostics = Diagnostics::new();
+    let manifest_file = sources.add(display(dir, MANIFEST), text.clone());
+    let mut project = Project::default();
+    let mut file_ids = Vec::new();
+    if let Some(manifest) = parse_manifest(manifest_file, &text, &mut diagnostics) {
+        for f in &manifest.files {
+            let path = dir.join(&f.path);
+            match std::fs::read_to_string(&path) {
+                Ok(text) => {
+                    let id = sources.add(display(dir, &f.path), text.clone());
+                    project
+                        .files
+                        .push(parse_file(id, &f.path, &text, &mut diagnostics));
+                    file_ids.push(id);
+                }
+                Err(e) => {
+                    let why = if e.kind() == std::io::ErrorKind::NotFound {
+                        "does not exist".to_string()
+                    } else {
+                        format!("cannot be read: {e}")
+                    };
+                    diagnostics.push(
+                        Diagnostic::error(
+                            "E0104",
+                            f.span,
+                            format!("net file `{}` {why}", path.display()),
+                        )
+                        .label("named here")
+                        .help(format!(
+                            "create it, or correct the path (relative to {})",
+                            display(dir, ".")
+                        )),
+                    );
+                }
+            }
+        }
+        // A net file lying in the project but not listed is most likely forgotten.
+        if let Ok(entries) = std::fs::read_dir(dir) {
+            let mut extra: Vec<String> = entries
+                .filter_map(|e| e.ok())
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .filter(|n| n.ends_with(".pn") && !manifest.files.iter().any(|f| &f.path == n))
+                .collect();
+            extra.sort();
+            for n in extra {
+                diagnostics.push(
+                    Diagnostic::warning(
+                        "W0101",
+                        crate::source::Span::new(manifest_file, 0, 0),
+                        format!("net file `{n}` is in the project directory but not in `files`"),
+                    )
+                    .label("the manifest's file list")
+                    .help(format!(
+                        "add \"{n}\" to `files` in [project], or move it out of the project"
+                    )),
+                );
+            }
+        }
+        project.manifest = manifest;
+    }
+    Ok(LoadedProject {
+        dir: dir.to_path_buf(),
+        project,
+        sources,
+        manifest_file,
+        file_ids,
+        diagnostics,
+    })
+}
+
+/// Reads and checks a project: every finding, sorted, and the compiled project if it has no
+/// error.
+pub fn load_and_check(
+    dir: &Path,
+) -> Result<(LoadedProject, Option<CompiledProject>, Diagnostics), LoadError> {
+    let loaded = load(dir)?;
+    let mut all = loaded.diagnostics.clone();
+    // Checking a project whose manifest could not be read would only add noise.
+    let manifest_ok = !all
+        .iter()
+        .any(|d| d.code == "E0101" && d.span.map(|s| s.file) == Some(loaded.manifest_file));
+    if !manifest_ok {
+        return Ok((loaded, None, all));
+    }
+    let (compiled, found) = check::check(&loaded.project);
+    all.extend(found);
+    all.sort();
+    let compiled = if all.has_errors() { None } else { compiled };
+    Ok((loaded, compiled, all))
+}
+
+/// Writes a project (manifest and net files, in canonical layout) into `dir`, creating it.
+pub fn write(dir: &Path, project: &Project) -> std::io::Result<()> {
+    std::fs::create_dir_all(dir)?;
+    std::fs::write(dir.join(MANIFEST), format_manifest(&project.manifest))?;
+    for f in &project.files {
+        let path = dir.join(&f.path);
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent)?;
+        }
+        std::fs::write(path, format_file(f))?;
+    }
+    Ok(())
+}

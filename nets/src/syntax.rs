@@ -1,0 +1,815 @@
+//! The net language: lexer and parser from text to [`crate::model::NetFile`].
+//!
+//! Hand-written so that every error can say exactly what was expected and the parser can carry
+//! on to report the next one. Newlines separate nothing (every statement starts with a keyword),
+//! but the lexer notes them so comments and blank lines stay where the author put them.
+
+use crate::diag::{Diagnostic, Diagnostics};
+use crate::model::*;
+use crate::source::{FileId, Span};
+
+/// Words that cannot be used as names anywhere.
+pub fn is_keyword(s: &str) -> bool {
+    matches!(s, "true" | "false")
+}
+
+#[derive(Clone, Debug, PartialEq)]
+enum Tok {
+    Ident(String),
+    Int(i64),
+    Float(f64),
+    Duration(f64, TimeUnit),
+    Text(String),
+    Comment(String),
+    LBrace,
+    RBrace,
+    LParen,
+    RParen,
+    LBracket,
+    RBracket,
+    Comma,
+    Colon,
+    Dot,
+    Arrow,
+    Equals,
+    Eof,
+}
+
+impl Tok {
+    fn describe(&self) -> String {
+        match self {
+            Tok::Ident(s) => format!("`{s}`"),
+            Tok::Int(i) => format!("the number `{i}`"),
+            Tok::Float(f) => format!("the number `{f:?}`"),
+            Tok::Duration(..) => "a duration".into(),
+            Tok::Text(_) => "a text literal".into(),
+            Tok::Comment(_) => "a comment".into(),
+            Tok::LBrace => "`{`".into(),
+            Tok::RBrace => "`}`".into(),
+            Tok::LParen => "`(`".into(),
+            Tok::RParen => "`)`".into(),
+            Tok::LBracket => "`[`".into(),
+            Tok::RBracket => "`]`".into(),
+            Tok::Comma => "`,`".into(),
+            Tok::Colon => "`:`".into(),
+            Tok::Dot => "`.`".into(),
+            Tok::Arrow => "`->`".into(),
+            Tok::Equals => "`=`".into(),
+            Tok::Eof => "the end of the file".into(),
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+struct Token {
+    tok: Tok,
+    span: Span,
+    /// First token on its line.
+    line_start: bool,
+    /// A blank line stands between this token and the previous one.
+    blank_before: bool,
+}
+
+fn lex(file: FileId, text: &str, diags: &mut Diagnostics) -> Vec<Token> {
+    let bytes = text.as_bytes();
+    let mut toks = Vec::new();
+    let mut i = 0;
+    let mut newlines = 2; // start of file counts as line start, not as blank line
+    let mut first = true;
+    while i < bytes.len() {
+        let c = bytes[i];
+        if c == b'\n' {
+            newlines += 1;
+            i += 1;
+            continue;
+        }
+        if c.is_ascii_whitespace() {
+            i += 1;
+            continue;
+        }
+        let start = i;
+        let line_start = newlines > 0;
+        let blank_before = newlines > 1 && !first;
+        let sp = |e: usize| Span::new(file, start, e);
+        let tok = if c == b'/' && bytes.get(i + 1) == Some(&b'/') {
+            let end = text[i..].find('\n').map(|n| i + n).unwrap_or(text.len());
+            let body = text[i + 2..end].trim_end();
+            let body = body.strip_prefix(' ').unwrap_or(body);
+            i = end;
+            Tok::Comment(body.to_string())
+        } else if c.is_ascii_alphabetic() || c == b'_' {
+            while i < bytes.len() && (bytes[i].is_ascii_alphanumeric() || bytes[i] == b'_') {
+                i += 1;
+            }
+            Tok::Ident(text[start..i].to_string())
+        } else if c.is_ascii_digit()
+            || (c == b'-' && bytes.get(i + 1).is_some_and(u8::is_ascii_digit))
+        {
+            i += 1;
+            let mut is_float = false;
+            while i < bytes.len() {
+                let b = bytes[i];
+                if b.is_ascii_digit() || b == b'_' {
+                    i += 1;
+                } else if b == b'.' && bytes.get(i + 1).is_some_and(u8::is_ascii_digit) && !is_float
+                {
+                    is_float = true;
+                    i += 1;
+                } else if (b == b'e' || b == b'E')
+                    && (bytes.get(i + 1).is_some_and(u8::is_ascii_digit)
+                        || (matches!(bytes.get(i + 1), Some(b'-' | b'+'))
+                            && bytes.get(i + 2).is_some_and(u8::is_ascii_digit)))
+                {
+                    is_float = true;
+                    i += 2;
+                } else {
+                    break;
+                }
+            }
+            let number: String = text[start..i].chars().filter(|&c| c != '_').collect();
+            let suffix_start = i;
+            while i < bytes.len() && bytes[i].is_ascii_alphabetic() {
+                i += 1;
+            }
+            let suffix = &text[suffix_start..i];
+            if !suffix.is_empty() {
+                match TimeUnit::ALL.into_iter().find(|u| u.suffix() == suffix) {
+                    Some(unit) => match number.parse::<f64>() {
+                        Ok(v) => Tok::Duration(v, unit),
+                        Err(_) => Tok::Int(0),
+                    },
+                    None => {
+                        diags.push(
+                            Diagnostic::error(
+                                "E0001",
+                                sp(i),
+                                format!("unknown time unit `{suffix}`"),
+                            )
+                            .label("not a unit")
+                            .help("durations are written `200ms`, `30s`, `1.5min` or `2h`"),
+                        );
+                        Tok::Duration(0.0, TimeUnit::Seconds)
+                    }
+                }
+            } else if is_float {
+                match number.parse::<f64>() {
+                    Ok(v) if v.is_finite() => Tok::Float(v),
+                    _ => {
+                        diags.push(
+                            Diagnostic::error(
+                                "E0001",
+                                sp(i),
+                                format!("the number `{number}` is too large for a float"),
+                            )
+                            .label("not a finite 64-bit float")
+                            .help("floats range up to about 1.8e308"),
+                        );
+                        Tok::Float(0.0)
+                    }
+                }
+            } else {
+                match number.parse::<i64>() {
+                    Ok(v) => Tok::Int(v),
+                    Err(_) => {
+                        diags.push(
+                            Diagnostic::error(
+                                "E0001",
+                                sp(i),
+                                format!("the integer `{number}` does not fit in 64 bits"),
+                            )
+                            .label("too large")
+                            .help("integers range from -9223372036854775808 to 9223372036854775807; write a float (with a `.`) for larger values"),
+                        );
+                        Tok::Int(0)
+                    }
+                }
+            }
+        } else if c == b'"' {
+            i += 1;
+            let mut s = String::new();
+            let mut closed = false;
+            while i < bytes.len() {
+                let ch = text[i..].chars().next().unwrap_or('\0');
+                if ch == '"' {
+                    i += 1;
+                    closed = true;
+                    break;
+                }
+                if ch == '\n' {
+                    break;
+                }
+                if ch == '\\' {
+                    let esc = text[i + 1..].chars().next();
+                    match esc {
+                        Some('n') => s.push('\n'),
+                        Some('t') => s.push('\t'),
+                        Some('"') => s.push('"'),
+                        Some('\\') => s.push('\\'),
+                        other => {
+                            let w = other.map(char::len_utf8).unwrap_or(0);
+                            diags.push(
+                                Diagnostic::error(
+                                    "E0001",
+                                    Span::new(file, i, i + 1 + w),
+                                    "unknown escape in text",
+                                )
+                                .label("not an escape")
+                                .help(r#"the escapes are \n, \t, \" and \\"#),
+                            );
+                        }
+                    }
+                    i += 1 + esc.map(char::len_utf8).unwrap_or(0);
+                    continue;
+                }
+                s.push(ch);
+                i += ch.len_utf8();
+            }
+            if !closed {
+                diags.push(
+                    Diagnostic::error("E0001", sp(i), "text is not closed")
+                        .label("this text has no closing `\"` on its line")
+                        .help("add a `\"` at the end of the text"),
+                );
+            }
+            Tok::Text(s)
+        } else {
+            i += 1;
+            match c {
+                b'{' => Tok::LBrace,
+                b'}' => Tok::RBrace,
+                b'(' => Tok::LParen,
+                b')' => Tok::RParen,
+                b'[' => Tok::LBracket,
+                b']' => Tok::RBracket,
+                b',' => Tok::Comma,
+                b':' => Tok::Colon,
+                b'.' => Tok::Dot,
+                b'=' => Tok::Equals,
+                b'-' if bytes.get(i) == Some(&b'>') => {
+                    i += 1;
+                    Tok::Arrow
+                }
+                _ => {
+                    let ch = text[start..].chars().next().unwrap_or('?');
+                    i = start + ch.len_utf8();
+                    diags.push(
+                        Diagnostic::error("E0001", sp(i), format!("unexpected character `{ch}`"))
+                            .label("not part of the net language")
+                            .help("names use letters, digits and `_`; comments start with `//`"),
+                    );
+                    continue;
+                }
+            }
+        };
+        toks.push(Token {
+            tok,
+            span: sp(i),
+            line_start,
+            blank_before,
+        });
+        newlines = 0;
+        first = false;
+    }
+    toks.push(Token {
+        tok: Tok::Eof,
+        span: Span::new(file, text.len(), text.len()),
+        line_start: true,
+        blank_before: false,
+    });
+    toks
+}
+
+/// Marks a syntax error already reported; the parser then skips ahead.
+struct Recover;
+
+type PResult<T> = Result<T, Recover>;
+
+struct Parser<'d> {
+    toks: Vec<Token>,
+    pos: usize,
+    diags: &'d mut Diagnostics,
+    /// End-of-line comments that have no item of their own (after `net X {` or a closing
+    /// brace): they become leading comments of whatever follows, so none is lost.
+    pending: Vec<String>,
+}
+
+impl Parser<'_> {
+    fn peek(&self) -> &Token {
+        &self.toks[self.pos]
+    }
+
+    fn bump(&mut self) -> Token {
+        let t = self.toks[self.pos].clone();
+        if self.pos + 1 < self.toks.len() {
+            self.pos += 1;
+        }
+        t
+    }
+
+    fn at_ident(&self, kw: &str) -> bool {
+        matches!(&self.peek().tok, Tok::Ident(s) if s == kw)
+    }
+
+    fn at(&self, t: &Tok) -> bool {
+        &self.peek().tok == t
+    }
+
+    fn error(&mut self, expected: &str, help: &str) -> Recover {
+        let t = self.peek().clone();
+        self.diags.push(
+            Diagnostic::error(
+                "E0001",
+                t.span,
+                format!("expected {expected}, found {}", t.tok.describe()),
+            )
+            .label(format!("expected {expected} here"))
+            .help(help),
+        );
+        Recover
+    }
+
+    fn expect(&mut self, t: Tok, help: &str) -> PResult<Span> {
+        if self.at(&t) {
+            Ok(self.bump().span)
+        } else {
+            Err(self.error(&t.describe(), help))
+        }
+    }
+
+    fn name(&mut self, what: &str, help: &str) -> PResult<Name> {
+        match &self.peek().tok {
+            Tok::Ident(s) if !is_keyword(s) => {
+                let t = self.bump();
+                let Tok::Ident(text) = t.tok else {
+                    unreachable!()
+                };
+                Ok(Name { text, span: t.span })
+            }
+            _ => Err(self.error(what, help)),
+        }
+    }
+
+    /// Whole-line comments (and the blank line before the first of them) ahead of an item.
+    fn leading(&mut self) -> Trivia {
+        let blank_before = self.peek().blank_before;
+        let mut comments = std::mem::take(&mut self.pending);
+        while let Tok::Comment(c) = &self.peek().tok {
+            comments.push(c.clone());
+            self.bump();
+        }
+        Trivia {
+            blank_before,
+            comments,
+        }
+    }
+
+    /// A comment at the end of the line just parsed.
+    fn trailing(&mut self) -> Option<String> {
+        match &self.peek().tok {
+            Tok::Comment(c) if !self.peek().line_start => {
+                let c = c.clone();
+                self.bump();
+                Some(c)
+            }
+            _ => None,
+        }
+    }
+
+    /// Keeps an end-of-line comment that belongs to no item for what follows.
+    fn stash_trailing(&mut self) {
+        if let Some(c) = self.trailing() {
+            self.pending.push(c);
+        }
+    }
+
+    /// Skips to the next token that starts a line and satisfies `stop`.
+    fn skip_until(&mut self, stop: impl Fn(&Tok) -> bool) {
+        loop {
+            let t = self.peek();
+            if t.tok == Tok::Eof || (t.line_start && stop(&t.tok)) {
+                return;
+            }
+            self.bump();
+        }
+    }
+
+    fn file(&mut self, path: &str) -> NetFile {
+        let mut nets = Vec::new();
+        loop {
+            let trivia = self.leading();
+            if self.at(&Tok::Eof) {
+                return NetFile {
+                    path: path.to_string(),
+                    nets,
+                    end_comments: trivia.comments,
+                };
+            }
+            match self.net(trivia) {
+                Ok(n) => nets.push(n),
+                Err(Recover) => {
+                    self.bump();
+                    self.skip_until(|t| matches!(t, Tok::Ident(s) if s == "net"));
+                }
+            }
+        }
+    }
+
+    fn net(&mut self, outer: Trivia) -> PResult<NetDecl> {
+        if !self.at_ident("net") {
+            return Err(self.error(
+                "`net`",
+                "a net file holds nets: `net NAME { place ... transition ... }`",
+            ));
+        }
+        self.bump();
+        let name = self.name("a net name", "write `net NAME {`")?;
+        self.expect(
+            Tok::LBrace,
+            "the net's places and transitions go between `{` and `}`",
+        )?;
+        self.stash_trailing();
+        let mut items = Vec::new();
+        loop {
+            let trivia = self.leading();
+            if self.at(&Tok::RBrace) {
+                self.bump();
+                self.stash_trailing();
+                return Ok(NetDecl {
+                    trivia: outer,
+                    name,
+                    items,
+                    end_comments: trivia.comments,
+                });
+            }
+            if self.at(&Tok::Eof) {
+                return Err(self.error(
+                    "`}`",
+                    &format!("net `{name}` is not closed: add `}}` after its last transition"),
+                ));
+            }
+            match self.item(trivia) {
+                Ok(item) => items.push(item),
+                Err(Recover) => {
+                    self.skip_item();
+                    if self.at_ident("net") {
+                        return Ok(NetDecl {
+                            trivia: outer,
+                            name,
+                            items,
+                            end_comments: Vec::new(),
+                        });
+                    }
+                }
+            }
+        }
+    }
+
+    /// Skips the rest of a broken item, over any action block it has, up to the next item.
+    fn skip_item(&mut self) {
+        let mut depth = 0usize;
+        self.bump();
+        loop {
+            let t = self.peek();
+            match &t.tok {
+                Tok::Eof => return,
+                Tok::Ident(s)
+                    if depth == 0
+                        && t.line_start
+                        && (s == "place" || s == "transition" || s == "net") =>
+                {
+                    return
+                }
+                Tok::LBrace => depth += 1,
+                Tok::RBrace if depth == 0 => return,
+                Tok::RBrace => depth -= 1,
+                _ => {}
+            }
+            self.bump();
+        }
+    }
+
+    fn item(&mut self, trivia: Trivia) -> PResult<Item> {
+        if self.at_ident("place") {
+            self.bump();
+            let name = self.name("a place name", "write `place NAME` or `place NAME = 1`")?;
+            let (tokens, tokens_span) = if self.at(&Tok::Equals) {
+                self.bump();
+                match self.peek().tok {
+                    Tok::Int(n) if n >= 0 => {
+                        let t = self.bump();
+                        (u32::try_from(n).unwrap_or(u32::MAX), Some(t.span))
+                    }
+                    _ => {
+                        return Err(self.error(
+                            "an initial marking (0 or 1)",
+                            "write `place NAME = 1` for a marked place, or `place NAME` for an empty one",
+                        ))
+                    }
+                }
+            } else {
+                (0, None)
+            };
+            let trailing = self.trailing();
+            return Ok(Item {
+                trivia,
+                kind: ItemKind::Place(PlaceDecl {
+                    name,
+                    tokens,
+                    tokens_span,
+                }),
+                trailing,
+            });
+        }
+        if self.at_ident("transition") {
+            self.bump();
+            let t = self.transition()?;
+            return Ok(Item {
+                trivia,
+                kind: ItemKind::Transition(t.0),
+                trailing: t.1,
+            });
+        }
+        Err(self.error(
+            "`place`, `transition` or `}`",
+            "a net holds `place NAME [= 1]` and `transition NAME [on EVENT]: INPUTS -> OUTPUTS [{ ACTIONS }]`",
+        ))
+    }
+
+    fn transition(&mut self) -> PResult<(TransitionDecl, Option<String>)> {
+        const SHAPE: &str =
+            "a transition reads `transition NAME [on EVENT(params)]: INPUTS -> OUTPUTS [{ ACTIONS }]`";
+        let name = self.name("a transition name", SHAPE)?;
+        let trigger = if self.at_ident("on") {
+            self.bump();
+            let event = self.name("an event name", SHAPE)?;
+            let mut bindings = Vec::new();
+            if self.at(&Tok::LParen) {
+                self.bump();
+                while !self.at(&Tok::RParen) {
+                    let name = self.name(
+                        "a name for the event parameter",
+                        "bind each event parameter to a name, in order: `on alarm(reason)`; `_` ignores one",
+                    )?;
+                    let ty = if self.at(&Tok::Colon) {
+                        self.bump();
+                        Some(self.ty()?)
+                    } else {
+                        None
+                    };
+                    bindings.push(Binding { name, ty });
+                    if !self.at(&Tok::RParen) {
+                        self.expect(Tok::Comma, "separate parameters with `,`")?;
+                    }
+                }
+                self.bump();
+            }
+            Some(Trigger { event, bindings })
+        } else {
+            None
+        };
+        self.expect(Tok::Colon, SHAPE)?;
+        let inputs = self.place_list()?;
+        self.expect(Tok::Arrow, SHAPE)?;
+        let outputs = self.place_list()?;
+        let mut actions = Vec::new();
+        let mut end_comments = Vec::new();
+        let trailing;
+        if self.at(&Tok::LBrace) {
+            self.bump();
+            trailing = self.trailing();
+            loop {
+                let trivia = self.leading();
+                if self.at(&Tok::RBrace) {
+                    self.bump();
+                    end_comments = trivia.comments;
+                    break;
+                }
+                if self.at(&Tok::Eof) {
+                    return Err(self.error(
+                        "`}`",
+                        &format!("the actions of transition `{name}` are not closed: add `}}`"),
+                    ));
+                }
+                match self.action() {
+                    Ok(action) => {
+                        let trailing = self.trailing();
+                        actions.push(ActionItem {
+                            trivia,
+                            action,
+                            trailing,
+                        })
+                    }
+                    Err(Recover) => {
+                        // Stay inside the block: skip to the next action or its end.
+                        self.bump();
+                        self.skip_until(|t| {
+                            matches!(t, Tok::RBrace)
+                                || matches!(t, Tok::Ident(s) if ACTION_WORDS.contains(&s.as_str()))
+                        });
+                    }
+                }
+            }
+            self.stash_trailing();
+        } else {
+            trailing = self.trailing();
+        }
+        Ok((
+            TransitionDecl {
+                name,
+                trigger,
+                inputs,
+                outputs,
+                actions,
+                end_comments,
+            },
+            trailing,
+        ))
+    }
+
+    fn place_list(&mut self) -> PResult<Vec<Name>> {
+        let mut out = Vec::new();
+        if !matches!(self.peek().tok, Tok::Ident(_)) {
+            return Ok(out);
+        }
+        loop {
+            out.push(self.name("a place name", "list places separated by `,`: `a, b -> c`")?);
+            if !self.at(&Tok::Comma) {
+                return Ok(out);
+            }
+            self.bump();
+        }
+    }
+
+    fn ty(&mut self) -> PResult<(Type, Span)> {
+        const HELP: &str = "the types are int, float, bool, text and [float]";
+        let start = self.peek().span;
+        if self.at(&Tok::LBracket) {
+            self.bump();
+            let inner = self.name("a type", HELP)?;
+            let end = self.expect(Tok::RBracket, HELP)?;
+            if inner.text == "float" {
+                return Ok((Type::FloatList, start.to(end)));
+            }
+            self.diags.push(
+                Diagnostic::error("E0001", inner.span, format!("no list type `[{inner}]`"))
+                    .label("only lists of floats exist")
+                    .help(HELP),
+            );
+            return Err(Recover);
+        }
+        let name = self.name("a type", HELP)?;
+        match Type::from_keyword(&name.text) {
+            Some(t) if t != Type::FloatList => Ok((t, name.span)),
+            _ => {
+                self.diags.push(
+                    Diagnostic::error("E0001", name.span, format!("unknown type `{name}`"))
+                        .label("not a type")
+                        .help(HELP),
+                );
+                Err(Recover)
+            }
+        }
+    }
+
+    fn action(&mut self) -> PResult<Action> {
+        let word = match &self.peek().tok {
+            Tok::Ident(s) if ACTION_WORDS.contains(&s.as_str()) => s.clone(),
+            _ => {
+                return Err(self.error(
+                    "an action",
+                    "the actions are `activate NET`, `deactivate NET`, `start TIMER after 30s`, `cancel TIMER`, `call PROGRAM.FUNCTION(args)` and `emit EVENT(args)`",
+                ))
+            }
+        };
+        let start = self.bump().span;
+        Ok(match word.as_str() {
+            "activate" => Action::Activate(self.name("a net name", "write `activate NET`")?),
+            "deactivate" => Action::Deactivate(self.name("a net name", "write `deactivate NET`")?),
+            "cancel" => Action::CancelTimer(self.name("a timer name", "write `cancel TIMER`")?),
+            "start" => {
+                const HELP: &str = "write `start TIMER after 30s`, or `after NAME` with an event parameter in seconds";
+                let timer = self.name("a timer name", HELP)?;
+                if !self.at_ident("after") {
+                    return Err(self.error("`after`", HELP));
+                }
+                self.bump();
+                let t = self.peek().clone();
+                let after = match t.tok {
+                    Tok::Duration(value, unit) => {
+                        self.bump();
+                        DurationExpr::Literal {
+                            value,
+                            unit,
+                            span: t.span,
+                        }
+                    }
+                    Tok::Ident(_) => DurationExpr::Seconds(self.name("a duration", HELP)?),
+                    _ => return Err(self.error("a duration such as `30s`", HELP)),
+                };
+                Action::StartTimer { timer, after }
+            }
+            "call" => {
+                const HELP: &str = "write `call PROGRAM.FUNCTION(arg, ...)`";
+                let program = self.name("a program name", HELP)?;
+                self.expect(Tok::Dot, HELP)?;
+                let function = self.name("a function name", HELP)?;
+                self.expect(Tok::LParen, HELP)?;
+                let (args, end) = self.args(Tok::RParen)?;
+                Action::Call {
+                    program,
+                    function,
+                    args,
+                    span: start.to(end),
+                }
+            }
+            "emit" => {
+                let event = self.name(
+                    "an event name",
+                    "write `emit EVENT` or `emit EVENT(arg, ...)`",
+                )?;
+                let mut span = start.to(event.span);
+                let args = if self.at(&Tok::LParen) {
+                    self.bump();
+                    let (args, end) = self.args(Tok::RParen)?;
+                    span = span.to(end);
+                    args
+                } else {
+                    Vec::new()
+                };
+                Action::Emit { event, args, span }
+            }
+            _ => unreachable!("ACTION_WORDS lists exactly the words matched above"),
+        })
+    }
+
+    /// Arguments up to and including `close`; returns them and the closing span.
+    fn args(&mut self, close: Tok) -> PResult<(Vec<Expr>, Span)> {
+        let mut args = Vec::new();
+        loop {
+            if self.at(&close) {
+                return Ok((args, self.bump().span));
+            }
+            args.push(self.expr()?);
+            if !self.at(&close) {
+                self.expect(Tok::Comma, "separate arguments with `,`")?;
+            }
+        }
+    }
+
+    fn expr(&mut self) -> PResult<Expr> {
+        let t = self.peek().clone();
+        let e = match t.tok {
+            Tok::Int(v) => Expr::Int(v, t.span),
+            Tok::Float(v) => Expr::Float(v, t.span),
+            Tok::Text(s) => Expr::Text(s, t.span),
+            Tok::Ident(ref s) if s == "true" => Expr::Bool(true, t.span),
+            Tok::Ident(ref s) if s == "false" => Expr::Bool(false, t.span),
+            Tok::Ident(_) => return Ok(Expr::Var(self.name("a value", "")?)),
+            Tok::LBracket => {
+                self.bump();
+                let (items, end) = self.args(Tok::RBracket)?;
+                return Ok(Expr::List(items, t.span.to(end)));
+            }
+            _ => {
+                return Err(self.error(
+                    "a value",
+                    "an argument is a number, `true`, `false`, a \"text\", a list `[1.0, 2.0]` or a name bound by the event",
+                ))
+            }
+        };
+        self.bump();
+        Ok(e)
+    }
+}
+
+const ACTION_WORDS: [&str; 6] = ["activate", "deactivate", "start", "cancel", "call", "emit"];
+
+/// Parses one net file. Syntax errors go to `diags`; the returned file holds every net and item
+/// that could be read, so later checks still run on the rest.
+pub fn parse_file(file: FileId, path: &str, text: &str, diags: &mut Diagnostics) -> NetFile {
+    let toks = lex(file, text, diags);
+    let mut p = Parser {
+        toks,
+        pos: 0,
+        diags,
+        pending: Vec::new(),
+    };
+    p.file(path)
+}
+
+/// Parses one action written alone, as PNML's `<toolspecific tool="petrel">` blocks carry them.
+pub fn parse_action(file: FileId, text: &str, diags: &mut Diagnostics) -> Option<Action> {
+    let toks = lex(file, text, diags);
+    let mut p = Parser {
+        toks,
+        pos: 0,
+        diags,
+        pending: Vec::new(),
+    };
+    let action = p.action().ok()?;
+    if !p.at(&Tok::Eof) {
+        p.error("the end of the action", "write one action only");
+        return None;
+    }
+    Some(action)
+}

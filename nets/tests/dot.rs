@@ -1,0 +1,806 @@
+//! Tests of the Graphviz DOT drawing (`petrel_nets::dot`).
+//!
+//! Graphviz is not available to tests, so a small structural validator below parses the subset
+//! of DOT the drawing uses and checks what Graphviz would trip on or silently get wrong: balanced
+//! braces and brackets, terminated strings, unique node declarations, and edges whose ends are
+//! all declared nodes (Graphviz would invent an unstyled node for a typo instead of failing).
+//!
+//! The whole-project golden is `tests/data/dot/survey.dot`; run with `PETREL_BLESS=1` to rewrite
+//! it after an intended change, then review the difference.
+
+use petrel_nets::dot::project_to_dot;
+use petrel_nets::model::*;
+use petrel_nets::source::Span;
+
+// ---------------------------------------------------------------------------------------------
+// Building projects.
+
+fn name(s: &str) -> Name {
+    Name::synthetic(s)
+}
+
+fn names(list: &[&str]) -> Vec<Name> {
+    list.iter().map(|s| name(s)).collect()
+}
+
+fn place(n: &str, tokens: u32) -> Item {
+    item(ItemKind::Place(PlaceDecl {
+        name: name(n),
+        tokens,
+        tokens_span: None,
+    }))
+}
+
+fn item(kind: ItemKind) -> Item {
+    Item {
+        trivia: Trivia::default(),
+        kind,
+        trailing: None,
+    }
+}
+
+fn transition(
+    n: &str,
+    trigger: Option<Trigger>,
+    inputs: &[&str],
+    outputs: &[&str],
+    actions: Vec<Action>,
+) -> Item {
+    item(ItemKind::Transition(TransitionDecl {
+        name: name(n),
+        trigger,
+        inputs: names(inputs),
+        outputs: names(outputs),
+        actions: actions
+            .into_iter()
+            .map(|action| ActionItem {
+                trivia: Trivia::default(),
+                action,
+                trailing: None,
+            })
+            .collect(),
+        end_comments: Vec::new(),
+    }))
+}
+
+fn trigger(event: &str, bindings: &[(&str, Option<Type>)]) -> Option<Trigger> {
+    Some(Trigger {
+        event: name(event),
+        bindings: bindings
+            .iter()
+            .map(|(n, ty)| Binding {
+                name: name(n),
+                ty: ty.map(|t| (t, Span::default())),
+            })
+            .collect(),
+    })
+}
+
+fn net(n: &str, items: Vec<Item>) -> NetDecl {
+    NetDecl {
+        trivia: Trivia::default(),
+        name: name(n),
+        items,
+        end_comments: Vec::new(),
+    }
+}
+
+fn global(n: &str, tokens: u32) -> GlobalPlaceDecl {
+    GlobalPlaceDecl {
+        name: name(n),
+        tokens,
+    }
+}
+
+fn project(
+    project_name: &str,
+    start: &[&str],
+    globals: Vec<GlobalPlaceDecl>,
+    nets: Vec<NetDecl>,
+) -> Project {
+    Project {
+        manifest: Manifest {
+            name: project_name.to_string(),
+            files: vec![FileRef {
+                path: "nets/main.pn".to_string(),
+                span: Span::default(),
+            }],
+            start: names(start),
+            globals,
+            ..Manifest::default()
+        },
+        files: vec![NetFile {
+            path: "nets/main.pn".to_string(),
+            nets,
+            end_comments: Vec::new(),
+        }],
+    }
+}
+
+/// Two nets, `Flight` active at start and `Payload` not; the global place `link` is used by
+/// both, `comms` only by `Flight`; `Payload` names a place `ghost` that exists nowhere.
+fn survey() -> Project {
+    let flight = net(
+        "Flight",
+        vec![
+            place("idle", 1),
+            place("flying", 0),
+            transition(
+                "takeoff",
+                trigger("go", &[("alt", None), ("reason", Some(Type::Text))]),
+                &["idle", "link"],
+                &["flying"],
+                vec![
+                    Action::Call {
+                        program: name("GUI"),
+                        function: name("say"),
+                        args: vec![
+                            Expr::Text("say \"hi\" \\ now".to_string(), Span::default()),
+                            Expr::Var(name("alt")),
+                        ],
+                        span: Span::default(),
+                    },
+                    Action::StartTimer {
+                        timer: name("watchdog"),
+                        after: DurationExpr::Literal {
+                            value: 30.0,
+                            unit: TimeUnit::Seconds,
+                            span: Span::default(),
+                        },
+                    },
+                    Action::Activate(name("Payload")),
+                ],
+            ),
+            transition(
+                "land",
+                None,
+                &["flying"],
+                &["idle", "link", "comms"],
+                vec![],
+            ),
+        ],
+    );
+    let payload = net(
+        "Payload",
+        vec![
+            place("ready", 1),
+            place("busy", 0),
+            transition(
+                "work",
+                trigger("tick", &[]),
+                &["ready", "link"],
+                &["busy"],
+                vec![Action::Emit {
+                    event: name("done"),
+                    args: vec![],
+                    span: Span::default(),
+                }],
+            ),
+            transition(
+                "finish",
+                None,
+                &["busy", "ghost"],
+                &["ready", "link"],
+                vec![],
+            ),
+        ],
+    );
+    project(
+        "survey",
+        &["Flight"],
+        vec![global("link", 1), global("comms", 0)],
+        vec![flight, payload],
+    )
+}
+
+// ---------------------------------------------------------------------------------------------
+// A structural DOT validator for the subset the drawing uses.
+
+#[derive(Clone, Debug, PartialEq)]
+enum Tok {
+    /// An unquoted identifier or numeral.
+    Id(String),
+    /// A quoted string, inner text as written (escapes kept).
+    Str(String),
+    /// `{ } [ ] ; , =` or `->`.
+    Punct(&'static str),
+}
+
+fn tokenize(text: &str) -> Result<Vec<Tok>, String> {
+    let chars: Vec<char> = text.chars().collect();
+    let mut toks = Vec::new();
+    let mut i = 0;
+    while i < chars.len() {
+        let c = chars[i];
+        if c.is_whitespace() {
+            i += 1;
+        } else if c == '/' && chars.get(i + 1) == Some(&'/') {
+            while i < chars.len() && chars[i] != '\n' {
+                i += 1;
+            }
+        } else if c == '"' {
+            let mut s = String::new();
+            i += 1;
+            loop {
+                match chars.get(i) {
+                    None => return Err("unterminated string".to_string()),
+                    Some('"') => break,
+                    Some('\\') => {
+                        let next = chars
+                            .get(i + 1)
+                            .ok_or_else(|| "backslash at end of input".to_string())?;
+                        s.push('\\');
+                        s.push(*next);
+                        i += 2;
+                    }
+                    Some(&ch) => {
+                        s.push(ch);
+                        i += 1;
+                    }
+                }
+            }
+            i += 1;
+            toks.push(Tok::Str(s));
+        } else if c == '-' && chars.get(i + 1) == Some(&'>') {
+            toks.push(Tok::Punct("->"));
+            i += 2;
+        } else if let Some(p) = ["{", "}", "[", "]", ";", ",", "="]
+            .into_iter()
+            .find(|p| p.starts_with(c))
+        {
+            toks.push(Tok::Punct(p));
+            i += 1;
+        } else if c.is_ascii_alphabetic() || c == '_' {
+            let start = i;
+            while i < chars.len() && (chars[i].is_ascii_alphanumeric() || chars[i] == '_') {
+                i += 1;
+            }
+            toks.push(Tok::Id(chars[start..i].iter().collect()));
+        } else if c.is_ascii_digit() || c == '.' || c == '-' {
+            // A numeral: -?(.digits | digits(.digits?)?).
+            let start = i;
+            if c == '-' {
+                i += 1;
+            }
+            let digits_start = i;
+            while i < chars.len() && (chars[i].is_ascii_digit() || chars[i] == '.') {
+                i += 1;
+            }
+            let body: String = chars[digits_start..i].iter().collect();
+            if body.is_empty() || body == "." || body.matches('.').count() > 1 {
+                return Err(format!("bad numeral at character {start}"));
+            }
+            toks.push(Tok::Id(chars[start..i].iter().collect()));
+        } else {
+            return Err(format!("unexpected character {c:?} at {i}"));
+        }
+    }
+    Ok(toks)
+}
+
+/// Attributes as written: key, then the value's raw text (escapes kept).
+type Attrs = Vec<(String, String)>;
+
+/// What the validator learnt from a drawing.
+#[derive(Debug, Default)]
+struct Dot {
+    /// Declared nodes: id, attributes, and the cluster they are declared in (if any).
+    nodes: Vec<(String, Attrs, Option<String>)>,
+    /// Edges: from, to, attributes.
+    edges: Vec<(String, String, Attrs)>,
+    /// Subgraph names with their graph attributes (`label=...` statements).
+    clusters: Vec<(String, Attrs)>,
+}
+
+impl Dot {
+    fn node(&self, id: &str) -> &[(String, String)] {
+        let found: Vec<_> = self.nodes.iter().filter(|n| n.0 == id).collect();
+        assert_eq!(found.len(), 1, "node {id} declared {} times", found.len());
+        &found[0].1
+    }
+
+    fn node_ids(&self) -> Vec<&str> {
+        self.nodes.iter().map(|n| n.0.as_str()).collect()
+    }
+}
+
+fn attr<'a>(attrs: &'a [(String, String)], key: &str) -> Option<&'a str> {
+    attrs
+        .iter()
+        .find(|(k, _)| k == key)
+        .map(|(_, v)| v.as_str())
+}
+
+struct Parser {
+    toks: Vec<Tok>,
+    pos: usize,
+    dot: Dot,
+}
+
+impl Parser {
+    fn peek(&self) -> Option<&Tok> {
+        self.toks.get(self.pos)
+    }
+
+    fn next(&mut self) -> Result<Tok, String> {
+        let t = self
+            .toks
+            .get(self.pos)
+            .cloned()
+            .ok_or_else(|| "unexpected end of input".to_string())?;
+        self.pos += 1;
+        Ok(t)
+    }
+
+    fn expect(&mut self, p: &str) -> Result<(), String> {
+        match self.next()? {
+            Tok::Punct(q) if q == p => Ok(()),
+            t => Err(format!("expected `{p}`, found {t:?}")),
+        }
+    }
+
+    fn id(&mut self) -> Result<String, String> {
+        match self.next()? {
+            Tok::Id(s) | Tok::Str(s) => Ok(s),
+            t => Err(format!("expected an id, found {t:?}")),
+        }
+    }
+
+    fn is_punct(&self, p: &str) -> bool {
+        matches!(self.peek(), Some(Tok::Punct(q)) if *q == p)
+    }
+
+    fn graph(mut self) -> Result<Dot, String> {
+        match self.next()? {
+            Tok::Id(k) if k == "digraph" => {}
+            t => return Err(format!("expected `digraph`, found {t:?}")),
+        }
+        if !self.is_punct("{") {
+            self.id()?;
+        }
+        self.expect("{")?;
+        self.stmts(None)?;
+        self.expect("}")?;
+        if self.pos != self.toks.len() {
+            return Err("text after the closing brace".to_string());
+        }
+        Ok(self.dot)
+    }
+
+    fn stmts(&mut self, cluster: Option<&str>) -> Result<(), String> {
+        while !self.is_punct("}") {
+            if self.peek().is_none() {
+                return Err("missing `}`".to_string());
+            }
+            self.stmt(cluster)?;
+            if self.is_punct(";") {
+                self.pos += 1;
+            }
+        }
+        Ok(())
+    }
+
+    fn attrs(&mut self) -> Result<Attrs, String> {
+        let mut out = Vec::new();
+        while self.is_punct("[") {
+            self.pos += 1;
+            while !self.is_punct("]") {
+                let k = self.id()?;
+                self.expect("=")?;
+                let v = self.id()?;
+                out.push((k, v));
+                if self.is_punct(",") || self.is_punct(";") {
+                    self.pos += 1;
+                }
+            }
+            self.expect("]")?;
+        }
+        Ok(out)
+    }
+
+    fn stmt(&mut self, cluster: Option<&str>) -> Result<(), String> {
+        if let Some(Tok::Id(k)) = self.peek() {
+            match k.as_str() {
+                "graph" | "node" | "edge" => {
+                    self.pos += 1;
+                    self.attrs()?;
+                    return Ok(());
+                }
+                "subgraph" => {
+                    self.pos += 1;
+                    let sub = self.id()?;
+                    if cluster.is_some() {
+                        return Err("nested subgraph".to_string());
+                    }
+                    self.dot.clusters.push((sub.clone(), Vec::new()));
+                    self.expect("{")?;
+                    self.stmts(Some(&sub))?;
+                    self.expect("}")?;
+                    return Ok(());
+                }
+                _ => {}
+            }
+        }
+        let first = self.id()?;
+        if self.is_punct("=") {
+            self.pos += 1;
+            let v = self.id()?;
+            if cluster.is_some() {
+                if let Some(c) = self.dot.clusters.last_mut() {
+                    c.1.push((first, v));
+                }
+            }
+            return Ok(());
+        }
+        if self.is_punct("->") {
+            let mut ends = vec![first];
+            while self.is_punct("->") {
+                self.pos += 1;
+                ends.push(self.id()?);
+            }
+            let attrs = self.attrs()?;
+            for w in ends.windows(2) {
+                self.dot
+                    .edges
+                    .push((w[0].clone(), w[1].clone(), attrs.clone()));
+            }
+            return Ok(());
+        }
+        let attrs = self.attrs()?;
+        self.dot
+            .nodes
+            .push((first, attrs, cluster.map(str::to_string)));
+        Ok(())
+    }
+}
+
+/// Parses `text` as DOT and checks its structure; the parsed drawing on success.
+fn validate(text: &str) -> Result<Dot, String> {
+    // Braces and brackets balance outside strings (checked apart from the parser, so a broken
+    // parser cannot hide an imbalance).
+    let toks = tokenize(text)?;
+    let mut depth = [0i64; 2];
+    for t in &toks {
+        match t {
+            Tok::Punct("{") => depth[0] += 1,
+            Tok::Punct("}") => depth[0] -= 1,
+            Tok::Punct("[") => depth[1] += 1,
+            Tok::Punct("]") => depth[1] -= 1,
+            _ => {}
+        }
+        if depth[0] < 0 || depth[1] < 0 {
+            return Err("closing brace or bracket before its opening".to_string());
+        }
+    }
+    if depth != [0, 0] {
+        return Err(format!("unbalanced braces or brackets: {depth:?}"));
+    }
+    let dot = Parser {
+        toks,
+        pos: 0,
+        dot: Dot::default(),
+    }
+    .graph()?;
+    let mut seen = std::collections::BTreeSet::new();
+    for (id, _, _) in &dot.nodes {
+        if !seen.insert(id.as_str()) {
+            return Err(format!("node {id} declared twice"));
+        }
+    }
+    for (from, to, _) in &dot.edges {
+        for end in [from, to] {
+            if !seen.contains(end.as_str()) {
+                return Err(format!("edge {from} -> {to}: {end} is not a declared node"));
+            }
+        }
+    }
+    Ok(dot)
+}
+
+fn draw(p: &Project, only: Option<&str>) -> (String, Dot) {
+    let text = project_to_dot(p, only).expect("drawing");
+    let dot = validate(&text).unwrap_or_else(|e| panic!("invalid DOT: {e}\n{text}"));
+    (text, dot)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Tests.
+
+#[test]
+fn whole_project_matches_golden() {
+    let text = project_to_dot(&survey(), None).expect("drawing");
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/dot/survey.dot");
+    if std::env::var_os("PETREL_BLESS").is_some() {
+        std::fs::create_dir_all(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/dot"))
+            .expect("create golden directory");
+        std::fs::write(path, &text).expect("write golden");
+    }
+    let golden = std::fs::read_to_string(path).expect("read golden (PETREL_BLESS=1 writes it)");
+    assert_eq!(text, golden, "DOT differs from {path}");
+}
+
+#[test]
+fn output_is_deterministic() {
+    let p = survey();
+    assert_eq!(project_to_dot(&p, None), project_to_dot(&p, None));
+    assert_eq!(
+        project_to_dot(&p, Some("Payload")),
+        project_to_dot(&p, Some("Payload"))
+    );
+}
+
+#[test]
+fn whole_and_filtered_drawings_are_valid_dot() {
+    let p = survey();
+    for only in [None, Some("Flight"), Some("Payload")] {
+        draw(&p, only);
+    }
+}
+
+#[test]
+fn validator_rejects_broken_dot() {
+    assert!(
+        validate("digraph \"a\" { \"x\" -> \"y\"; }").is_err(),
+        "undeclared ends"
+    );
+    assert!(
+        validate("digraph \"a\" { \"x\"; ").is_err(),
+        "missing brace"
+    );
+    assert!(
+        validate("digraph \"a\" { \"x\" [label=\"a]; }").is_err(),
+        "open string"
+    );
+    assert!(
+        validate("digraph \"a\" { \"x\"; \"x\"; }").is_err(),
+        "duplicate node"
+    );
+    assert!(validate("digraph \"a\" { \"x\"; \"y\"; \"x\" -> \"y\"; }").is_ok());
+}
+
+#[test]
+fn graph_has_layout_font_and_one_cluster_per_net() {
+    let (text, dot) = draw(&survey(), None);
+    assert!(text.starts_with("digraph \"survey\" {\n"));
+    assert!(text.contains("rankdir=LR"));
+    assert!(text.contains("fontname=\"Helvetica\""));
+    let clusters: Vec<&str> = dot.clusters.iter().map(|c| c.0.as_str()).collect();
+    assert_eq!(clusters, ["cluster_Flight", "cluster_Payload"]);
+    let label = |i: usize| {
+        attr(&dot.clusters[i].1, "label")
+            .unwrap_or_default()
+            .to_string()
+    };
+    assert_eq!(label(0), "Flight: active at start");
+    assert!(label(1).starts_with("Payload: inactive at start"));
+    assert!(label(1).contains("marking when activated"));
+}
+
+#[test]
+fn global_place_is_drawn_once_outside_clusters_with_arcs_from_both_nets() {
+    let (text, dot) = draw(&survey(), None);
+    let declared: Vec<_> = dot.nodes.iter().filter(|n| n.0 == "global.link").collect();
+    assert_eq!(declared.len(), 1);
+    assert_eq!(declared[0].2, None, "global place drawn inside a cluster");
+    let lines = text
+        .lines()
+        .filter(|l| l.trim_start().starts_with("\"global.link\" [shape"));
+    assert_eq!(lines.count(), 1);
+    let link = dot.node("global.link");
+    assert_eq!(attr(link, "shape"), Some("doublecircle"));
+    assert_eq!(attr(link, "style"), Some("filled"), "link holds a token");
+    assert_eq!(
+        attr(dot.node("global.comms"), "style"),
+        None,
+        "comms is empty"
+    );
+
+    // Arcs touch it from transitions of both nets, in both directions.
+    let touching: Vec<(&str, &str)> = dot
+        .edges
+        .iter()
+        .filter(|e| e.0 == "global.link" || e.1 == "global.link")
+        .map(|e| (e.0.as_str(), e.1.as_str()))
+        .collect();
+    assert_eq!(
+        touching,
+        [
+            ("global.link", "Flight.t.takeoff"),
+            ("Flight.t.land", "global.link"),
+            ("global.link", "Payload.t.work"),
+            ("Payload.t.finish", "global.link"),
+        ]
+    );
+    // No net has a node of its own for it.
+    assert!(!dot
+        .node_ids()
+        .iter()
+        .any(|id| id.ends_with(".link") && *id != "global.link"));
+}
+
+#[test]
+fn marked_places_are_filled_and_dormant_marking_is_lighter() {
+    let (_, dot) = draw(&survey(), None);
+    let idle = dot.node("Flight.idle");
+    assert_eq!(attr(idle, "shape"), Some("circle"));
+    assert_eq!(attr(idle, "xlabel"), Some("idle"));
+    assert_eq!(attr(idle, "style"), Some("filled"));
+    let dark = attr(idle, "fillcolor").expect("fill");
+    assert_eq!(attr(dot.node("Flight.flying"), "style"), None);
+
+    let ready = dot.node("Payload.ready");
+    assert_eq!(attr(ready, "style"), Some("filled"));
+    let light = attr(ready, "fillcolor").expect("fill");
+    assert_ne!(dark, light, "a dormant net's marking must look different");
+    assert!(attr(ready, "tooltip").is_some_and(|t| t.contains("when activated")));
+    assert_eq!(attr(dot.node("Payload.busy"), "style"), None);
+}
+
+#[test]
+fn transitions_show_trigger_or_immediate_and_escaped_actions() {
+    let (_, dot) = draw(&survey(), None);
+    let takeoff = dot.node("Flight.t.takeoff");
+    assert_eq!(attr(takeoff, "shape"), Some("box"));
+    // Raw DOT text: the action's own quotes and backslash are escaped once more for DOT.
+    assert_eq!(
+        attr(takeoff, "label"),
+        Some(
+            r#"takeoff\lon go(alt, reason: text)\lcall GUI.say(\"say \\\"hi\\\" \\\\ now\", alt)\lstart watchdog after 30s\lactivate Payload\l"#
+        )
+    );
+    assert_eq!(
+        attr(dot.node("Flight.t.land"), "label"),
+        Some(r"land\limmediate\l")
+    );
+    assert_eq!(
+        attr(dot.node("Payload.t.work"), "label"),
+        Some(r"work\lon tick\lemit done\l")
+    );
+}
+
+#[test]
+fn arcs_follow_inputs_and_outputs_in_order() {
+    let (_, dot) = draw(&survey(), None);
+    let flight: Vec<(&str, &str)> = dot
+        .edges
+        .iter()
+        .filter(|e| e.0.starts_with("Flight.") || e.1.starts_with("Flight."))
+        .map(|e| (e.0.as_str(), e.1.as_str()))
+        .collect();
+    assert_eq!(
+        flight,
+        [
+            ("Flight.idle", "Flight.t.takeoff"),
+            ("global.link", "Flight.t.takeoff"),
+            ("Flight.t.takeoff", "Flight.flying"),
+            ("Flight.flying", "Flight.t.land"),
+            ("Flight.t.land", "Flight.idle"),
+            ("Flight.t.land", "global.link"),
+            ("Flight.t.land", "global.comms"),
+        ]
+    );
+}
+
+#[test]
+fn unknown_place_is_a_dashed_red_node_in_its_net() {
+    let (_, dot) = draw(&survey(), None);
+    let ghost = dot
+        .nodes
+        .iter()
+        .find(|n| n.0 == "Payload.unknown.ghost")
+        .expect("unknown place node");
+    assert_eq!(ghost.2.as_deref(), Some("cluster_Payload"));
+    assert_eq!(attr(&ghost.1, "xlabel"), Some("unknown place ghost"));
+    assert_eq!(attr(&ghost.1, "style"), Some("dashed"));
+    assert!(attr(&ghost.1, "color").is_some());
+    assert!(dot.edges.iter().any(|e| e.0 == "Payload.unknown.ghost"
+        && e.1 == "Payload.t.finish"
+        && attr(&e.2, "style") == Some("dashed")));
+}
+
+#[test]
+fn only_net_keeps_that_net_and_the_globals_it_touches() {
+    let p = survey();
+    let (text, dot) = draw(&p, Some("Payload"));
+    let clusters: Vec<&str> = dot.clusters.iter().map(|c| c.0.as_str()).collect();
+    assert_eq!(clusters, ["cluster_Payload"]);
+    assert!(!text.contains("Flight."), "Flight leaked into:\n{text}");
+    assert!(dot
+        .node_ids()
+        .iter()
+        .all(|id| id.starts_with("Payload.") || id.starts_with("global.")));
+    assert!(dot.node_ids().contains(&"global.link"));
+    assert!(
+        !dot.node_ids().contains(&"global.comms"),
+        "Payload does not use comms"
+    );
+
+    let (_, flight) = draw(&p, Some("Flight"));
+    let globals: Vec<&str> = flight
+        .node_ids()
+        .into_iter()
+        .filter(|id| id.starts_with("global."))
+        .collect();
+    assert_eq!(globals, ["global.link", "global.comms"], "manifest order");
+    assert!(!flight
+        .node_ids()
+        .iter()
+        .any(|id| id.starts_with("Payload.")));
+}
+
+#[test]
+fn unknown_net_is_an_error_naming_the_nets() {
+    let err = project_to_dot(&survey(), Some("Nope")).expect_err("no such net");
+    assert_eq!(err, "no net named `Nope`; the nets are: Flight, Payload");
+    let empty = project("empty", &[], vec![], vec![]);
+    let err = project_to_dot(&empty, Some("Nope")).expect_err("no such net");
+    assert!(err.contains("`Nope`") && err.contains("no nets"), "{err}");
+}
+
+#[test]
+fn local_place_shadows_global_of_same_name() {
+    let p = project(
+        "shadow",
+        &["A", "B"],
+        vec![global("link", 1)],
+        vec![
+            net(
+                "A",
+                vec![
+                    place("link", 0),
+                    transition("t", None, &["link"], &[], vec![]),
+                ],
+            ),
+            net("B", vec![transition("t", None, &[], &["link"], vec![])]),
+        ],
+    );
+    let (_, dot) = draw(&p, None);
+    let pairs: Vec<(&str, &str)> = dot
+        .edges
+        .iter()
+        .map(|e| (e.0.as_str(), e.1.as_str()))
+        .collect();
+    assert_eq!(pairs, [("A.link", "A.t.t"), ("B.t.t", "global.link")]);
+    // Only B touches the global place.
+    let (_, only_a) = draw(&p, Some("A"));
+    assert!(!only_a.node_ids().contains(&"global.link"));
+}
+
+#[test]
+fn awkward_names_still_give_valid_unique_dot() {
+    // A quote and a newline in the project name, two nets with one name, a net named `global`
+    // with a place named like a global place, a place and a transition with one name.
+    let p = project(
+        "say \"hi\"\nback\\slash",
+        &["global"],
+        vec![global("x", 1)],
+        vec![
+            net(
+                "global",
+                vec![place("x", 1), transition("x", None, &["x"], &["x"], vec![])],
+            ),
+            net("N", vec![place("p", 0)]),
+            net(
+                "N",
+                vec![place("p", 1), transition("u", None, &["x"], &["p"], vec![])],
+            ),
+        ],
+    );
+    let (text, dot) = draw(&p, None);
+    assert!(text.starts_with("digraph \"say \\\"hi\\\"\\lback\\\\slash\" {"));
+    assert_eq!(dot.clusters.len(), 3);
+    // The second N's arc to x reaches the global place, not the net `global`'s own x.
+    assert!(dot
+        .edges
+        .iter()
+        .any(|e| e.0 == "global.x" && e.1 == "N#2.t.u"));
+    let (_, both) = draw(&p, Some("N"));
+    assert_eq!(both.clusters.len(), 2);
+}
+
+#[test]
+fn empty_project_is_valid_dot() {
+    let (text, dot) = draw(&Project::default(), None);
+    assert!(dot.nodes.is_empty() && dot.edges.is_empty());
+    assert!(text.starts_with("digraph \"\" {"));
+}

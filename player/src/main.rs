@@ -1,0 +1,302 @@
+//! `petrel`: the command line of the Petrel mission supervisor.
+//!
+//! Exit codes, for every command: 0 clean, 1 the project or file has errors, 2 usage or I/O
+//! error.
+
+use clap::{Parser, Subcommand, ValueEnum};
+use petrel_nets::diag::Diagnostics;
+use petrel_nets::project::{self, LoadError};
+use petrel_nets::source::SourceMap;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(
+    name = "petrel",
+    version,
+    about = "Petrel: a mission supervisor for autonomous vehicles, written as safe Petri nets",
+    after_help = "Exit codes: 0 clean, 1 errors found, 2 usage or I/O error."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Clone, Copy, ValueEnum, PartialEq)]
+enum Format {
+    /// For people: each finding with its line and a caret.
+    Human,
+    /// For tools: one JSON document.
+    Json,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Check a mission project: syntax, names, types, markings.
+    Check {
+        /// The project directory (the one holding petrel.toml).
+        dir: PathBuf,
+        /// Output format.
+        #[arg(long, value_enum, default_value = "human")]
+        format: Format,
+    },
+    /// Rewrite the project's net files in canonical layout (running it twice changes nothing).
+    Fmt {
+        /// The project directory.
+        dir: PathBuf,
+        /// Change nothing; exit 1 if a file is not in canonical layout.
+        #[arg(long)]
+        check: bool,
+    },
+    /// Print the project's nets as Graphviz DOT.
+    Dot {
+        /// The project directory.
+        dir: PathBuf,
+        /// Only this net (and the global places it uses).
+        #[arg(long)]
+        net: Option<String>,
+        /// Write to this file instead of standard output.
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+    },
+    /// Export the project as PNML (ISO/IEC 15909-2); events and actions travel in a
+    /// `<toolspecific tool="petrel">` block.
+    Export {
+        /// The project directory.
+        dir: PathBuf,
+        /// Write PNML (the only export format for now).
+        #[arg(long, required = true)]
+        pnml: bool,
+        /// Write to this file instead of standard output.
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+    },
+    /// Import a PNML file as a Petrel project.
+    Import {
+        /// The PNML file.
+        file: PathBuf,
+        /// The project directory to create (default: the file's name without extension).
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+        /// Overwrite files in an existing directory.
+        #[arg(long)]
+        force: bool,
+    },
+}
+
+/// How a command ended.
+enum Outcome {
+    Clean,
+    Errors,
+    Usage(String),
+}
+
+impl From<LoadError> for Outcome {
+    fn from(e: LoadError) -> Self {
+        Outcome::Usage(e.to_string())
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let outcome = match cli.command {
+        Command::Check { dir, format } => check(&dir, format),
+        Command::Fmt { dir, check } => fmt(&dir, check),
+        Command::Dot { dir, net, output } => dot(&dir, net.as_deref(), output.as_deref()),
+        Command::Export { dir, output, .. } => export(&dir, output.as_deref()),
+        Command::Import {
+            file,
+            output,
+            force,
+        } => import(&file, output, force),
+    };
+    match outcome {
+        Outcome::Clean => ExitCode::SUCCESS,
+        Outcome::Errors => ExitCode::from(1),
+        Outcome::Usage(msg) => {
+            eprintln!("error: {msg}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn report(d: &Diagnostics, sources: &SourceMap) {
+    if !d.is_empty() {
+        eprint!("{}", d.render_human(sources));
+    }
+}
+
+fn write_output(output: Option<&Path>, text: &str) -> Result<(), Outcome> {
+    match output {
+        Some(p) => std::fs::write(p, text)
+            .map_err(|e| Outcome::Usage(format!("cannot write {}: {e}", p.display()))),
+        None => {
+            print!("{text}");
+            Ok(())
+        }
+    }
+}
+
+fn check(dir: &Path, format: Format) -> Outcome {
+    let (loaded, compiled, d) = match project::load_and_check(dir) {
+        Ok(r) => r,
+        Err(e) => return e.into(),
+    };
+    match format {
+        Format::Json => {
+            let doc = d.to_json(&loaded.sources);
+            println!("{}", serde_json::to_string_pretty(&doc).unwrap_or_default());
+        }
+        Format::Human => {
+            report(&d, &loaded.sources);
+            if let Some(c) = &compiled {
+                let places: usize = c.nets.iter().map(|n| n.places.len()).sum();
+                let transitions: usize = c.nets.iter().map(|n| n.transitions.len()).sum();
+                println!(
+                    "project `{}` checks clean: {} nets ({} active at start), {} places, {} global places, {} transitions, {} events, {} programs, {} timers, {} warnings",
+                    c.name,
+                    c.nets.len(),
+                    c.start.len(),
+                    places,
+                    c.globals.len(),
+                    transitions,
+                    c.events.len(),
+                    c.programs.len(),
+                    c.timers.len(),
+                    d.warning_count()
+                );
+            }
+        }
+    }
+    if d.has_errors() {
+        Outcome::Errors
+    } else {
+        Outcome::Clean
+    }
+}
+
+fn fmt(dir: &Path, check_only: bool) -> Outcome {
+    let loaded = match project::load(dir) {
+        Ok(l) => l,
+        Err(e) => return e.into(),
+    };
+    // A file with a syntax error is left alone: formatting it would drop what could not be read.
+    let broken: Vec<_> = loaded
+        .diagnostics
+        .iter()
+        .filter(|d| d.code == "E0001")
+        .filter_map(|d| d.span.map(|s| s.file))
+        .collect();
+    report(&loaded.diagnostics, &loaded.sources);
+    let mut unformatted = Vec::new();
+    for (file, id) in loaded.project.files.iter().zip(&loaded.file_ids) {
+        if broken.iter().any(|b| b.0 == id.0) {
+            continue;
+        }
+        let text = petrel_nets::fmt::format_file(file);
+        let source = loaded.sources.get(*id);
+        if text != source.text {
+            unformatted.push(source.name.clone());
+            if !check_only {
+                let path = dir.join(&file.path);
+                if let Err(e) = std::fs::write(&path, &text) {
+                    return Outcome::Usage(format!("cannot write {}: {e}", path.display()));
+                }
+            }
+        }
+    }
+    for name in &unformatted {
+        if check_only {
+            println!("not in canonical layout: {name}");
+        } else {
+            println!("formatted {name}");
+        }
+    }
+    if loaded.diagnostics.has_errors() || (check_only && !unformatted.is_empty()) {
+        Outcome::Errors
+    } else {
+        Outcome::Clean
+    }
+}
+
+/// Loads and checks; on errors reports them and returns `Err(Outcome::Errors)`.
+fn checked(dir: &Path) -> Result<project::LoadedProject, Outcome> {
+    let (loaded, _, d) = project::load_and_check(dir)?;
+    report(&d, &loaded.sources);
+    if d.has_errors() {
+        eprintln!("fix the errors above first (`petrel check` lists them)");
+        return Err(Outcome::Errors);
+    }
+    Ok(loaded)
+}
+
+fn dot(dir: &Path, net: Option<&str>, output: Option<&Path>) -> Outcome {
+    let loaded = match checked(dir) {
+        Ok(l) => l,
+        Err(o) => return o,
+    };
+    match petrel_nets::dot::project_to_dot(&loaded.project, net) {
+        Ok(text) => match write_output(output, &text) {
+            Ok(()) => Outcome::Clean,
+            Err(o) => o,
+        },
+        Err(msg) => Outcome::Usage(msg),
+    }
+}
+
+fn export(dir: &Path, output: Option<&Path>) -> Outcome {
+    let loaded = match checked(dir) {
+        Ok(l) => l,
+        Err(o) => return o,
+    };
+    let text = petrel_nets::pnml::export_pnml(&loaded.project);
+    match write_output(output, &text) {
+        Ok(()) => Outcome::Clean,
+        Err(o) => o,
+    }
+}
+
+fn import(file: &Path, output: Option<PathBuf>, force: bool) -> Outcome {
+    let text = match std::fs::read_to_string(file) {
+        Ok(t) => t,
+        Err(e) => return Outcome::Usage(format!("cannot read {}: {e}", file.display())),
+    };
+    let out = output.unwrap_or_else(|| {
+        let stem = file.file_stem().unwrap_or_default();
+        PathBuf::from(stem)
+    });
+    let mut sources = SourceMap::new();
+    let id = sources.add(file.display().to_string(), text.clone());
+    let mut d = Diagnostics::new();
+    let project = petrel_nets::pnml::import_pnml(id, &text, &mut d);
+    d.sort();
+    report(&d, &sources);
+    let Some(project) = project.filter(|_| !d.has_errors()) else {
+        eprintln!(
+            "nothing written: {} cannot be held by a Petrel project as it is",
+            file.display()
+        );
+        return Outcome::Errors;
+    };
+    let occupied = std::fs::read_dir(&out)
+        .map(|mut e| e.next().is_some())
+        .unwrap_or(false);
+    if occupied && !force {
+        return Outcome::Usage(format!(
+            "{} exists and is not empty: choose another directory with --output, or pass --force to overwrite",
+            out.display()
+        ));
+    }
+    if let Err(e) = project::write(&out, &project) {
+        return Outcome::Usage(format!("cannot write {}: {e}", out.display()));
+    }
+    let nets = project.nets().count();
+    let places: usize = project.nets().map(|n| n.places().count()).sum();
+    let transitions: usize = project.nets().map(|n| n.transitions().count()).sum();
+    println!(
+        "imported {} into {}: {nets} net(s), {places} places, {transitions} transitions",
+        file.display(),
+        out.display()
+    );
+    Outcome::Clean
+}
