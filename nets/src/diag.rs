@@ -32,6 +32,8 @@ pub struct Diagnostic {
     pub label: String,
     /// What to do about it.
     pub help: Option<String>,
+    /// Other places that explain the finding (the first declaration of a duplicate...).
+    pub related: Vec<(Span, String)>,
 }
 
 impl Diagnostic {
@@ -44,6 +46,7 @@ impl Diagnostic {
             span: Some(span),
             label: String::new(),
             help: None,
+            related: Vec::new(),
         }
     }
 
@@ -66,6 +69,12 @@ impl Diagnostic {
     /// Sets the text shown under the caret.
     pub fn label(mut self, label: impl Into<String>) -> Self {
         self.label = label.into();
+        self
+    }
+
+    /// Adds another location that explains the finding.
+    pub fn related(mut self, span: Span, label: impl Into<String>) -> Self {
+        self.related.push((span, label.into()));
         self
     }
 
@@ -200,7 +209,7 @@ impl IntoIterator for Diagnostics {
 }
 
 fn render_one(d: &Diagnostic, sources: &SourceMap) -> String {
-    use ariadne::{CharSet, Config, IndexType, Label, Report, ReportKind, Source};
+    use ariadne::{CharSet, Config, IndexType, Label, Report, ReportKind};
     let kind = match d.severity {
         Severity::Error => ReportKind::Error,
         Severity::Warning => ReportKind::Warning,
@@ -225,7 +234,7 @@ fn render_one(d: &Diagnostic, sources: &SourceMap) -> String {
     };
     let file = sources.get(span.file);
     let name = file.name.clone();
-    let range = span.start as usize..(span.end.max(span.start + 1) as usize);
+    let range = byte_range(&file.text, span);
     let label = if d.label.is_empty() {
         d.message.clone()
     } else {
@@ -241,13 +250,44 @@ fn render_one(d: &Diagnostic, sources: &SourceMap) -> String {
         .with_code(d.code)
         .with_message(&d.message)
         .with_label(Label::new((name.clone(), range)).with_message(label));
+    let mut cache: Vec<(String, &str)> = vec![(name.clone(), file.text.as_str())];
+    for (i, (s, text)) in d.related.iter().enumerate() {
+        if s.is_synthetic() || (s.file.0 as usize) >= sources.len() {
+            continue;
+        }
+        let f = sources.get(s.file);
+        if !cache.iter().any(|(n, _)| n == &f.name) {
+            cache.push((f.name.clone(), f.text.as_str()));
+        }
+        report = report.with_label(
+            Label::new((f.name.clone(), byte_range(&f.text, *s)))
+                .with_message(text)
+                .with_order(i as i32 + 1),
+        );
+    }
     if let Some(h) = &d.help {
         report = report.with_help(h);
     }
     let mut buf = Vec::new();
     // Writing into a Vec cannot fail; ariadne only errors on I/O.
-    let _ = report
-        .finish()
-        .write((name, Source::from(file.text.as_str())), &mut buf);
+    let _ = report.finish().write(ariadne::sources(cache), &mut buf);
     String::from_utf8_lossy(&buf).into_owned()
+}
+
+/// A non-empty range inside `text` on character boundaries, whatever the span says: a span at
+/// the very end of a file (an unexpected end) still gets a caret.
+fn byte_range(text: &str, span: Span) -> std::ops::Range<usize> {
+    let len = text.len();
+    if len == 0 {
+        return 0..0;
+    }
+    let mut start = (span.start as usize).min(len - 1);
+    while !text.is_char_boundary(start) {
+        start -= 1;
+    }
+    let mut end = (span.end as usize).clamp(start + 1, len);
+    while !text.is_char_boundary(end) {
+        end += 1;
+    }
+    start..end
 }

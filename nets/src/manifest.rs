@@ -212,7 +212,13 @@ pub fn parse_manifest(file: FileId, text: &str, diags: &mut Diagnostics) -> Opti
                 .span()
                 .map(|r| Span::new(file, r.start, r.end))
                 .unwrap_or(Span::new(file, 0, 0));
-            let msg = e.message().trim_end().to_string();
+            let msg = e
+                .message()
+                .lines()
+                .map(str::trim)
+                .filter(|l| !l.is_empty())
+                .collect::<Vec<_>>()
+                .join(": ");
             diags.push(
                 Diagnostic::error("E0101", span, format!("the manifest is not valid: {msg}"))
                     .label(msg)

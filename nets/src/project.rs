@@ -102,8 +102,8 @@ pub fn load(dir: &Path) -> Result<LoadedProject, LoadError> {
                         )
                         .label("named here")
                         .help(format!(
-                            "create it, or correct the path (relative to {})",
-                            display(dir, ".")
+                            "create it, or correct the path: paths are relative to the project directory {}",
+                            dir.display()
                         )),
                     );
                 }

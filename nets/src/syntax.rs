@@ -375,6 +375,13 @@ impl Parser<'_> {
         }
     }
 
+    /// At `place`, `transition` or `net` starting a line: where an item may begin.
+    fn at_item_start(&self) -> bool {
+        let t = self.peek();
+        t.line_start
+            && matches!(&t.tok, Tok::Ident(s) if s == "place" || s == "transition" || s == "net")
+    }
+
     /// Keeps an end-of-line comment that belongs to no item for what follows.
     fn stash_trailing(&mut self) {
         if let Some(c) = self.trailing() {
@@ -467,7 +474,9 @@ impl Parser<'_> {
     /// Skips the rest of a broken item, over any action block it has, up to the next item.
     fn skip_item(&mut self) {
         let mut depth = 0usize;
-        self.bump();
+        if !self.at_item_start() {
+            self.bump();
+        }
         loop {
             let t = self.peek();
             match &t.tok {
@@ -600,11 +609,22 @@ impl Parser<'_> {
                         })
                     }
                     Err(Recover) => {
+                        // A new item means this block was never closed.
+                        if self.at_item_start() {
+                            return Err(Recover);
+                        }
                         // Stay inside the block: skip to the next action or its end.
-                        self.bump();
+                        let t = self.peek();
+                        let at_sync = t.line_start
+                            && (t.tok == Tok::RBrace
+                                || matches!(&t.tok, Tok::Ident(s) if ACTION_WORDS.contains(&s.as_str())));
+                        if !at_sync {
+                            self.bump();
+                        }
                         self.skip_until(|t| {
                             matches!(t, Tok::RBrace)
-                                || matches!(t, Tok::Ident(s) if ACTION_WORDS.contains(&s.as_str()))
+                                || matches!(t, Tok::Ident(s) if ACTION_WORDS.contains(&s.as_str())
+                                    || s == "place" || s == "transition" || s == "net")
                         });
                     }
                 }

@@ -1,0 +1,126 @@
+//! Golden tests: one small project per class of diagnostic, under `tests/data/diagnostics/`.
+//!
+//! Each case directory holds a project and `expected.txt`, the exact report a user sees. Run
+//! with `PETREL_BLESS=1` to rewrite the expected files after a deliberate change, then review
+//! the diff.
+
+use petrel_nets::project::load_and_check;
+use std::path::{Path, PathBuf};
+
+fn case_dir(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/diagnostics")
+        .join(name)
+}
+
+/// The human report of a case, with the machine-specific directory prefix removed.
+fn report(name: &str) -> (String, serde_json::Value, Vec<&'static str>) {
+    let dir = case_dir(name);
+    let (loaded, compiled, d) = load_and_check(&dir).expect("case project reads");
+    assert!(compiled.is_none(), "case {name} must not compile");
+    let prefix = format!("{}/", dir.display());
+    let text = d.render_human(&loaded.sources).replace(&prefix, "");
+    let json = d.to_json(&loaded.sources);
+    let codes = d.iter().map(|d| d.code).collect();
+    (text, json, codes)
+}
+
+fn golden(name: &str) -> Vec<&'static str> {
+    let (text, _, codes) = report(name);
+    let path = case_dir(name).join("expected.txt");
+    if std::env::var_os("PETREL_BLESS").is_some() {
+        std::fs::write(&path, &text).unwrap();
+    }
+    let expected = std::fs::read_to_string(&path)
+        .unwrap_or_else(|_| panic!("{} missing: run with PETREL_BLESS=1", path.display()));
+    assert_eq!(text, expected, "report of case {name} changed");
+    codes
+}
+
+#[test]
+fn syntax_errors_are_all_reported_with_line_and_caret() {
+    let codes = golden("syntax");
+    assert!(codes.len() >= 3, "{codes:?}");
+    assert!(codes.iter().all(|c| *c == "E0001"));
+}
+
+#[test]
+fn unknown_names_of_every_kind() {
+    let codes = golden("unknown_names");
+    for code in ["E0201", "E0202", "E0203", "E0204", "E0205", "E0206"] {
+        assert!(codes.contains(&code), "{code} missing from {codes:?}");
+    }
+}
+
+#[test]
+fn duplicate_names() {
+    let codes = golden("duplicates");
+    assert_eq!(codes.iter().filter(|c| **c == "E0301").count(), 4, "{codes:?}");
+}
+
+#[test]
+fn argument_count_and_type_mismatches_in_calls_and_emits() {
+    let codes = golden("arguments");
+    assert!(codes.contains(&"E0401") && codes.contains(&"E0402"), "{codes:?}");
+}
+
+#[test]
+fn names_the_event_does_not_bind() {
+    let codes = golden("unbound");
+    assert_eq!(codes.iter().filter(|c| **c == "E0207").count(), 4, "{codes:?}");
+}
+
+#[test]
+fn initial_markings_above_one_token() {
+    let codes = golden("marking");
+    assert_eq!(codes, ["E0405", "E0405"]);
+}
+
+#[test]
+fn manifest_naming_a_missing_file() {
+    assert_eq!(golden("missing_file"), ["E0104"]);
+}
+
+#[test]
+fn manifest_values_categories_types_timers() {
+    let codes = golden("manifest_values");
+    for code in ["E0102", "E0103", "E0407"] {
+        assert!(codes.contains(&code), "{code} missing from {codes:?}");
+    }
+}
+
+#[test]
+fn manifest_that_is_not_toml() {
+    assert_eq!(golden("manifest_toml"), ["E0101"]);
+}
+
+#[test]
+fn trigger_bindings_count_and_types() {
+    let codes = golden("bindings");
+    assert!(codes.contains(&"E0403") && codes.contains(&"E0404"), "{codes:?}");
+}
+
+#[test]
+fn arcs_repeated_places_and_shadowed_globals() {
+    let codes = golden("arcs");
+    for code in ["E0406", "E0409", "E0302"] {
+        assert!(codes.contains(&code), "{code} missing from {codes:?}");
+    }
+}
+
+#[test]
+fn json_report_names_file_line_and_column() {
+    let (_, json, _) = report("unknown_names");
+    let list = json["diagnostics"].as_array().unwrap();
+    assert_eq!(json["errors"].as_u64().unwrap() as usize, list.len());
+    let place = list
+        .iter()
+        .find(|d| d["code"] == "E0201")
+        .expect("unknown place reported");
+    assert!(place["file"].as_str().unwrap().ends_with("a.pn"));
+    assert_eq!(place["line"], 4);
+    assert_eq!(place["column"], 37);
+    assert_eq!(place["end_column"], 42);
+    assert_eq!(place["severity"], "error");
+    assert!(place["help"].as_str().unwrap().contains("did you mean `busy`?"));
+}
