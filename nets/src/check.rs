@@ -86,11 +86,6 @@ fn unique<'p>(
     let mut spans: HashMap<&str, Span> = HashMap::new();
     for (i, n) in names.enumerate() {
         if let Some(first) = spans.get(n.as_str()) {
-            let first_at = if first.is_synthetic() {
-                String::new()
-            } else {
-                " (see its first declaration)".to_string()
-            };
             d.push(
                 Diagnostic::error(
                     "E0301",
@@ -98,9 +93,8 @@ fn unique<'p>(
                     format!("{what} `{n}` is declared twice{scope}"),
                 )
                 .label("second declaration")
-                .help(format!(
-                    "give it another name, or remove one of the two{first_at}"
-                )),
+                .related(*first, "first declared here")
+                .help("give one of them another name, or remove one"),
             );
         } else {
             map.insert(n.as_str(), i as u32);
@@ -730,7 +724,7 @@ impl<'p> Checker<'p> {
             )
             .label(format!("{found}, expected {}", p.ty))
             .help(format!(
-                "pass {} value, such as {example}, or a name bound to one",
+                "pass a value of type {}, such as {example}, or a name bound to one",
                 p.ty
             )),
         );

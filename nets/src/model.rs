@@ -403,7 +403,7 @@ pub struct Trigger {
 }
 
 /// A place of a net.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub struct PlaceDecl {
     /// Place name.
     pub name: Name,
@@ -411,6 +411,13 @@ pub struct PlaceDecl {
     pub tokens: u32,
     /// Where the marking is written, if it is.
     pub tokens_span: Option<Span>,
+}
+
+// Where the marking was written is a location, and locations do not make models differ.
+impl PartialEq for PlaceDecl {
+    fn eq(&self, other: &Self) -> bool {
+        self.name == other.name && self.tokens == other.tokens
+    }
 }
 
 /// A transition of a net.

@@ -411,6 +411,11 @@ impl Parser<'_> {
                     end_comments: trivia.comments,
                 };
             }
+            // Nets are always one blank line apart: that is layout, not content.
+            let trivia = Trivia {
+                blank_before: false,
+                ..trivia
+            };
             match self.net(trivia) {
                 Ok(n) => nets.push(n),
                 Err(Recover) => {
@@ -648,7 +653,8 @@ impl Parser<'_> {
 
     fn place_list(&mut self) -> PResult<Vec<Name>> {
         let mut out = Vec::new();
-        if !matches!(self.peek().tok, Tok::Ident(_)) {
+        // An empty list followed by a new item on the next line: `transition t: a ->`.
+        if !matches!(self.peek().tok, Tok::Ident(_)) || self.at_item_start() {
             return Ok(out);
         }
         loop {

@@ -55,19 +55,30 @@ fn unknown_names_of_every_kind() {
 #[test]
 fn duplicate_names() {
     let codes = golden("duplicates");
-    assert_eq!(codes.iter().filter(|c| **c == "E0301").count(), 4, "{codes:?}");
+    assert_eq!(
+        codes.iter().filter(|c| **c == "E0301").count(),
+        4,
+        "{codes:?}"
+    );
 }
 
 #[test]
 fn argument_count_and_type_mismatches_in_calls_and_emits() {
     let codes = golden("arguments");
-    assert!(codes.contains(&"E0401") && codes.contains(&"E0402"), "{codes:?}");
+    assert!(
+        codes.contains(&"E0401") && codes.contains(&"E0402"),
+        "{codes:?}"
+    );
 }
 
 #[test]
 fn names_the_event_does_not_bind() {
     let codes = golden("unbound");
-    assert_eq!(codes.iter().filter(|c| **c == "E0207").count(), 4, "{codes:?}");
+    assert_eq!(
+        codes.iter().filter(|c| **c == "E0207").count(),
+        4,
+        "{codes:?}"
+    );
 }
 
 #[test]
@@ -97,7 +108,10 @@ fn manifest_that_is_not_toml() {
 #[test]
 fn trigger_bindings_count_and_types() {
     let codes = golden("bindings");
-    assert!(codes.contains(&"E0403") && codes.contains(&"E0404"), "{codes:?}");
+    assert!(
+        codes.contains(&"E0403") && codes.contains(&"E0404"),
+        "{codes:?}"
+    );
 }
 
 #[test]
@@ -122,5 +136,8 @@ fn json_report_names_file_line_and_column() {
     assert_eq!(place["column"], 37);
     assert_eq!(place["end_column"], 42);
     assert_eq!(place["severity"], "error");
-    assert!(place["help"].as_str().unwrap().contains("did you mean `busy`?"));
+    assert!(place["help"]
+        .as_str()
+        .unwrap()
+        .contains("did you mean `busy`?"));
 }
