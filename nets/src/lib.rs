@@ -11,6 +11,7 @@ pub mod dot;
 pub mod fmt;
 pub mod manifest;
 pub mod model;
+pub mod pnml;
 pub mod project;
 pub mod source;
 pub mod syntax;

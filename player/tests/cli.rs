@@ -1,0 +1,221 @@
+//! The `petrel` command as a user runs it: exit codes, outputs, files written.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn petrel(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_petrel"))
+        .args(args)
+        .output()
+        .expect("petrel runs")
+}
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn uav() -> String {
+    repo().join("missions/uav").display().to_string()
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A copy of a project in a fresh directory, so tests may change it.
+fn copy_project(from: &Path) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        if e.file_type().unwrap().is_file() {
+            std::fs::copy(e.path(), dir.path().join(e.file_name())).unwrap();
+        }
+    }
+    dir
+}
+
+#[test]
+fn check_on_the_uav_mission_exits_0_with_a_summary() {
+    let o = petrel(&["check", &uav()]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let out = stdout(&o);
+    assert!(
+        out.contains("project `uav` checks clean: 2 nets (2 active at start)"),
+        "{out}"
+    );
+    assert!(stderr(&o).is_empty());
+}
+
+#[test]
+fn check_with_errors_exits_1_and_reports_every_error() {
+    let case = repo().join("nets/tests/data/diagnostics/unknown_names");
+    let o = petrel(&["check", &case.display().to_string()]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = stderr(&o);
+    for code in ["E0201", "E0202", "E0203", "E0204", "E0205", "E0206"] {
+        assert!(err.contains(code), "{code} missing:\n{err}");
+    }
+    assert!(err.contains("a.pn:4:37"), "{err}");
+    assert!(err.ends_with("7 errors, 0 warnings\n"), "{err}");
+}
+
+#[test]
+fn check_json_lists_the_diagnostics_for_tools() {
+    let case = repo().join("nets/tests/data/diagnostics/marking");
+    let o = petrel(&["check", "--format", "json", &case.display().to_string()]);
+    assert_eq!(o.status.code(), Some(1));
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).expect("valid JSON");
+    assert_eq!(doc["errors"], 2);
+    let d = &doc["diagnostics"][1];
+    assert_eq!(d["code"], "E0405");
+    assert_eq!(d["line"], 2);
+    assert_eq!(d["column"], 18);
+    assert!(d["file"].as_str().unwrap().ends_with("a.pn"));
+}
+
+#[test]
+fn usage_and_io_errors_exit_2() {
+    let o = petrel(&["check", "/nonexistent/project"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("has no petrel.toml"), "{}", stderr(&o));
+    assert_eq!(petrel(&["check"]).status.code(), Some(2));
+    assert_eq!(petrel(&["frobnicate"]).status.code(), Some(2));
+    let o = petrel(&["import", "/nonexistent.pnml"]);
+    assert_eq!(o.status.code(), Some(2));
+}
+
+#[test]
+fn fmt_rewrites_to_canonical_layout_and_a_second_run_changes_nothing() {
+    let dir = copy_project(&repo().join("missions/uav"));
+    let path = dir.path().join("mission.pn");
+    let canonical = std::fs::read_to_string(&path).unwrap();
+    // Squash the layout: every line's indentation gone, blank lines doubled.
+    let messy: String = canonical
+        .lines()
+        .map(|l| format!("{}\n", l.trim_start()))
+        .collect::<String>()
+        .replace("\n\n", "\n\n\n");
+    std::fs::write(&path, &messy).unwrap();
+    let d = dir.path().display().to_string();
+
+    let o = petrel(&["fmt", "--check", &d]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stdout(&o).contains("not in canonical layout"),
+        "{}",
+        stdout(&o)
+    );
+    assert_eq!(
+        std::fs::read_to_string(&path).unwrap(),
+        messy,
+        "--check writes nothing"
+    );
+
+    let o = petrel(&["fmt", &d]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert_eq!(std::fs::read_to_string(&path).unwrap(), canonical);
+
+    let o = petrel(&["fmt", &d]);
+    assert_eq!(o.status.code(), Some(0));
+    assert!(
+        stdout(&o).is_empty(),
+        "second run formatted: {}",
+        stdout(&o)
+    );
+    assert_eq!(petrel(&["fmt", "--check", &d]).status.code(), Some(0));
+}
+
+#[test]
+fn fmt_leaves_a_file_with_syntax_errors_untouched() {
+    let dir = copy_project(&repo().join("nets/tests/data/diagnostics/syntax"));
+    let path = dir.path().join("a.pn");
+    let before = std::fs::read_to_string(&path).unwrap();
+    let o = petrel(&["fmt", &dir.path().display().to_string()]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("E0001"));
+    assert_eq!(std::fs::read_to_string(&path).unwrap(), before);
+}
+
+#[test]
+fn dot_draws_the_mission_with_shared_global_places() {
+    let o = petrel(&["dot", &uav()]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let dot = stdout(&o);
+    assert!(dot.starts_with("digraph"), "{dot}");
+    assert!(dot.contains("cluster_MISSION") && dot.contains("cluster_EVENTS"));
+    // The global place `replan` is one node, written by EVENTS and read by MISSION.
+    assert_eq!(dot.matches("\"global.replan\" [shape").count(), 1, "{dot}");
+    assert!(
+        dot.contains("\"EVENTS.t.payload_lost\" -> \"global.replan\""),
+        "{dot}"
+    );
+    assert!(
+        dot.contains("\"global.replan\" -> \"MISSION.t.replanning\""),
+        "{dot}"
+    );
+
+    let o = petrel(&["dot", &uav(), "--net", "EVENTS"]);
+    assert_eq!(o.status.code(), Some(0));
+    let only = stdout(&o);
+    assert!(only.contains("cluster_EVENTS") && !only.contains("cluster_MISSION"));
+
+    let o = petrel(&["dot", &uav(), "--net", "NOPE"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("MISSION"), "{}", stderr(&o));
+}
+
+#[test]
+fn export_then_import_gives_back_the_same_project() {
+    let out = tempfile::tempdir().unwrap();
+    let pnml = out.path().join("uav.pnml");
+    let o = petrel(&[
+        "export",
+        "--pnml",
+        &uav(),
+        "-o",
+        &pnml.display().to_string(),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let xml = std::fs::read_to_string(&pnml).unwrap();
+    assert!(xml.contains("<toolspecific tool=\"petrel\""));
+
+    let back = out.path().join("uav");
+    let o = petrel(&[
+        "import",
+        &pnml.display().to_string(),
+        "-o",
+        &back.display().to_string(),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert_eq!(
+        petrel(&["check", &back.display().to_string()])
+            .status
+            .code(),
+        Some(0)
+    );
+
+    let original = petrel_nets::project::load(&repo().join("missions/uav")).unwrap();
+    let imported = petrel_nets::project::load(&back).unwrap();
+    assert_eq!(imported.project, original.project);
+    // Net files come back byte for byte (the manifest is rewritten canonically).
+    for f in ["mission.pn", "events.pn"] {
+        assert_eq!(
+            std::fs::read_to_string(back.join(f)).unwrap(),
+            std::fs::read_to_string(repo().join("missions/uav").join(f)).unwrap()
+        );
+    }
+
+    // Importing again into the same directory refuses to overwrite without --force.
+    let o = petrel(&[
+        "import",
+        &pnml.display().to_string(),
+        "-o",
+        &back.display().to_string(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("--force"));
+}
