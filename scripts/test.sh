@@ -4,12 +4,13 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-# System packages the suite needs (none yet beyond the Rust toolchain; later issues add the
-# vcan bench's). apt is only touched when something is missing.
+# Debian packages the suite needs: graphviz checks that `petrel dot` output is real DOT.
 need=()
-for pkg in "$@"; do :; done
+command -v dot >/dev/null 2>&1 || need+=(graphviz)
 if [ "${#need[@]}" -gt 0 ]; then
-    apt-get update -qq && apt-get install -y -qq "${need[@]}"
+    echo "== installing ${need[*]}"
+    apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${need[@]}" >/dev/null
 fi
 
 echo "== cargo fmt --check"

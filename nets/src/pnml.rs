@@ -455,44 +455,33 @@ impl<'a> Xml<'a> {
         }
     }
 
-    /// The attributes of `e`, unescaped; a malformed attribute list is reported once.
-    fn attrs(&self, e: &Elem<'_>, diags: &mut Diagnostics) -> Vec<(String, String)> {
+    /// The attributes of `e`, unescaped. A malformed attribute list is malformed XML: the
+    /// parser's idea of where the tag ends is then unreliable, so reading stops there.
+    fn attrs(&self, e: &Elem<'_>, diags: &mut Diagnostics) -> Result<Vec<(String, String)>, Fatal> {
         let mut out = Vec::new();
         for a in e.start.attributes() {
-            match a {
+            let problem = match a {
                 Ok(a) => {
                     let key = String::from_utf8_lossy(a.key.local_name().into_inner()).into_owned();
                     let raw = String::from_utf8_lossy(&a.value).into_owned();
                     match unescape(&raw) {
-                        Ok(v) => out.push((key, v.into_owned())),
-                        Err(msg) => {
-                            diags.push(
-                                Diagnostic::error(
-                                    "E0501",
-                                    e.span,
-                                    format!("malformed XML: attribute `{key}`: {msg}"),
-                                )
-                                .label("in this tag")
-                                .help("write `&amp;` for `&`, `&lt;` for `<` and `&quot;` for `\"` in attribute values"),
-                            );
+                        Ok(v) => {
+                            out.push((key, v.into_owned()));
+                            continue;
                         }
+                        Err(msg) => format!("attribute `{key}`: {msg}"),
                     }
                 }
-                Err(err) => {
-                    diags.push(
-                        Diagnostic::error(
-                            "E0501",
-                            e.span,
-                            format!("malformed XML: bad attributes in `<{}>`: {err}", e.tag()),
-                        )
-                        .label("in this tag")
-                        .help("attributes read `name=\"value\"`, each name once"),
-                    );
-                    break;
-                }
-            }
+                Err(err) => format!("bad attributes in `<{}>`: {err}", e.tag()),
+            };
+            diags.push(
+                Diagnostic::error("E0501", e.span, format!("malformed XML: {problem}"))
+                    .label("in this tag")
+                    .help("attributes read `name=\"value\"`, each name once, and the tag ends with `>`; write `&amp;` for `&`, `&lt;` for `<` and `&quot;` for `\"` in values"),
+            );
+            return Err(Fatal);
         }
-        out
+        Ok(out)
     }
 
     /// One attribute, for messages only (errors are reported by [`Xml::attrs`]).
@@ -558,14 +547,16 @@ impl<'a> Xml<'a> {
 
     /// Reads a Petrel block into a [`Node`] tree (iteratively, like [`Xml::skip`]).
     fn node(&mut self, e: Elem<'a>, diags: &mut Diagnostics) -> Result<Node, Fatal> {
-        let head = |x: &Self, e: &Elem<'_>, diags: &mut Diagnostics| Node {
-            name: String::from_utf8_lossy(e.local()).into_owned(),
-            attrs: x.attrs(e, diags),
-            children: Vec::new(),
-            text: String::new(),
-            span: e.span,
+        let head = |x: &Self, e: &Elem<'_>, diags: &mut Diagnostics| {
+            Ok(Node {
+                name: String::from_utf8_lossy(e.local()).into_owned(),
+                attrs: x.attrs(e, diags)?,
+                children: Vec::new(),
+                text: String::new(),
+                span: e.span,
+            })
         };
-        let root = head(self, &e, diags);
+        let root = head(self, &e, diags)?;
         let mut stack = vec![(e, root)];
         loop {
             let Some((top, _)) = stack.last() else {
@@ -582,7 +573,7 @@ impl<'a> Xml<'a> {
                     }
                 }
                 Some(Child::Open(c)) => {
-                    let n = head(self, &c, diags);
+                    let n = head(self, &c, diags)?;
                     stack.push((c, n));
                 }
                 Some(Child::Text(t, _)) => {
@@ -838,7 +829,7 @@ fn read_net<'a>(
     e: Elem<'a>,
     diags: &mut Diagnostics,
 ) -> Result<Option<RawNet>, Fatal> {
-    let attrs = x.attrs(&e, diags);
+    let attrs = x.attrs(&e, diags)?;
     let id = attr(&attrs, "id").map(str::to_string);
     let shown = id.as_deref().unwrap_or("without id");
     match attr(&attrs, "type") {
@@ -919,7 +910,7 @@ fn read_container<'a>(
                 }
             }
             b"toolspecific" => {
-                let attrs = x.attrs(&c, diags);
+                let attrs = x.attrs(&c, diags)?;
                 match attr(&attrs, "tool") {
                     Some("nupn") => {
                         b.has_nupn = true;
@@ -981,7 +972,7 @@ fn read_place<'a>(
     e: Elem<'a>,
     diags: &mut Diagnostics,
 ) -> Result<(), Fatal> {
-    let attrs = x.attrs(&e, diags);
+    let attrs = x.attrs(&e, diags)?;
     let Some((id, e)) = required_id(x, e, &attrs, diags)? else {
         return Ok(());
     };
@@ -1021,7 +1012,7 @@ fn read_transition<'a>(
     e: Elem<'a>,
     diags: &mut Diagnostics,
 ) -> Result<(), Fatal> {
-    let attrs = x.attrs(&e, diags);
+    let attrs = x.attrs(&e, diags)?;
     let Some((id, e)) = required_id(x, e, &attrs, diags)? else {
         return Ok(());
     };
@@ -1052,7 +1043,7 @@ fn read_arc<'a>(
     e: Elem<'a>,
     diags: &mut Diagnostics,
 ) -> Result<(), Fatal> {
-    let attrs = x.attrs(&e, diags);
+    let attrs = x.attrs(&e, diags)?;
     let Some((id, e)) = required_id(x, e, &attrs, diags)? else {
         return Ok(());
     };
