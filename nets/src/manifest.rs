@@ -374,7 +374,7 @@ pub fn format_manifest(m: &Manifest) -> String {
         if let Some(d) = &p.description {
             let _ = writeln!(out, "description = {}", toml_str(d));
         }
-        let _ = write!(out, "[programs.{}.functions]\n", toml_key(&p.name.text));
+        let _ = writeln!(out, "[programs.{}.functions]", toml_key(&p.name.text));
         for f in &p.functions {
             let _ = writeln!(
                 out,

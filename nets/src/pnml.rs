@@ -1322,10 +1322,21 @@ impl Unique {
 struct Writer {
     out: String,
     depth: usize,
+    /// A start tag is written up to its attributes: `>` if content follows, `/>` if not.
+    open_tag: bool,
 }
 
 impl Writer {
+    /// Finishes a pending start tag, now that it has content.
+    fn settle(&mut self) {
+        if self.open_tag {
+            self.out.push_str(">\n");
+            self.open_tag = false;
+        }
+    }
+
     fn indent(&mut self) {
+        self.settle();
         for _ in 0..self.depth {
             self.out.push_str("  ");
         }
@@ -1342,7 +1353,7 @@ impl Writer {
 
     fn open(&mut self, name: &str, attrs: &[(&str, &str)]) {
         self.tag(name, attrs);
-        self.out.push_str(">\n");
+        self.open_tag = true;
         self.depth += 1;
     }
 
@@ -1353,6 +1364,10 @@ impl Writer {
 
     fn close(&mut self, name: &str) {
         self.depth = self.depth.saturating_sub(1);
+        if std::mem::take(&mut self.open_tag) {
+            self.out.push_str("/>\n");
+            return;
+        }
         self.indent();
         let _ = writeln!(self.out, "</{name}>");
     }
@@ -1434,6 +1449,7 @@ pub fn export_pnml(project: &Project) -> String {
     let mut w = Writer {
         out: String::new(),
         depth: 0,
+        open_tag: false,
     };
     w.out
         .push_str("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n");

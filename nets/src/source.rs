@@ -3,21 +3,26 @@
 use std::fmt;
 
 /// Index of a file in a [`SourceMap`].
-#[derive(Clone, Copy, Debug, Default, Eq, Hash, Ord, PartialOrd)]
+#[derive(Clone, Copy, Debug, Default, Eq)]
 pub struct FileId(pub u32);
 
-// Locations are metadata: two models are the same whatever file they came from.
+// Locations are metadata: two models are the same whatever file they came from. Hash agrees
+// with equality, so a name is one key in a map wherever it was written.
 impl PartialEq for FileId {
     fn eq(&self, _: &Self) -> bool {
         true
     }
 }
 
+impl std::hash::Hash for FileId {
+    fn hash<H: std::hash::Hasher>(&self, _: &mut H) {}
+}
+
 /// A byte range in one source file.
 ///
 /// Spans compare equal whatever their position: a model read from text and the same model read
 /// back from PNML must be equal, and only one of them has positions.
-#[derive(Clone, Copy, Debug, Default, Eq, Hash)]
+#[derive(Clone, Copy, Debug, Default, Eq)]
 pub struct Span {
     /// The file the range is in.
     pub file: FileId,
@@ -31,6 +36,10 @@ impl PartialEq for Span {
     fn eq(&self, _: &Self) -> bool {
         true
     }
+}
+
+impl std::hash::Hash for Span {
+    fn hash<H: std::hash::Hasher>(&self, _: &mut H) {}
 }
 
 impl Span {
