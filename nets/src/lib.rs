@@ -13,5 +13,6 @@ pub mod manifest;
 pub mod model;
 pub mod pnml;
 pub mod project;
+pub mod semantics;
 pub mod source;
 pub mod syntax;

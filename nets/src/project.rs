@@ -177,3 +177,41 @@ pub fn write(dir: &Path, project: &Project) -> std::io::Result<()> {
     }
     Ok(())
 }
+
+/// Reads and checks a project held in memory: a manifest and `(path, text)` net files (the
+/// manifest's `files` must name them). For tests and tools that build projects on the fly.
+pub fn from_sources(
+    manifest: &str,
+    files: &[(&str, &str)],
+) -> (Project, Option<CompiledProject>, Diagnostics, SourceMap) {
+    let mut sources = SourceMap::new();
+    let mut d = Diagnostics::new();
+    let mid = sources.add(MANIFEST, manifest);
+    let mut project = Project::default();
+    if let Some(m) = parse_manifest(mid, manifest, &mut d) {
+        for f in &m.files {
+            match files.iter().find(|(p, _)| *p == f.path) {
+                Some((path, text)) => {
+                    let id = sources.add(*path, *text);
+                    project.files.push(parse_file(id, path, text, &mut d));
+                }
+                None => d.push(
+                    Diagnostic::error(
+                        "E0104",
+                        f.span,
+                        format!("net file `{}` is not given", f.path),
+                    )
+                    .label("named here")
+                    .help("pass it along with the manifest"),
+                ),
+            }
+        }
+        project.manifest = m;
+    }
+    if d.has_errors() {
+        return (project, None, d, sources);
+    }
+    let (compiled, found) = check::check(&project);
+    d.extend(found);
+    (project, compiled, d, sources)
+}

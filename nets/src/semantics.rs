@@ -1,0 +1,527 @@
+//! The firing rules of `docs/semantics.md`, once, for everything that runs a project.
+//!
+//! The verifier explores with this code and the player executes with it, so what is verified is
+//! what runs. It is sans-I/O: a [`State`] is a bit vector (active nets, every place, running
+//! timers, the catastrophic flag), and what a firing does outside the state (calls, emitted
+//! events, timer deadlines, refusals) goes to an [`Effects`] implementation. Processing an event
+//! allocates nothing once a [`Scratch`] has warmed up.
+
+use crate::compiled::{
+    Action, Arg, CompiledProject, EventId, FunctionId, NetId, PlaceRef, ProgramId, TimerDuration,
+    TimerId,
+};
+use crate::model::Category;
+
+/// A state of the project, as bits; see [`Layout`] for what each bit means.
+pub type State = Vec<u64>;
+
+/// A set of bits within a state, as (word, mask) pairs, sorted by word, one pair per word.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Bits(Vec<(u32, u64)>);
+
+impl Bits {
+    fn from_bits(bits: impl IntoIterator<Item = u32>) -> Bits {
+        let mut v: Vec<(u32, u64)> = Vec::new();
+        let mut sorted: Vec<u32> = bits.into_iter().collect();
+        sorted.sort_unstable();
+        for b in sorted {
+            let (w, m) = (b / 64, 1u64 << (b % 64));
+            match v.last_mut() {
+                Some((lw, lm)) if *lw == w => *lm |= m,
+                _ => v.push((w, m)),
+            }
+        }
+        Bits(v)
+    }
+
+    /// True when every bit is set in `s`.
+    #[inline]
+    pub fn all_in(&self, s: &[u64]) -> bool {
+        self.0.iter().all(|&(w, m)| s[w as usize] & m == m)
+    }
+
+    /// True when some bit is set in `s`.
+    #[inline]
+    pub fn any_in(&self, s: &[u64]) -> bool {
+        self.0.iter().any(|&(w, m)| s[w as usize] & m != 0)
+    }
+
+    #[inline]
+    fn set(&self, s: &mut [u64]) {
+        for &(w, m) in &self.0 {
+            s[w as usize] |= m;
+        }
+    }
+
+    #[inline]
+    fn clear(&self, s: &mut [u64]) {
+        for &(w, m) in &self.0 {
+            s[w as usize] &= !m;
+        }
+    }
+
+    /// The bit numbers, in increasing order.
+    pub fn iter(&self) -> impl Iterator<Item = u32> + '_ {
+        self.0.iter().flat_map(|&(w, m)| {
+            (0..64)
+                .filter(move |b| m & (1 << b) != 0)
+                .map(move |b| w * 64 + b)
+        })
+    }
+}
+
+/// A transition, precompiled to bit operations.
+#[derive(Clone, Debug)]
+pub struct FiringRule {
+    /// Its net.
+    pub net: NetId,
+    /// Its index in the net.
+    pub transition: u32,
+    /// Bits that must be set for it to be enabled: its input places and its net's active bit.
+    enable: Bits,
+    /// Input places: tokens taken.
+    consume: Bits,
+    /// Output places that are not inputs: tokens put, and where a second token would go.
+    produce_new: Bits,
+    /// Output places that are also inputs: their token is put back.
+    produce_back: Bits,
+}
+
+/// Where each part of the project lives in a [`State`], and the precompiled transitions.
+#[derive(Clone, Debug)]
+pub struct Layout {
+    /// Words in a state.
+    pub words: usize,
+    /// Bit of each net's "active" flag.
+    pub net_active: Vec<u32>,
+    /// First bit of each net's local places (place `p` of net `n` is `net_base[n] + p`).
+    pub net_base: Vec<u32>,
+    /// First bit of the global places.
+    pub global_base: u32,
+    /// First bit of the timers' "running" flags.
+    pub timer_base: u32,
+    /// The bit set once a catastrophic event has been processed.
+    pub catastrophic: u32,
+    net_places: Vec<Bits>,
+    net_initial: Vec<Bits>,
+    /// Every transition, in dispatch order.
+    pub rules: Vec<FiringRule>,
+    /// For each event, the indices in `rules` of the transitions it triggers, in dispatch order.
+    pub by_event: Vec<Vec<u32>>,
+    /// Indices in `rules` of the immediate transitions, in dispatch order.
+    pub immediate: Vec<u32>,
+    /// Index in `rules` of each net's first transition.
+    pub net_first_rule: Vec<u32>,
+}
+
+impl Layout {
+    /// Lays out `p`.
+    pub fn new(p: &CompiledProject) -> Layout {
+        let mut next = 0u32;
+        let net_active: Vec<u32> = p
+            .nets
+            .iter()
+            .map(|_| {
+                next += 1;
+                next - 1
+            })
+            .collect();
+        let mut net_base = Vec::new();
+        for n in &p.nets {
+            net_base.push(next);
+            next += n.places.len() as u32;
+        }
+        let global_base = next;
+        next += p.globals.len() as u32;
+        let timer_base = next;
+        next += p.timers.len() as u32;
+        let catastrophic = next;
+        next += 1;
+        let words = (next as usize).div_ceil(64);
+        let bit = |net: usize, r: PlaceRef| match r {
+            PlaceRef::Local(i) => net_base[net] + i,
+            PlaceRef::Global(g) => global_base + g,
+        };
+        let mut rules = Vec::new();
+        let mut by_event = vec![Vec::new(); p.events.len()];
+        let mut immediate = Vec::new();
+        let mut net_first_rule = Vec::new();
+        for (ni, n) in p.nets.iter().enumerate() {
+            net_first_rule.push(rules.len() as u32);
+            for (ti, t) in n.transitions.iter().enumerate() {
+                let inputs: Vec<u32> = t.inputs.iter().map(|&r| bit(ni, r)).collect();
+                let outputs: Vec<u32> = t.outputs.iter().map(|&r| bit(ni, r)).collect();
+                let idx = rules.len() as u32;
+                match t.event {
+                    Some(e) => by_event[e as usize].push(idx),
+                    None => immediate.push(idx),
+                }
+                rules.push(FiringRule {
+                    net: ni as NetId,
+                    transition: ti as u32,
+                    enable: Bits::from_bits(inputs.iter().copied().chain([net_active[ni]])),
+                    consume: Bits::from_bits(inputs.iter().copied()),
+                    produce_new: Bits::from_bits(
+                        outputs.iter().copied().filter(|o| !inputs.contains(o)),
+                    ),
+                    produce_back: Bits::from_bits(
+                        outputs.iter().copied().filter(|o| inputs.contains(o)),
+                    ),
+                });
+            }
+        }
+        let net_places = p
+            .nets
+            .iter()
+            .enumerate()
+            .map(|(i, n)| Bits::from_bits((0..n.places.len() as u32).map(|k| net_base[i] + k)))
+            .collect();
+        let net_initial = p
+            .nets
+            .iter()
+            .enumerate()
+            .map(|(i, n)| {
+                Bits::from_bits(
+                    n.places
+                        .iter()
+                        .enumerate()
+                        .filter(|(_, pl)| pl.initial)
+                        .map(|(k, _)| net_base[i] + k as u32),
+                )
+            })
+            .collect();
+        Layout {
+            words,
+            net_active,
+            net_base,
+            global_base,
+            timer_base,
+            catastrophic,
+            net_places,
+            net_initial,
+            rules,
+            by_event,
+            immediate,
+            net_first_rule,
+        }
+    }
+
+    /// True if bit `b` is set in `s`.
+    #[inline]
+    pub fn bit(s: &[u64], b: u32) -> bool {
+        s[(b / 64) as usize] & (1 << (b % 64)) != 0
+    }
+
+    #[inline]
+    fn set(s: &mut [u64], b: u32) {
+        s[(b / 64) as usize] |= 1 << (b % 64);
+    }
+
+    #[inline]
+    fn clear(s: &mut [u64], b: u32) {
+        s[(b / 64) as usize] &= !(1 << (b % 64));
+    }
+
+    /// True if net `n` is active in `s`.
+    pub fn is_active(&self, s: &[u64], n: NetId) -> bool {
+        Self::bit(s, self.net_active[n as usize])
+    }
+
+    /// True if place `r` of net `n` is marked in `s`.
+    pub fn is_marked(&self, s: &[u64], n: NetId, r: PlaceRef) -> bool {
+        Self::bit(s, self.place_bit(n, r))
+    }
+
+    /// The bit of place `r` seen from net `n`.
+    pub fn place_bit(&self, n: NetId, r: PlaceRef) -> u32 {
+        match r {
+            PlaceRef::Local(i) => self.net_base[n as usize] + i,
+            PlaceRef::Global(g) => self.global_base + g,
+        }
+    }
+
+    /// True if timer `t` runs in `s`.
+    pub fn timer_running(&self, s: &[u64], t: TimerId) -> bool {
+        Self::bit(s, self.timer_base + t)
+    }
+
+    /// True once a catastrophic event has been processed.
+    pub fn is_over(&self, s: &[u64]) -> bool {
+        Self::bit(s, self.catastrophic)
+    }
+
+    /// True if rule `r` is enabled in `s`.
+    #[inline]
+    pub fn enabled(&self, s: &[u64], r: u32) -> bool {
+        self.rules[r as usize].enable.all_in(s)
+    }
+
+    /// The places (as bits) where firing rule `r` in `s` would put a second token.
+    pub fn unsafe_outputs(&self, s: &[u64], r: u32) -> impl Iterator<Item = u32> + '_ {
+        let rule = &self.rules[r as usize];
+        let s = s.to_vec();
+        rule.produce_new.iter().filter(move |&b| Self::bit(&s, b))
+    }
+
+    /// Describes bit `b` for people: `NET.place`, `global.place`, `NET (active)`, `timer T`.
+    pub fn describe_bit(&self, p: &CompiledProject, b: u32) -> String {
+        if b == self.catastrophic {
+            return "catastrophic".into();
+        }
+        if b >= self.timer_base {
+            return format!("timer {}", p.timers[(b - self.timer_base) as usize].name);
+        }
+        if b >= self.global_base {
+            return format!("global.{}", p.globals[(b - self.global_base) as usize].name);
+        }
+        if let Some(n) = self.net_active.iter().position(|&a| a == b) {
+            return format!("{} (active)", p.nets[n].name);
+        }
+        let n = self
+            .net_base
+            .iter()
+            .rposition(|&base| base <= b)
+            .unwrap_or(0);
+        format!(
+            "{}.{}",
+            p.nets[n].name,
+            p.nets[n].places[(b - self.net_base[n]) as usize].name
+        )
+    }
+}
+
+/// A notice about a step that changes no state but must not pass unseen.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Notice {
+    /// `activate` of a net that was already active: nothing changed.
+    AlreadyActive(NetId),
+    /// `deactivate` of a net that was not active: nothing changed.
+    AlreadyInactive(NetId),
+}
+
+/// What firing does outside the state. Every method has a default that ignores it, so an
+/// implementation listens only to what it needs.
+pub trait Effects {
+    /// Rule `rule` (an index in [`Layout::rules`]) fired.
+    fn fired(&mut self, _rule: u32) {}
+    /// A firing of `rule` was refused: it would have put a second token in place bit `place`.
+    fn refused(&mut self, _rule: u32, _place: u32) {}
+    /// Candidate `rule` of the current event was skipped: an earlier firing of the same event
+    /// took a token it needed (a conflict), or deactivated its net.
+    fn conflict(&mut self, _rule: u32) {}
+    /// `call PROGRAM.FUNCTION(args)`; `Arg::EventParam` refers to the triggering event, which
+    /// the caller of [`Semantics::process_event`] holds.
+    fn call(&mut self, _program: ProgramId, _function: FunctionId, _args: &[Arg]) {}
+    /// `emit EVENT(args)`.
+    fn emit(&mut self, _event: EventId, _args: &[Arg]) {}
+    /// `start TIMER after D`.
+    fn start_timer(&mut self, _timer: TimerId, _after: &TimerDuration) {}
+    /// `cancel TIMER`.
+    fn cancel_timer(&mut self, _timer: TimerId) {}
+    /// A notice (activation of an active net...).
+    fn notice(&mut self, _notice: Notice) {}
+    /// An immediate transition fired during a fixpoint, leading to `state`. Return `false` to
+    /// stop the fixpoint (the verifier does when it sees a state twice: a livelock).
+    fn immediate_step(&mut self, _state: &[u64]) -> bool {
+        true
+    }
+    /// The fixpoint hit the firing bound without settling.
+    fn livelock(&mut self) {}
+}
+
+/// Effects that are all ignored.
+pub struct NoEffects;
+impl Effects for NoEffects {}
+
+/// Reusable buffers, so that processing an event allocates nothing in the steady state.
+#[derive(Default)]
+pub struct Scratch {
+    candidates: Vec<u32>,
+    refused_immediate: Vec<u32>,
+}
+
+/// How an event step ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StepOutcome {
+    /// At least one transition was a candidate (it fired, lost a conflict or was refused).
+    Processed,
+    /// No transition waited for the event in this state; the state is unchanged.
+    Unused,
+    /// A catastrophic event was processed earlier: the event is refused.
+    RefusedAfterCatastrophic,
+}
+
+/// The engine's and the verifier's shared step function.
+pub struct Semantics<'p> {
+    /// The compiled project.
+    pub project: &'p CompiledProject,
+    /// Its layout.
+    pub layout: Layout,
+    /// Most immediate firings in one fixpoint before it is called a livelock.
+    pub fixpoint_bound: u32,
+}
+
+impl<'p> Semantics<'p> {
+    /// The semantics of `project`, with the default fixpoint bound (10,000 firings).
+    pub fn new(project: &'p CompiledProject) -> Self {
+        Semantics {
+            project,
+            layout: Layout::new(project),
+            fixpoint_bound: 10_000,
+        }
+    }
+
+    /// The initial state: global places marked, start nets activated in order, then the
+    /// immediate fixpoint.
+    pub fn initial(&self, fx: &mut impl Effects, scratch: &mut Scratch) -> State {
+        let mut s = vec![0u64; self.layout.words];
+        for (g, gp) in self.project.globals.iter().enumerate() {
+            if gp.initial {
+                Layout::set(&mut s, self.layout.global_base + g as u32);
+            }
+        }
+        for &n in &self.project.start {
+            self.activate(&mut s, n, fx);
+        }
+        self.fixpoint(&mut s, fx, scratch);
+        s
+    }
+
+    fn activate(&self, s: &mut [u64], n: NetId, fx: &mut impl Effects) {
+        let l = &self.layout;
+        if l.is_active(s, n) {
+            fx.notice(Notice::AlreadyActive(n));
+            return;
+        }
+        Layout::set(s, l.net_active[n as usize]);
+        l.net_initial[n as usize].set(s);
+    }
+
+    fn deactivate(&self, s: &mut [u64], n: NetId, fx: &mut impl Effects) {
+        let l = &self.layout;
+        if !l.is_active(s, n) {
+            fx.notice(Notice::AlreadyInactive(n));
+            return;
+        }
+        Layout::clear(s, l.net_active[n as usize]);
+        l.net_places[n as usize].clear(s);
+    }
+
+    /// Fires rule `r` if it is enabled and safe; returns whether it fired.
+    fn fire(&self, s: &mut [u64], r: u32, fx: &mut impl Effects) -> bool {
+        let rule = &self.layout.rules[r as usize];
+        if !rule.enable.all_in(s) {
+            return false;
+        }
+        // Refuse a second token: checked on the marking after the inputs are taken, which is
+        // the marking before for outputs that are not inputs.
+        if rule.produce_new.any_in(s) {
+            let place = rule
+                .produce_new
+                .iter()
+                .find(|&b| Layout::bit(s, b))
+                .unwrap_or(0);
+            fx.refused(r, place);
+            return false;
+        }
+        rule.consume.clear(s);
+        rule.produce_new.set(s);
+        rule.produce_back.set(s);
+        fx.fired(r);
+        let t = &self.project.nets[rule.net as usize].transitions[rule.transition as usize];
+        for a in &t.actions {
+            match a {
+                Action::Activate(n) => self.activate(s, *n, fx),
+                Action::Deactivate(n) => self.deactivate(s, *n, fx),
+                Action::StartTimer { timer, after } => {
+                    Layout::set(s, self.layout.timer_base + timer);
+                    fx.start_timer(*timer, after);
+                }
+                Action::CancelTimer(timer) => {
+                    Layout::clear(s, self.layout.timer_base + timer);
+                    fx.cancel_timer(*timer);
+                }
+                Action::Call {
+                    program,
+                    function,
+                    args,
+                } => fx.call(*program, *function, args),
+                Action::Emit { event, args } => fx.emit(*event, args),
+            }
+        }
+        true
+    }
+
+    /// Marks timer `t` as expired (not running) before its event is processed.
+    pub fn timer_expired(&self, s: &mut [u64], t: TimerId) {
+        Layout::clear(s, self.layout.timer_base + t);
+    }
+
+    /// Processes one event on a stable state: candidates from the snapshot, fired in dispatch
+    /// order, then the immediate fixpoint.
+    pub fn process_event(
+        &self,
+        s: &mut [u64],
+        event: EventId,
+        fx: &mut impl Effects,
+        scratch: &mut Scratch,
+    ) -> StepOutcome {
+        let l = &self.layout;
+        if l.is_over(s) {
+            return StepOutcome::RefusedAfterCatastrophic;
+        }
+        scratch.candidates.clear();
+        for &r in &l.by_event[event as usize] {
+            if l.enabled(s, r) {
+                scratch.candidates.push(r);
+            }
+        }
+        let outcome = if scratch.candidates.is_empty() {
+            StepOutcome::Unused
+        } else {
+            for i in 0..scratch.candidates.len() {
+                let r = scratch.candidates[i];
+                if !l.enabled(s, r) {
+                    fx.conflict(r);
+                    continue;
+                }
+                self.fire(s, r, fx);
+            }
+            self.fixpoint(s, fx, scratch);
+            StepOutcome::Processed
+        };
+        if self.project.events[event as usize].category == Category::Catastrophic {
+            Layout::set(s, l.catastrophic);
+        }
+        outcome
+    }
+
+    /// Fires the first enabled immediate transition, again and again, until none is enabled.
+    pub fn fixpoint(&self, s: &mut [u64], fx: &mut impl Effects, scratch: &mut Scratch) {
+        let l = &self.layout;
+        scratch.refused_immediate.clear();
+        let mut fired = 0u32;
+        'search: loop {
+            for &r in &l.immediate {
+                if !l.enabled(s, r) || scratch.refused_immediate.contains(&r) {
+                    continue;
+                }
+                if self.fire(s, r, fx) {
+                    fired += 1;
+                    if fired > self.fixpoint_bound {
+                        fx.livelock();
+                        return;
+                    }
+                    if !fx.immediate_step(s) {
+                        return;
+                    }
+                } else {
+                    // Refused for safety: not retried during this fixpoint.
+                    scratch.refused_immediate.push(r);
+                }
+                continue 'search;
+            }
+            return;
+        }
+    }
+}
