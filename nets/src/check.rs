@@ -191,6 +191,7 @@ impl<'p> Checker<'p> {
             })
             .collect();
         let nets = self.p.nets().map(|n| self.net(n)).collect();
+        let finals = m.finals.iter().map(|f| self.final_marking(f)).collect();
         c::CompiledProject {
             name: m.name.clone(),
             nets,
@@ -229,7 +230,38 @@ impl<'p> Checker<'p> {
                 .collect(),
             timers,
             start,
+            finals,
         }
+    }
+
+    /// Resolves the places of an intended final marking, `NET.place` or `global.place`.
+    fn final_marking(&mut self, places: &[Name]) -> Vec<(u32, c::PlaceRef)> {
+        let mut out = Vec::new();
+        for n in places {
+            let found = match n.text.split_once('.') {
+                Some(("global", g)) => self.globals.get(g).map(|&i| (0, c::PlaceRef::Global(i))),
+                Some((net, place)) => self.nets.get(net).and_then(|&ni| {
+                    let decl = self.p.nets().nth(ni as usize)?;
+                    decl.places()
+                        .position(|p| p.name.text == place)
+                        .map(|i| (ni, c::PlaceRef::Local(i as u32)))
+                }),
+                None => None,
+            };
+            match found {
+                Some(f) => out.push(f),
+                None => self.d.push(
+                    Diagnostic::error(
+                        "E0208",
+                        n.span,
+                        format!("unknown place `{n}` in a final marking"),
+                    )
+                    .label("no such place")
+                    .help("write places of final markings as `NET.place` or `global.place`"),
+                ),
+            }
+        }
+        out
     }
 
     fn unknown(&mut self, code: &'static str, what: &str, n: &Name, mut candidates: Vec<&str>) {

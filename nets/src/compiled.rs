@@ -206,6 +206,9 @@ pub struct CompiledProject {
     pub timers: Vec<Timer>,
     /// Nets active at start, in manifest order, no duplicates.
     pub start: Vec<NetId>,
+    /// Intended final markings: each a set of places (with the net they are seen from; any net
+    /// for a global place) that a planned end of the mission holds.
+    pub finals: Vec<Vec<(NetId, PlaceRef)>>,
 }
 
 impl CompiledProject {

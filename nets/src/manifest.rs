@@ -71,6 +71,15 @@ struct RawManifest {
     programs: Ordered<RawProgram>,
     #[serde(default)]
     timers: Ordered<RawTimer>,
+    #[serde(default)]
+    verify: RawVerify,
+}
+
+#[derive(serde::Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RawVerify {
+    #[serde(default, rename = "final")]
+    finals: Vec<Vec<Spanned<String>>>,
 }
 
 #[derive(serde::Deserialize)]
@@ -308,6 +317,23 @@ pub fn parse_manifest(file: FileId, text: &str, diags: &mut Diagnostics) -> Opti
         let event = r.name(&v.event, "event", text);
         m.timers.push(TimerDecl { name, event });
     }
+    for places in &raw.verify.finals {
+        // `NET.place` is not an identifier: keep the text, the checker resolves it.
+        let names = places
+            .iter()
+            .map(|s| {
+                let mut r2 = s.span();
+                if text[r2.clone()].starts_with('"') {
+                    r2 = r2.start + 1..r2.end.saturating_sub(1);
+                }
+                Name {
+                    text: s.get_ref().clone(),
+                    span: r.span(r2),
+                }
+            })
+            .collect();
+        m.finals.push(names);
+    }
     Some(m)
 }
 
@@ -383,6 +409,14 @@ pub fn format_manifest(m: &Manifest) -> String {
                 param_list(&f.params)
             );
         }
+    }
+    if !m.finals.is_empty() {
+        out.push_str("\n[verify]\nfinal = [\n");
+        for f in &m.finals {
+            let places: Vec<String> = f.iter().map(|n| toml_str(&n.text)).collect();
+            let _ = writeln!(out, "    [{}],", places.join(", "));
+        }
+        out.push_str("]\n");
     }
     if !m.timers.is_empty() {
         out.push_str("\n[timers]\n");

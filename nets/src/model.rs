@@ -234,6 +234,9 @@ pub struct Manifest {
     pub programs: Vec<ProgramDecl>,
     /// Timers.
     pub timers: Vec<TimerDecl>,
+    /// Intended final markings: a dead state holding every place of one of these is the
+    /// mission's planned end, not an error. Places are written `NET.place` or `global.place`.
+    pub finals: Vec<Vec<Name>>,
 }
 
 /// Comments and spacing that belong before an item, kept so `petrel fmt` loses nothing.

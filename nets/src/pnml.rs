@@ -1606,6 +1606,13 @@ fn write_manifest(w: &mut Writer, m: &Manifest, layout: &Layout) {
             &[("name", t.name.as_str()), ("event", t.event.as_str())],
         );
     }
+    for f in &m.finals {
+        w.open("final", &[]);
+        for p in f {
+            w.empty("place", &[("name", p.as_str())]);
+        }
+        w.close("final");
+    }
     w.close("manifest");
 }
 
@@ -2059,6 +2066,16 @@ impl Rebuild<'_, '_> {
                 name: self.name(t, "name"),
                 event: self.name(t, "event"),
             });
+        }
+        for f in n.children("final") {
+            let places = f
+                .children("place")
+                .map(|p| Name {
+                    text: self.req(p, "name").to_string(),
+                    span: p.span,
+                })
+                .collect();
+            m.finals.push(places);
         }
         m
     }

@@ -256,6 +256,52 @@ impl Layout {
         self.rules[r as usize].enable.all_in(s)
     }
 
+    /// True if rules `a` and `b` take a token from a common place (they conflict when both are
+    /// enabled by the same event).
+    pub fn share_input(&self, a: u32, b: u32) -> bool {
+        let (x, y) = (&self.rules[a as usize].consume.0, &self.rules[b as usize].consume.0);
+        x.iter()
+            .any(|&(w, m)| y.iter().any(|&(w2, m2)| w == w2 && m & m2 != 0))
+    }
+
+    /// Number of marked places (local and global) in `s`.
+    pub fn tokens(&self, s: &[u64]) -> u32 {
+        let mut n = 0;
+        for b in self.net_base.first().copied().unwrap_or(self.global_base)..self.timer_base {
+            n += u32::from(Self::bit(s, b));
+        }
+        n
+    }
+
+    /// The marked places of `s`, as `NET.place` and `global.place`, and the active nets.
+    pub fn describe_state(&self, p: &CompiledProject, s: &[u64]) -> Vec<String> {
+        let mut out = Vec::new();
+        for (n, net) in p.nets.iter().enumerate() {
+            if !self.is_active(s, n as NetId) {
+                continue;
+            }
+            let marked: Vec<&str> = net
+                .places
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| Self::bit(s, self.net_base[n] + *i as u32))
+                .map(|(_, pl)| pl.name.as_str())
+                .collect();
+            out.push(format!("{}{{{}}}", net.name, marked.join(", ")));
+        }
+        for (g, gp) in p.globals.iter().enumerate() {
+            if Self::bit(s, self.global_base + g as u32) {
+                out.push(format!("global.{}", gp.name));
+            }
+        }
+        for (t, tm) in p.timers.iter().enumerate() {
+            if Self::bit(s, self.timer_base + t as u32) {
+                out.push(format!("timer {} running", tm.name));
+            }
+        }
+        out
+    }
+
     /// The places (as bits) where firing rule `r` in `s` would put a second token.
     pub fn unsafe_outputs(&self, s: &[u64], r: u32) -> impl Iterator<Item = u32> + '_ {
         let rule = &self.rules[r as usize];

@@ -807,6 +807,7 @@ fn sample_project() -> Project {
             name: n("watchdog"),
             event: n("tick"),
         }],
+        finals: vec![vec![n("Nav.done"), n("global.ok")], vec![n("Nav.idle")]],
     };
 
     let nav_go = TransitionDecl {
