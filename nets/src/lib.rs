@@ -13,6 +13,8 @@ pub mod manifest;
 pub mod model;
 pub mod pnml;
 pub mod project;
+pub mod reach;
 pub mod semantics;
 pub mod source;
 pub mod syntax;
+pub mod verify;

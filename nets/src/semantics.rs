@@ -259,7 +259,10 @@ impl Layout {
     /// True if rules `a` and `b` take a token from a common place (they conflict when both are
     /// enabled by the same event).
     pub fn share_input(&self, a: u32, b: u32) -> bool {
-        let (x, y) = (&self.rules[a as usize].consume.0, &self.rules[b as usize].consume.0);
+        let (x, y) = (
+            &self.rules[a as usize].consume.0,
+            &self.rules[b as usize].consume.0,
+        );
         x.iter()
             .any(|&(w, m)| y.iter().any(|&(w2, m2)| w == w2 && m & m2 != 0))
     }

@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use petrel_nets::diag::Diagnostics;
 use petrel_nets::project::{self, LoadError};
 use petrel_nets::source::SourceMap;
+use petrel_nets::verify;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -39,6 +40,25 @@ enum Command {
         /// Output format.
         #[arg(long, value_enum, default_value = "human")]
         format: Format,
+        /// Skip the quick verification (reachable states, up to 100,000) that runs after a
+        /// clean check.
+        #[arg(long)]
+        no_verify: bool,
+    },
+    /// Verify a project (or one net of it): safety, dead markings, loops, conflicts, with the
+    /// shortest event sequence to each finding.
+    Verify {
+        /// The project directory.
+        dir: PathBuf,
+        /// Verify this net alone, its global places and events being free choices.
+        #[arg(long)]
+        net: Option<String>,
+        /// Output format.
+        #[arg(long, value_enum, default_value = "human")]
+        format: Format,
+        /// Stop with an error beyond this many states.
+        #[arg(long)]
+        max_states: Option<u64>,
     },
     /// Rewrite the project's net files in canonical layout (running it twice changes nothing).
     Fmt {
@@ -100,7 +120,17 @@ impl From<LoadError> for Outcome {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let outcome = match cli.command {
-        Command::Check { dir, format } => check(&dir, format),
+        Command::Check {
+            dir,
+            format,
+            no_verify,
+        } => check(&dir, format, !no_verify),
+        Command::Verify {
+            dir,
+            net,
+            format,
+            max_states,
+        } => verify(&dir, net, format, max_states),
         Command::Fmt { dir, check } => fmt(&dir, check),
         Command::Dot { dir, net, output } => dot(&dir, net.as_deref(), output.as_deref()),
         Command::Export { dir, output, .. } => export(&dir, output.as_deref()),
@@ -120,6 +150,23 @@ fn main() -> ExitCode {
     }
 }
 
+/// Writes to standard output. A closed pipe (`petrel ... | head`) ends the command quietly:
+/// the reader has what it wanted.
+fn out(text: &str) {
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
+    if let Err(e) = stdout
+        .write_all(text.as_bytes())
+        .and_then(|_| stdout.flush())
+    {
+        if e.kind() == std::io::ErrorKind::BrokenPipe {
+            std::process::exit(0);
+        }
+        eprintln!("error: cannot write to standard output: {e}");
+        std::process::exit(2);
+    }
+}
+
 fn report(d: &Diagnostics, sources: &SourceMap) {
     if !d.is_empty() {
         eprint!("{}", d.render_human(sources));
@@ -131,29 +178,53 @@ fn write_output(output: Option<&Path>, text: &str) -> Result<(), Outcome> {
         Some(p) => std::fs::write(p, text)
             .map_err(|e| Outcome::Usage(format!("cannot write {}: {e}", p.display()))),
         None => {
-            print!("{text}");
+            out(text);
             Ok(())
         }
     }
 }
 
-fn check(dir: &Path, format: Format) -> Outcome {
-    let (loaded, compiled, d) = match project::load_and_check(dir) {
+/// States explored by the quick verification of `petrel check`.
+const QUICK_VERIFY_STATES: u64 = 100_000;
+
+fn check(dir: &Path, format: Format, quick_verify: bool) -> Outcome {
+    let (loaded, compiled, mut d) = match project::load_and_check(dir) {
         Ok(r) => r,
         Err(e) => return e.into(),
     };
+    if let (Some(c), true) = (&compiled, quick_verify) {
+        let opts = verify::VerifyOptions {
+            max_states: Some(QUICK_VERIFY_STATES),
+            ..Default::default()
+        };
+        match verify::verify(c, opts) {
+            Ok(report) => d.extend(verify::diagnostics(&loaded.project, &report)),
+            Err(e) => d.push(petrel_nets::diag::Diagnostic {
+                severity: petrel_nets::diag::Severity::Warning,
+                ..petrel_nets::diag::Diagnostic::global(
+                    "W0605",
+                    format!("the quick verification did not finish: {e}"),
+                )
+                .help("run `petrel verify` on the project for the full analysis")
+            }),
+        }
+        d.sort();
+    }
     match format {
         Format::Json => {
             let doc = d.to_json(&loaded.sources);
-            println!("{}", serde_json::to_string_pretty(&doc).unwrap_or_default());
+            out(&format!(
+                "{}\n",
+                serde_json::to_string_pretty(&doc).unwrap_or_default()
+            ));
         }
         Format::Human => {
             report(&d, &loaded.sources);
-            if let Some(c) = &compiled {
+            if let Some(c) = compiled.as_ref().filter(|_| !d.has_errors()) {
                 let places: usize = c.nets.iter().map(|n| n.places.len()).sum();
                 let transitions: usize = c.nets.iter().map(|n| n.transitions.len()).sum();
-                println!(
-                    "project `{}` checks clean: {} nets ({} active at start), {} places, {} global places, {} transitions, {} events, {} programs, {} timers, {} warnings",
+                out(&format!(
+                    "project `{}` checks clean: {} nets ({} active at start), {} places, {} global places, {} transitions, {} events, {} programs, {} timers, {} warnings\n",
                     c.name,
                     c.nets.len(),
                     c.start.len(),
@@ -164,7 +235,7 @@ fn check(dir: &Path, format: Format) -> Outcome {
                     c.programs.len(),
                     c.timers.len(),
                     d.warning_count()
-                );
+                ));
             }
         }
     }
@@ -172,6 +243,58 @@ fn check(dir: &Path, format: Format) -> Outcome {
         Outcome::Errors
     } else {
         Outcome::Clean
+    }
+}
+
+fn verify(dir: &Path, net: Option<String>, format: Format, max_states: Option<u64>) -> Outcome {
+    let (loaded, compiled, d) = match project::load_and_check(dir) {
+        Ok(r) => r,
+        Err(e) => return e.into(),
+    };
+    report(&d, &loaded.sources);
+    let Some(c) = compiled else {
+        eprintln!("fix the errors above first: only a project that checks can be verified");
+        return Outcome::Errors;
+    };
+    let interactive =
+        format == Format::Human && std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let opts = verify::VerifyOptions {
+        max_states,
+        only_net: net,
+        progress: interactive.then(|| {
+            Box::new(|states: u64, rate: f64| {
+                eprint!("\r{states} states, {rate:.0} states/s   ");
+            }) as Box<dyn FnMut(u64, f64)>
+        }),
+    };
+    let r = match verify::verify(&c, opts) {
+        Ok(r) => r,
+        Err(verify::VerifyError::UnknownNet(n)) => {
+            let names: Vec<_> = c.nets.iter().map(|n| n.name.as_str()).collect();
+            return Outcome::Usage(format!(
+                "no net named `{n}`; the nets are: {}",
+                names.join(", ")
+            ));
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            return Outcome::Errors;
+        }
+    };
+    if interactive {
+        eprint!("\r\x1b[K");
+    }
+    match format {
+        Format::Json => out(&format!(
+            "{}\n",
+            serde_json::to_string_pretty(&verify::to_json(&r)).unwrap_or_default()
+        )),
+        Format::Human => out(&verify::render_human(&c.name, &r)),
+    }
+    if r.is_clean() {
+        Outcome::Clean
+    } else {
+        Outcome::Errors
     }
 }
 
@@ -207,9 +330,9 @@ fn fmt(dir: &Path, check_only: bool) -> Outcome {
     }
     for name in &unformatted {
         if check_only {
-            println!("not in canonical layout: {name}");
+            out(&format!("not in canonical layout: {name}\n"));
         } else {
-            println!("formatted {name}");
+            out(&format!("formatted {name}\n"));
         }
     }
     if loaded.diagnostics.has_errors() || (check_only && !unformatted.is_empty()) {
@@ -261,7 +384,7 @@ fn import(file: &Path, output: Option<PathBuf>, force: bool) -> Outcome {
         Ok(t) => t,
         Err(e) => return Outcome::Usage(format!("cannot read {}: {e}", file.display())),
     };
-    let out = output.unwrap_or_else(|| {
+    let dest = output.unwrap_or_else(|| {
         let stem = file.file_stem().unwrap_or_default();
         PathBuf::from(stem)
     });
@@ -278,25 +401,25 @@ fn import(file: &Path, output: Option<PathBuf>, force: bool) -> Outcome {
         );
         return Outcome::Errors;
     };
-    let occupied = std::fs::read_dir(&out)
+    let occupied = std::fs::read_dir(&dest)
         .map(|mut e| e.next().is_some())
         .unwrap_or(false);
     if occupied && !force {
         return Outcome::Usage(format!(
             "{} exists and is not empty: choose another directory with --output, or pass --force to overwrite",
-            out.display()
+            dest.display()
         ));
     }
-    if let Err(e) = project::write(&out, &project) {
-        return Outcome::Usage(format!("cannot write {}: {e}", out.display()));
+    if let Err(e) = project::write(&dest, &project) {
+        return Outcome::Usage(format!("cannot write {}: {e}", dest.display()));
     }
     let nets = project.nets().count();
     let places: usize = project.nets().map(|n| n.places().count()).sum();
     let transitions: usize = project.nets().map(|n| n.transitions().count()).sum();
-    println!(
-        "imported {} into {}: {nets} net(s), {places} places, {transitions} transitions",
+    out(&format!(
+        "imported {} into {}: {nets} net(s), {places} places, {transitions} transitions\n",
         file.display(),
-        out.display()
-    );
+        dest.display()
+    ));
     Outcome::Clean
 }

@@ -219,3 +219,71 @@ fn export_then_import_gives_back_the_same_project() {
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("--force"));
 }
+
+#[test]
+fn verify_proves_the_uav_mission_and_lists_its_planned_ends() {
+    let o = petrel(&["verify", &uav()]);
+    assert_eq!(o.status.code(), Some(0), "{}{}", stdout(&o), stderr(&o));
+    let out = stdout(&o);
+    assert!(out.contains("safe: yes"), "{out}");
+    assert!(
+        out.contains("dead markings: 2 (2 intended, 0 not)"),
+        "{out}"
+    );
+    assert!(out.ends_with("result: verified, no error\n"), "{out}");
+
+    let o = petrel(&["verify", &uav(), "--format", "json"]);
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON");
+    for key in [
+        "states",
+        "edges",
+        "max_tokens_in_place",
+        "max_tokens_per_marking",
+        "safe",
+        "deadlock",
+    ] {
+        assert!(doc.get(key).is_some(), "{key} missing");
+    }
+    assert_eq!(doc["safe"], true);
+    assert_eq!(doc["deadlock"], false);
+}
+
+#[test]
+fn verify_and_check_report_each_flaw_with_its_trace() {
+    let flawed = repo()
+        .join("nets/tests/data/verify/flawed")
+        .display()
+        .to_string();
+    let o = petrel(&["verify", &flawed]);
+    assert_eq!(o.status.code(), Some(1));
+    let out = stdout(&o);
+    for line in [
+        "error: A.begin would put a second token in global.busy, after go → done → go",
+        "error: dead marking: A{stuck}, after spare",
+        "error: immediate transitions loop forever: A.wob → A.ble, after go → more",
+        "warning: on done, A.end fires and A.stop does not (written order), after go → done",
+        "nets never activated: Unused",
+    ] {
+        assert!(out.contains(line), "missing `{line}` in:\n{out}");
+    }
+
+    // `check` runs the same verification and points at the transitions.
+    let o = petrel(&["check", &flawed]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = stderr(&o);
+    for code in ["E0601", "E0602", "E0603", "W0601", "W0602", "W0603"] {
+        assert!(err.contains(code), "{code} missing:\n{err}");
+    }
+    assert!(err.contains("a.pn:9:16"), "E0601 points at `begin`: {err}");
+    // --no-verify keeps to the language.
+    assert_eq!(
+        petrel(&["check", "--no-verify", &flawed]).status.code(),
+        Some(0)
+    );
+
+    let o = petrel(&["verify", &flawed, "--max-states", "2"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("--max-states"), "{}", stderr(&o));
+    let o = petrel(&["verify", &flawed, "--net", "Nope"]);
+    assert_eq!(o.status.code(), Some(2));
+}

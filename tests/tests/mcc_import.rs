@@ -62,8 +62,10 @@ fn every_mcc_net_imports_or_is_refused_with_reasons() {
             )),
             "{model}: {msg}"
         );
+        // The language-level check: as missions, these nets are all immediate transitions,
+        // which the verification part of `check` rightly reports (livelocks, dead markings).
         let o = Command::new(petrel_bin())
-            .arg("check")
+            .args(["check", "--no-verify"])
             .arg(&dir)
             .output()
             .unwrap();
