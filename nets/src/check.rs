@@ -111,6 +111,34 @@ impl<'p> Checker<'p> {
         self.nets = unique(d, "net", " in the project", self.p.nets().map(|n| &n.name));
         self.globals = unique(d, "global place", "", m.globals.iter().map(|g| &g.name));
         self.events = unique(d, "event", "", m.events.iter().map(|e| &e.name));
+        for (k, b) in builtin_events().iter().enumerate() {
+            if let Some(e) = m.events.iter().find(|e| e.name.text == b.name.text) {
+                d.push(
+                    Diagnostic::error(
+                        "E0106",
+                        e.name.span,
+                        format!("`{}` is a built-in event: it cannot be declared", b.name),
+                    )
+                    .label("reserved name")
+                    .help(format!(
+                        "every project has `{}`; use it without declaring it, or give your event another name",
+                        crate::fmt::format_trigger(&Trigger {
+                            event: b.name.clone(),
+                            bindings: b
+                                .params
+                                .iter()
+                                .map(|p| Binding {
+                                    name: p.name.clone(),
+                                    ty: Some((p.ty, Span::default())),
+                                })
+                                .collect(),
+                        })
+                    )),
+                );
+            }
+            self.events
+                .insert(b.name.as_str(), (m.events.len() + k) as u32);
+        }
         self.programs = unique(d, "program", "", m.programs.iter().map(|p| &p.name));
         self.timers = unique(d, "timer", "", m.timers.iter().map(|t| &t.name));
         for e in &m.events {
@@ -147,7 +175,7 @@ impl<'p> Checker<'p> {
         for t in &m.timers {
             let event = match self.events.get(t.event.as_str()) {
                 Some(&e) => {
-                    let decl = &m.events[e as usize];
+                    let decl = self.event_decl(e);
                     if !decl.params.is_empty() {
                         self.d.push(
                             Diagnostic::error(
@@ -199,6 +227,7 @@ impl<'p> Checker<'p> {
             events: m
                 .events
                 .iter()
+                .chain(builtin_events())
                 .map(|e| c::Event {
                     name: e.name.text.clone(),
                     category: e.category,
@@ -234,6 +263,13 @@ impl<'p> Checker<'p> {
         }
     }
 
+    /// A declared or built-in event.
+    fn event_decl(&self, e: u32) -> &'p EventDecl {
+        let m = &self.p.manifest.events;
+        m.get(e as usize)
+            .unwrap_or_else(|| &builtin_events()[e as usize - m.len()])
+    }
+
     /// Resolves the places of an intended final marking, `NET.place` or `global.place`.
     fn final_marking(&mut self, places: &[Name]) -> Vec<(u32, c::PlaceRef)> {
         let mut out = Vec::new();
@@ -266,7 +302,15 @@ impl<'p> Checker<'p> {
 
     fn unknown(&mut self, code: &'static str, what: &str, n: &Name, mut candidates: Vec<&str>) {
         candidates.sort_unstable();
-        let hint = suggest(n.as_str(), candidates.into_iter());
+        let mut hint = suggest(n.as_str(), candidates.iter().copied());
+        if what == "event" && !hint.starts_with("did you mean") {
+            // List what the user declared; built-ins are documented, not declared.
+            let declared = candidates
+                .iter()
+                .copied()
+                .filter(|c| !builtin_events().iter().any(|b| b.name.text == *c));
+            hint = suggest(n.as_str(), declared);
+        }
         let declare = match what {
             "net" => "nets are declared with `net NAME { ... }` in a file the manifest lists",
             "event" => "declare events in the manifest's [events] table",
@@ -425,7 +469,7 @@ impl<'p> Checker<'p> {
                 ),
                 Some(e) => {
                     event = Some(e);
-                    let decl = &self.p.manifest.events[e as usize];
+                    let decl = self.event_decl(e);
                     if !trigger.bindings.is_empty() && trigger.bindings.len() != decl.params.len() {
                         let expected = decl
                             .params
@@ -618,7 +662,7 @@ impl<'p> Checker<'p> {
                     );
                     return None;
                 };
-                let params = &self.p.manifest.events[eid as usize].params;
+                let params = &self.event_decl(eid).params;
                 let what = format!("event `{event}`");
                 let args = self.args(s, &what, params, args, *span)?;
                 c::Action::Emit { event: eid, args }

@@ -155,6 +155,62 @@ pub struct Param {
     pub ty: Type,
 }
 
+/// Events every project has without declaring them: the player raises them, and nets may react
+/// to them like to any other event. Their names are reserved.
+pub fn builtin_events() -> &'static [EventDecl] {
+    static BUILTINS: std::sync::OnceLock<Vec<EventDecl>> = std::sync::OnceLock::new();
+    BUILTINS.get_or_init(|| {
+        let ev = |name: &str, category, params: &[(&str, Type)], description: &str| EventDecl {
+            name: Name::synthetic(name),
+            category,
+            params: params
+                .iter()
+                .map(|(n, t)| Param {
+                    name: Name::synthetic(*n),
+                    ty: *t,
+                })
+                .collect(),
+            description: Some(description.to_string()),
+        };
+        vec![
+            ev(
+                "program_lost",
+                Category::Safety,
+                &[("program", Type::Text)],
+                "a software program stopped (crashed, killed or disconnected)",
+            ),
+            ev(
+                "call_failed",
+                Category::Safety,
+                &[("program", Type::Text), ("function", Type::Text)],
+                "a call could not be delivered: the program is absent",
+            ),
+            ev(
+                "safety_violation",
+                Category::Safety,
+                &[
+                    ("net", Type::Text),
+                    ("transition", Type::Text),
+                    ("place", Type::Text),
+                ],
+                "a firing was refused: it would have put a second token in a place",
+            ),
+            ev(
+                "livelock",
+                Category::Safety,
+                &[("net", Type::Text), ("transition", Type::Text)],
+                "immediate transitions did not settle: the fixpoint was stopped",
+            ),
+            ev(
+                "bad_message",
+                Category::Communication,
+                &[("sender", Type::Text), ("reason", Type::Text)],
+                "a message was refused: unknown event, wrong parameters, or undecodable",
+            ),
+        ]
+    })
+}
+
 /// An event declared in the manifest.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EventDecl {

@@ -761,6 +761,14 @@ fn mix(i: usize, x: u64) -> u64 {
     fold_mul(x ^ seed, 0xA076_1D64_78BD_642F)
 }
 
+/// Equality of two markings without a `memcmp` call: a branch-free fold the compiler unrolls
+/// when the length is a constant. Most comparisons are of equal markings (a successor already
+/// stored), so an early exit would not save anything.
+#[inline(always)]
+fn words_eq(a: &[u64], b: &[u64]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).fold(0, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
 #[inline(always)]
 fn hash_words(words: &[u64]) -> u64 {
     words.iter().enumerate().fold(0, |h, (i, &x)| h ^ mix(i, x))
@@ -771,6 +779,27 @@ fn oom(states: usize, store_bytes: usize) -> ExploreError {
         states_so_far: states as u64,
         store_bytes: store_bytes as u64,
     }
+}
+
+/// Doubles the table of states `0..n`. Done here, where a failed allocation can be reported,
+/// rather than inside `entry`, where it would abort. And done by reinserting the states in
+/// arena order rather than with hashbrown's own rehash: reading the arena sequentially to
+/// recompute hashes is several times faster than reading it in bucket order.
+fn grow(
+    table: &mut HashTable<u32>,
+    n: usize,
+    hash: impl Fn(u32) -> u64,
+) -> Result<(), hashbrown::TryReserveError> {
+    let mut fresh: HashTable<u32> = HashTable::new();
+    fresh.try_reserve(n.saturating_mul(2).max(64), |&j| hash(j))?;
+    // Free the old buckets before filling the new ones: the peak is then the same as
+    // hashbrown's own resize, and the fill touches only fresh memory.
+    *table = HashTable::new();
+    for j in 0..n as u32 {
+        fresh.insert_unique(hash(j), j, |&k| hash(k));
+    }
+    *table = fresh;
+    Ok(())
 }
 
 /// The positions on the breadth-first tree from the root to `state`, both included.
@@ -1006,6 +1035,7 @@ fn run_bits<const N: usize>(
     ctl: &mut Ctl,
 ) -> Result<Option<PtReport>, ExploreError> {
     let w = if N > 0 { N } else { bn.words };
+    eprintln!("DEBUG N={N} w={w}");
     let mut arena: Vec<u64> = Vec::new();
     let mut parents: Vec<u32> = Vec::new();
     let mut table: HashTable<u32> = HashTable::new();
@@ -1054,8 +1084,13 @@ fn run_bits<const N: usize>(
             }
             bn.build_index(c.places, &freq);
         }
+        // Slicing to `w` everywhere lets the compiler see the constant length (N > 0) and turn
+        // copies and comparisons into a few loads instead of memcpy and memcmp calls.
+        let cur = &mut cur[..w];
+        let next = &mut next[..w];
         cur.copy_from_slice(&arena[i * w..][..w]);
-        let h = hash_words(&cur);
+        let cur = &*cur;
+        let h = hash_words(cur);
         let total: u64 = cur.iter().map(|x| u64::from(x.count_ones())).sum();
         max_total = max_total.max(total);
 
@@ -1066,7 +1101,7 @@ fn run_bits<const N: usize>(
                 let p = wi * 64 + m.trailing_zeros() as usize;
                 m &= m - 1;
                 for &t in bn.indexed(p) {
-                    if bits_enabled(bn.touches(t as usize), &cur) {
+                    if bits_enabled(bn.touches(t as usize), cur) {
                         enabled.push(t);
                     }
                 }
@@ -1081,7 +1116,7 @@ fn run_bits<const N: usize>(
         edges += enabled.len() as u64;
 
         for &t in &enabled {
-            let delta = match bits_fire(bn.touches(t as usize), &cur, &mut next) {
+            let delta = match bits_fire(bn.touches(t as usize), cur, next) {
                 Ok(d) => d,
                 Err(_) => return Ok(None),
             };
@@ -1090,7 +1125,7 @@ fn run_bits<const N: usize>(
                 let arena = &arena;
                 match table.entry(
                     hn,
-                    |&j| arena[j as usize * w..][..w] == next[..],
+                    |&j| words_eq(&arena[j as usize * w..][..w], next),
                     |&j| hasher(arena, j),
                 ) {
                     Entry::Occupied(_) => false,
@@ -1109,16 +1144,14 @@ fn run_bits<const N: usize>(
                 {
                     return Err(oom(n, store_bytes(&arena, &parents, &table)));
                 }
-                arena.extend_from_slice(&next);
+                arena.extend_from_slice(next);
                 if ctl.keep_traces {
                     parents.push(i as u32);
                 }
                 n += 1;
-                // Grow the table here, where failure can be reported, rather than inside
-                // `entry`, where it would abort.
                 if table.len() == table.capacity() {
                     let arena = &arena;
-                    if table.try_reserve(1, |&j| hasher(arena, j)).is_err() {
+                    if grow(&mut table, n, |j| hasher(arena, j)).is_err() {
                         return Err(oom(n, store_bytes(arena, &parents, &table)));
                     }
                 }
@@ -1469,7 +1502,7 @@ fn run_counts<C: Count>(c: &Compiled, ctl: &mut Ctl) -> Result<Option<PtReport>,
             n += 1;
             if table.len() == table.capacity() {
                 let arena = &arena;
-                if table.try_reserve(1, |&j| hasher(arena, j)).is_err() {
+                if grow(&mut table, n, |j| hasher(arena, j)).is_err() {
                     return Err(oom(n, store_bytes(arena, &parents, &table)));
                 }
             }

@@ -475,8 +475,13 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
         })
         .map(|(_, n)| n.name.clone())
         .collect();
+    let builtin = |name: &str| {
+        crate::model::builtin_events()
+            .iter()
+            .any(|b| b.name.text == name)
+    };
     report.unused_events = (0..p.events.len())
-        .filter(|&e| l.by_event[e].is_empty())
+        .filter(|&e| l.by_event[e].is_empty() && !builtin(&p.events[e].name))
         .map(|e| p.events[e].name.clone())
         .collect();
     report.seconds = started.elapsed().as_secs_f64();
