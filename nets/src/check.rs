@@ -813,7 +813,8 @@ struct Scope<'a> {
 }
 
 /// A literal as a value of type `ty`; an int literal is accepted where a float is expected.
-fn literal(e: &Expr, ty: Type) -> Option<c::Value> {
+/// `None` when the literal does not fit the type (or is a name).
+pub fn literal(e: &Expr, ty: Type) -> Option<c::Value> {
     Some(match (e, ty) {
         (Expr::Int(v, _), Type::Int) => c::Value::Int(*v),
         (Expr::Int(v, _), Type::Float) => c::Value::Float(*v as f64),

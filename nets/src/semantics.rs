@@ -369,6 +369,10 @@ pub trait Effects {
     fn cancel_timer(&mut self, _timer: TimerId) {}
     /// A notice (activation of an active net...).
     fn notice(&mut self, _notice: Notice) {}
+    /// Net `net` was activated (it received its initial marking).
+    fn activated(&mut self, _net: NetId) {}
+    /// Net `net` was deactivated (it lost its marking).
+    fn deactivated(&mut self, _net: NetId) {}
     /// An immediate transition fired during a fixpoint, leading to `state`. Return `false` to
     /// stop the fixpoint (the verifier does when it sees a state twice: a livelock).
     fn immediate_step(&mut self, _state: &[u64]) -> bool {
@@ -444,6 +448,7 @@ impl<'p> Semantics<'p> {
         }
         Layout::set(s, l.net_active[n as usize]);
         l.net_initial[n as usize].set(s);
+        fx.activated(n);
     }
 
     fn deactivate(&self, s: &mut [u64], n: NetId, fx: &mut impl Effects) {
@@ -454,6 +459,7 @@ impl<'p> Semantics<'p> {
         }
         Layout::clear(s, l.net_active[n as usize]);
         l.net_places[n as usize].clear(s);
+        fx.deactivated(n);
     }
 
     /// Fires rule `r` if it is enabled and safe; returns whether it fired.

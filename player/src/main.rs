@@ -60,6 +60,18 @@ enum Command {
         #[arg(long)]
         max_states: Option<u64>,
     },
+    /// Run a mission script in virtual time, with no process: events at given times and
+    /// expectations; each step prints as a JSON line. A failed expectation exits 1.
+    Run {
+        /// The project directory.
+        dir: PathBuf,
+        /// The script: lines `TIME EVENT(args)`, `TIME wait`, `expect ...`.
+        #[arg(long)]
+        script: PathBuf,
+        /// Print nothing but the result of the expectations.
+        #[arg(short, long)]
+        quiet: bool,
+    },
     /// Rewrite the project's net files in canonical layout (running it twice changes nothing).
     Fmt {
         /// The project directory.
@@ -132,6 +144,7 @@ fn main() -> ExitCode {
             max_states,
         } => verify(&dir, net, format, max_states),
         Command::Fmt { dir, check } => fmt(&dir, check),
+        Command::Run { dir, script, quiet } => run(&dir, &script, quiet),
         Command::Dot { dir, net, output } => dot(&dir, net.as_deref(), output.as_deref()),
         Command::Export { dir, output, .. } => export(&dir, output.as_deref()),
         Command::Import {
@@ -295,6 +308,59 @@ fn verify(dir: &Path, net: Option<String>, format: Format, max_states: Option<u6
         Outcome::Clean
     } else {
         Outcome::Errors
+    }
+}
+
+fn run(dir: &Path, script_path: &Path, quiet: bool) -> Outcome {
+    let (loaded, compiled, d) = match project::load_and_check(dir) {
+        Ok(r) => r,
+        Err(e) => return e.into(),
+    };
+    report(&d, &loaded.sources);
+    let Some(c) = compiled else {
+        eprintln!("fix the errors above first: only a project that checks can run");
+        return Outcome::Errors;
+    };
+    let text = match std::fs::read_to_string(script_path) {
+        Ok(t) => t,
+        Err(e) => return Outcome::Usage(format!("cannot read {}: {e}", script_path.display())),
+    };
+    let script = match petrel_player::script::parse_script(&text, &c) {
+        Ok(s) => s,
+        Err(errors) => {
+            let list: Vec<String> = errors
+                .iter()
+                .map(|(n, e)| format!("{}:{n}: {e}", script_path.display()))
+                .collect();
+            return Outcome::Usage(format!("the script has errors:\n{}", list.join("\n")));
+        }
+    };
+    let outcome = petrel_player::script::run_script(&c, &script, |step| {
+        if !quiet {
+            out(&format!("{step}\n"));
+        }
+    });
+    let expectations = script
+        .lines
+        .iter()
+        .filter(|(_, l)| matches!(l, petrel_player::script::Line::Expect { .. }))
+        .count();
+    match outcome.failure {
+        Some((line, msg)) => {
+            eprintln!(
+                "{}:{line}: expectation failed: {msg}",
+                script_path.display()
+            );
+            Outcome::Errors
+        }
+        None => {
+            eprintln!(
+                "{}: {} steps, {expectations} expectations met",
+                script_path.display(),
+                outcome.steps.len()
+            );
+            Outcome::Clean
+        }
     }
 }
 

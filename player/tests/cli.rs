@@ -287,3 +287,43 @@ fn verify_and_check_report_each_flaw_with_its_trace() {
     let o = petrel(&["verify", &flawed, "--net", "Nope"]);
     assert_eq!(o.status.code(), Some(2));
 }
+
+#[test]
+fn run_plays_the_uav_scripts_in_virtual_time_as_json_lines() {
+    for name in ["nominal", "payload_failure", "engine_failure"] {
+        let script = repo().join(format!("missions/uav/scripts/{name}.script"));
+        let o = petrel(&["run", &uav(), "--script", &script.display().to_string()]);
+        assert_eq!(o.status.code(), Some(0), "{name}: {}", stderr(&o));
+        let out = stdout(&o);
+        for line in out.lines() {
+            let step: serde_json::Value =
+                serde_json::from_str(line).expect("one JSON document a line");
+            for key in ["time", "event", "fired", "marking", "actions"] {
+                assert!(step.get(key).is_some(), "{key} missing in {line}");
+            }
+        }
+        assert!(stderr(&o).contains("expectations met"), "{}", stderr(&o));
+    }
+    // A failed expectation exits 1 and shows what was found.
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.script");
+    std::fs::write(&bad, "0 start_mission\nexpect MISSION.climbing\n").unwrap();
+    let o = petrel(&["run", &uav(), "--script", &bad.display().to_string(), "-q"]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = stderr(&o);
+    assert!(
+        err.contains("bad.script:2: expectation failed: expected place MISSION.climbing marked"),
+        "{err}"
+    );
+    assert!(err.contains("found: marking MISSION{rolling}"), "{err}");
+    // A malformed script is a usage error naming each bad line.
+    std::fs::write(&bad, "0 start_mision\n1 go(\n").unwrap();
+    let o = petrel(&["run", &uav(), "--script", &bad.display().to_string()]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("bad.script:1: unknown event `start_mision`"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(stderr(&o).contains("bad.script:2:"), "{}", stderr(&o));
+}

@@ -1,0 +1,620 @@
+//! The engine: a compiled project and its state, turning events into firings and actions.
+//!
+//! Sans-I/O and deterministic: the caller gives it events and the time, and receives what to do
+//! through a [`Sink`]. The firing itself is [`petrel_nets::semantics`], the code the verifier
+//! explores, so what was verified is what runs. Events are dispatched by category (catastrophic
+//! first, oldest first within a category); after a catastrophic event nothing more is
+//! processed. Processing an event allocates nothing in the steady state: queues and buffers are
+//! reused (a test counts allocations).
+
+use petrel_nets::compiled::{
+    Arg, CompiledProject, EventId, FunctionId, NetId, PlaceRef, ProgramId, TimerDuration, TimerId,
+    Value,
+};
+use petrel_nets::model::{Category, Type};
+use petrel_nets::semantics::{Effects, Notice, Scratch, Semantics, State, StepOutcome};
+use std::collections::VecDeque;
+
+/// Time in microseconds since the mission started (injected: the engine has no clock).
+pub type Micros = u64;
+
+/// An argument of a call, borrowed from the net's literal or the triggering event.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ArgValue<'a> {
+    /// An int.
+    Int(i64),
+    /// A float.
+    Float(f64),
+    /// A bool.
+    Bool(bool),
+    /// A text.
+    Text(&'a str),
+    /// A list of floats.
+    FloatList(&'a [f64]),
+}
+
+impl<'a> ArgValue<'a> {
+    fn of(v: &'a Value) -> Self {
+        match v {
+            Value::Int(i) => ArgValue::Int(*i),
+            Value::Float(f) => ArgValue::Float(*f),
+            Value::Bool(b) => ArgValue::Bool(*b),
+            Value::Text(s) => ArgValue::Text(s),
+            Value::FloatList(l) => ArgValue::FloatList(l),
+        }
+    }
+
+    /// An owned copy.
+    pub fn to_value(self) -> Value {
+        match self {
+            ArgValue::Int(i) => Value::Int(i),
+            ArgValue::Float(f) => Value::Float(f),
+            ArgValue::Bool(b) => Value::Bool(b),
+            ArgValue::Text(s) => Value::Text(s.to_string()),
+            ArgValue::FloatList(l) => Value::FloatList(l.to_vec()),
+        }
+    }
+}
+
+/// The arguments of a call or an emission, resolved lazily (no allocation).
+#[derive(Clone, Copy)]
+pub struct Args<'a> {
+    args: &'a [Arg],
+    params: &'a [Value],
+}
+
+impl<'a> Args<'a> {
+    /// Number of arguments.
+    pub fn len(&self) -> usize {
+        self.args.len()
+    }
+
+    /// True when there is none.
+    pub fn is_empty(&self) -> bool {
+        self.args.is_empty()
+    }
+
+    /// Argument `i`.
+    pub fn get(&self, i: usize) -> ArgValue<'a> {
+        match &self.args[i] {
+            Arg::Literal(v) => ArgValue::of(v),
+            // The checker proved the index is in range for the triggering event.
+            Arg::EventParam(p) => ArgValue::of(&self.params[*p as usize]),
+        }
+    }
+
+    /// Every argument, in order.
+    pub fn iter(&self) -> impl Iterator<Item = ArgValue<'a>> + 'a {
+        let this = *self;
+        (0..self.args.len()).map(move |i| this.get(i))
+    }
+}
+
+/// What the engine asks of the world, and tells it. Every method has a default that ignores it.
+pub trait Sink {
+    /// The engine took `event` from the queue and is about to process it.
+    fn taken(&mut self, _event: EventId, _params: &[Value]) {}
+    /// A transition fired.
+    fn fired(&mut self, _net: NetId, _transition: u32) {}
+    /// `call PROGRAM.FUNCTION(args)`: deliver it (the engine does not wait for an answer).
+    fn call(&mut self, _program: ProgramId, _function: FunctionId, _args: Args<'_>) {}
+    /// An event was emitted by a net (it is queued by the engine).
+    fn emitted(&mut self, _event: EventId) {}
+    /// A timer was started; it expires at `deadline`.
+    fn timer_started(&mut self, _timer: TimerId, _deadline: Micros) {}
+    /// A timer was cancelled.
+    fn timer_cancelled(&mut self, _timer: TimerId) {}
+    /// A firing was refused: it would have put a second token in `place` (a description such
+    /// as `NET.place`). A `safety_violation` event is queued too.
+    fn safety_violation(&mut self, _net: NetId, _transition: u32, _place: &str) {}
+    /// A transition lost a conflict on the current event.
+    fn conflict(&mut self, _net: NetId, _transition: u32) {}
+    /// `activate` of an active net, `deactivate` of an inactive one.
+    fn notice(&mut self, _notice: Notice) {}
+    /// A net was activated.
+    fn activated(&mut self, _net: NetId) {}
+    /// A net was deactivated.
+    fn deactivated(&mut self, _net: NetId) {}
+    /// The immediate fixpoint did not settle and was stopped; a `livelock` event is queued.
+    fn livelock(&mut self) {}
+}
+
+/// A sink that ignores everything.
+pub struct NullSink;
+impl Sink for NullSink {}
+
+/// Why an event was not accepted.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Refusal {
+    /// No event of this name is declared.
+    UnknownEvent(String),
+    /// Wrong number of parameters.
+    Arity {
+        /// The event.
+        event: String,
+        /// Declared count.
+        expected: usize,
+        /// Given count.
+        found: usize,
+    },
+    /// A parameter of the wrong type.
+    ParamType {
+        /// The event.
+        event: String,
+        /// The parameter's name.
+        param: String,
+        /// Declared type.
+        expected: Type,
+        /// Given type.
+        found: Type,
+    },
+    /// A catastrophic event was processed: the mission is over.
+    AfterCatastrophic(String),
+}
+
+impl std::fmt::Display for Refusal {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Refusal::UnknownEvent(e) => write!(f, "unknown event `{e}`: the project declares no such event"),
+            Refusal::Arity {
+                event,
+                expected,
+                found,
+            } => write!(f, "event `{event}` takes {expected} parameter(s), {found} given"),
+            Refusal::ParamType {
+                event,
+                param,
+                expected,
+                found,
+            } => write!(f, "parameter `{param}` of event `{event}` is {expected}, {found} given"),
+            Refusal::AfterCatastrophic(e) => write!(
+                f,
+                "event `{e}` refused: a catastrophic event ended the mission, no further event is processed"
+            ),
+        }
+    }
+}
+
+/// Counters that account for every event: `received == processed + unused + refused + queued`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Stats {
+    /// Events accepted into the queue (from outside, from nets, from timers, built-ins).
+    pub received: u64,
+    /// Events that fired or offered at least one transition.
+    pub processed: u64,
+    /// Events no transition waited for in the state they found.
+    pub unused: u64,
+    /// Events refused (at submission or, after a catastrophic event, when taken).
+    pub refused: u64,
+}
+
+/// One event waiting in the queue.
+#[derive(Debug)]
+struct Queued {
+    event: EventId,
+    params: Vec<Value>,
+}
+
+/// What one step did.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Step {
+    /// The event taken from the queue.
+    pub event: EventId,
+    /// What became of it.
+    pub outcome: StepOutcome,
+}
+
+/// The engine.
+pub struct Engine<'p> {
+    sem: Semantics<'p>,
+    state: State,
+    scratch: Scratch,
+    queues: [VecDeque<Queued>; 5],
+    deadlines: Vec<Option<Micros>>,
+    now: Micros,
+    stats: Stats,
+    /// Parameter vectors given back after processing, reused for later events.
+    pool: Vec<Vec<Value>>,
+    /// Events emitted during the current step, queued once it is over.
+    emitted: Vec<Queued>,
+    started: bool,
+}
+
+fn category_index(c: Category) -> usize {
+    match c {
+        Category::Catastrophic => 0,
+        Category::Safety => 1,
+        Category::Mission => 2,
+        Category::Communication => 3,
+        Category::Nominal => 4,
+    }
+}
+
+impl<'p> Engine<'p> {
+    /// An engine for `project`, not started yet (see [`Engine::start`]).
+    pub fn new(project: &'p CompiledProject) -> Self {
+        let sem = Semantics::new(project);
+        let words = sem.layout.words;
+        Engine {
+            state: vec![0; words],
+            sem,
+            scratch: Scratch::default(),
+            queues: Default::default(),
+            deadlines: vec![None; project.timers.len()],
+            now: 0,
+            stats: Stats::default(),
+            pool: Vec::new(),
+            emitted: Vec::new(),
+            started: false,
+        }
+    }
+
+    /// Sets the most immediate firings one fixpoint may do before it is a livelock.
+    pub fn set_fixpoint_bound(&mut self, bound: u32) {
+        self.sem.fixpoint_bound = bound;
+    }
+
+    /// The project.
+    pub fn project(&self) -> &'p CompiledProject {
+        self.sem.project
+    }
+
+    /// Starts the mission at time `now`: global places marked, start nets activated, immediate
+    /// transitions run. Their actions go to `sink`.
+    pub fn start(&mut self, now: Micros, sink: &mut impl Sink) {
+        self.now = now;
+        let mut fx = Adapter {
+            sink,
+            sem: &self.sem,
+            params: &[],
+            deadlines: &mut self.deadlines,
+            now,
+            emitted: &mut self.emitted,
+            pool: &mut self.pool,
+            violations: Vec::new(),
+            livelock: None,
+            last_fired: None,
+        };
+        self.state = self.sem.initial(&mut fx, &mut self.scratch);
+        let violations = std::mem::take(&mut fx.violations);
+        let livelock = fx.livelock;
+        self.after_step(violations, livelock);
+        self.started = true;
+    }
+
+    /// The current time.
+    pub fn now(&self) -> Micros {
+        self.now
+    }
+
+    /// The counters.
+    pub fn stats(&self) -> Stats {
+        self.stats
+    }
+
+    /// Events waiting.
+    pub fn queued(&self) -> usize {
+        self.queues.iter().map(VecDeque::len).sum()
+    }
+
+    /// True once a catastrophic event has been processed.
+    pub fn is_over(&self) -> bool {
+        self.sem.layout.is_over(&self.state)
+    }
+
+    /// The state, as bits (see [`petrel_nets::semantics::Layout`]).
+    pub fn state(&self) -> &[u64] {
+        &self.state
+    }
+
+    /// True if net `n` is active.
+    pub fn is_active(&self, n: NetId) -> bool {
+        self.sem.layout.is_active(&self.state, n)
+    }
+
+    /// True if place `r` of net `n` is marked.
+    pub fn is_marked(&self, n: NetId, r: PlaceRef) -> bool {
+        self.sem.layout.is_marked(&self.state, n, r)
+    }
+
+    /// The marked places of each active net, then the marked global places (key `global`).
+    pub fn marking(&self) -> Vec<(String, Vec<String>)> {
+        let p = self.sem.project;
+        let mut out = Vec::new();
+        for (n, net) in p.nets.iter().enumerate() {
+            if !self.is_active(n as NetId) {
+                continue;
+            }
+            let marked = net
+                .places
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| self.is_marked(n as NetId, PlaceRef::Local(*i as u32)))
+                .map(|(_, pl)| pl.name.clone())
+                .collect();
+            out.push((net.name.clone(), marked));
+        }
+        let globals = p
+            .globals
+            .iter()
+            .enumerate()
+            .filter(|(g, _)| self.is_marked(0, PlaceRef::Global(*g as u32)))
+            .map(|(_, gp)| gp.name.clone())
+            .collect();
+        out.push(("global".to_string(), globals));
+        out
+    }
+
+    /// A parameter vector to fill for [`Engine::submit`], reused from processed events.
+    pub fn param_buffer(&mut self) -> Vec<Value> {
+        self.pool.pop().unwrap_or_default()
+    }
+
+    /// Queues an event after checking its parameters against the declaration.
+    pub fn submit(&mut self, event: EventId, params: Vec<Value>) -> Result<(), Refusal> {
+        let p = self.sem.project;
+        let Some(decl) = p.events.get(event as usize) else {
+            self.stats.refused += 1;
+            return Err(Refusal::UnknownEvent(format!("#{event}")));
+        };
+        if self.is_over() {
+            self.stats.refused += 1;
+            self.recycle(params);
+            return Err(Refusal::AfterCatastrophic(decl.name.clone()));
+        }
+        if decl.params.len() != params.len() {
+            self.stats.refused += 1;
+            let found = params.len();
+            self.recycle(params);
+            return Err(Refusal::Arity {
+                event: decl.name.clone(),
+                expected: decl.params.len(),
+                found,
+            });
+        }
+        for ((name, ty), v) in decl.params.iter().zip(&params) {
+            if v.ty() != *ty {
+                self.stats.refused += 1;
+                let r = Refusal::ParamType {
+                    event: decl.name.clone(),
+                    param: name.clone(),
+                    expected: *ty,
+                    found: v.ty(),
+                };
+                self.recycle(params);
+                return Err(r);
+            }
+        }
+        self.stats.received += 1;
+        self.queues[category_index(decl.category)].push_back(Queued { event, params });
+        Ok(())
+    }
+
+    /// Queues an event by name.
+    pub fn submit_named(&mut self, name: &str, params: Vec<Value>) -> Result<(), Refusal> {
+        match self.sem.project.event_id(name) {
+            Some(e) => self.submit(e, params),
+            None => {
+                self.stats.refused += 1;
+                Err(Refusal::UnknownEvent(name.to_string()))
+            }
+        }
+    }
+
+    fn recycle(&mut self, mut params: Vec<Value>) {
+        params.clear();
+        if self.pool.len() < 1024 {
+            self.pool.push(params);
+        }
+    }
+
+    /// The earliest running timer's deadline.
+    pub fn next_deadline(&self) -> Option<Micros> {
+        self.deadlines.iter().flatten().min().copied()
+    }
+
+    /// Moves time to `now`: every timer whose deadline has passed stops, and its event is
+    /// queued (earliest deadline first, then timer order).
+    pub fn advance_to(&mut self, now: Micros) {
+        self.now = self.now.max(now);
+        while let Some((t, _)) = self
+            .deadlines
+            .iter()
+            .enumerate()
+            .filter_map(|(t, d)| d.filter(|&d| d <= self.now).map(|d| (t, d)))
+            .min_by_key(|&(t, d)| (d, t))
+        {
+            self.deadlines[t] = None;
+            self.sem.timer_expired(&mut self.state, t as TimerId);
+            let event = self.sem.project.timers[t].event;
+            let params = self.param_buffer();
+            // A timer's event has no parameters; refusal happens only after a catastrophic
+            // event, and is counted.
+            let _ = self.submit(event, params);
+        }
+    }
+
+    /// Takes the next event (highest category, oldest first) and processes it. `None` when the
+    /// queue is empty.
+    pub fn step(&mut self, sink: &mut impl Sink) -> Option<Step> {
+        let q = self.queues.iter_mut().find(|q| !q.is_empty())?;
+        let Queued { event, params } = q.pop_front()?;
+        sink.taken(event, &params);
+        if self.is_over() {
+            self.stats.refused += 1;
+            self.recycle(params);
+            return Some(Step {
+                event,
+                outcome: StepOutcome::RefusedAfterCatastrophic,
+            });
+        }
+        let mut fx = Adapter {
+            sink,
+            sem: &self.sem,
+            params: &params,
+            deadlines: &mut self.deadlines,
+            now: self.now,
+            emitted: &mut self.emitted,
+            pool: &mut self.pool,
+            violations: Vec::new(),
+            livelock: None,
+            last_fired: None,
+        };
+        let outcome = self
+            .sem
+            .process_event(&mut self.state, event, &mut fx, &mut self.scratch);
+        let violations = std::mem::take(&mut fx.violations);
+        let livelock = fx.livelock;
+        match outcome {
+            StepOutcome::Processed => self.stats.processed += 1,
+            StepOutcome::Unused => self.stats.unused += 1,
+            StepOutcome::RefusedAfterCatastrophic => self.stats.refused += 1,
+        }
+        self.recycle(params);
+        self.after_step(violations, livelock);
+        Some(Step { event, outcome })
+    }
+
+    /// Queues what the step produced: emitted events, then built-in reports.
+    fn after_step(
+        &mut self,
+        violations: Vec<(NetId, u32, String)>,
+        livelock: Option<(NetId, u32)>,
+    ) {
+        let emitted = std::mem::take(&mut self.emitted);
+        for q in emitted {
+            // Types were checked statically; only a catastrophic end can refuse (counted).
+            let _ = self.submit(q.event, q.params);
+        }
+        let p = self.sem.project;
+        for (net, t, place) in violations {
+            if let Some(e) = p.event_id("safety_violation") {
+                let n = &p.nets[net as usize];
+                let params = vec![
+                    Value::Text(n.name.clone()),
+                    Value::Text(n.transitions[t as usize].name.clone()),
+                    Value::Text(place),
+                ];
+                let _ = self.submit(e, params);
+            }
+        }
+        if let (Some((net, t)), Some(e)) = (livelock, p.event_id("livelock")) {
+            let n = &p.nets[net as usize];
+            let params = vec![
+                Value::Text(n.name.clone()),
+                Value::Text(n.transitions[t as usize].name.clone()),
+            ];
+            let _ = self.submit(e, params);
+        }
+    }
+
+    /// Processes events until the queue is empty; returns how many were taken.
+    pub fn run_until_idle(&mut self, sink: &mut impl Sink) -> u64 {
+        let mut n = 0;
+        while self.step(sink).is_some() {
+            n += 1;
+        }
+        n
+    }
+}
+
+/// Turns the firing code's effects into sink calls and engine bookkeeping.
+struct Adapter<'a, 'p, S: Sink> {
+    sink: &'a mut S,
+    sem: &'a Semantics<'p>,
+    params: &'a [Value],
+    deadlines: &'a mut Vec<Option<Micros>>,
+    now: Micros,
+    emitted: &'a mut Vec<Queued>,
+    pool: &'a mut Vec<Vec<Value>>,
+    violations: Vec<(NetId, u32, String)>,
+    /// The last transition fired when the fixpoint was stopped.
+    livelock: Option<(NetId, u32)>,
+    last_fired: Option<(NetId, u32)>,
+}
+
+impl<S: Sink> Effects for Adapter<'_, '_, S> {
+    fn fired(&mut self, rule: u32) {
+        let r = &self.sem.layout.rules[rule as usize];
+        self.last_fired = Some((r.net, r.transition));
+        self.sink.fired(r.net, r.transition);
+    }
+
+    fn refused(&mut self, rule: u32, place: u32) {
+        let r = &self.sem.layout.rules[rule as usize];
+        let name = self.sem.layout.describe_bit(self.sem.project, place);
+        self.sink.safety_violation(r.net, r.transition, &name);
+        self.violations.push((r.net, r.transition, name));
+    }
+
+    fn conflict(&mut self, rule: u32) {
+        let r = &self.sem.layout.rules[rule as usize];
+        self.sink.conflict(r.net, r.transition);
+    }
+
+    fn call(&mut self, program: ProgramId, function: FunctionId, args: &[Arg]) {
+        self.sink.call(
+            program,
+            function,
+            Args {
+                args,
+                params: self.params,
+            },
+        );
+    }
+
+    fn emit(&mut self, event: EventId, args: &[Arg]) {
+        let mut params = self.pool.pop().unwrap_or_default();
+        let a = Args {
+            args,
+            params: self.params,
+        };
+        params.extend(a.iter().map(ArgValue::to_value));
+        self.emitted.push(Queued { event, params });
+        self.sink.emitted(event);
+    }
+
+    fn start_timer(&mut self, timer: TimerId, after: &TimerDuration) {
+        let micros = match after {
+            TimerDuration::Millis(ms) => ms.saturating_mul(1000),
+            TimerDuration::EventParamSeconds(i) => {
+                let secs = match self.params.get(*i as usize) {
+                    Some(Value::Int(v)) => *v as f64,
+                    Some(Value::Float(v)) => *v,
+                    _ => 0.0,
+                };
+                // Negative or not-a-number durations count as zero (docs/semantics.md).
+                if secs.is_finite() && secs > 0.0 {
+                    (secs * 1e6).min(u64::MAX as f64) as u64
+                } else {
+                    0
+                }
+            }
+        };
+        let deadline = self.now.saturating_add(micros);
+        self.deadlines[timer as usize] = Some(deadline);
+        self.sink.timer_started(timer, deadline);
+    }
+
+    fn cancel_timer(&mut self, timer: TimerId) {
+        self.deadlines[timer as usize] = None;
+        self.sink.timer_cancelled(timer);
+    }
+
+    fn notice(&mut self, notice: Notice) {
+        self.sink.notice(notice);
+    }
+
+    fn activated(&mut self, net: NetId) {
+        self.sink.activated(net);
+    }
+
+    fn deactivated(&mut self, net: NetId) {
+        self.sink.deactivated(net);
+    }
+
+    fn livelock(&mut self) {
+        self.livelock = self.last_fired.or(Some((0, 0)));
+        self.sink.livelock();
+    }
+}

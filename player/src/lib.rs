@@ -1,0 +1,7 @@
+//! The Petrel player: the deterministic engine and the tools around it.
+//!
+//! - [`engine`]: sans-I/O; events in, actions out, time injected.
+//! - [`script`]: missions as unit tests, in virtual time (`petrel run --script`).
+
+pub mod engine;
+pub mod script;
