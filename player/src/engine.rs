@@ -218,6 +218,9 @@ pub struct Engine<'p> {
     /// Events emitted during the current step, queued once it is over.
     emitted: Vec<Queued>,
     started: bool,
+    /// Ids of the built-in events the engine raises itself.
+    safety_violation: Option<EventId>,
+    livelock: Option<EventId>,
 }
 
 fn category_index(c: Category) -> usize {
@@ -246,6 +249,8 @@ impl<'p> Engine<'p> {
             pool: Vec::new(),
             emitted: Vec::new(),
             started: false,
+            safety_violation: project.event_id("safety_violation"),
+            livelock: project.event_id("livelock"),
         }
     }
 
@@ -488,7 +493,7 @@ impl<'p> Engine<'p> {
         }
         let p = self.sem.project;
         for (net, t, place) in violations {
-            if let Some(e) = p.event_id("safety_violation") {
+            if let Some(e) = self.safety_violation {
                 let n = &p.nets[net as usize];
                 let params = vec![
                     Value::Text(n.name.clone()),
@@ -498,7 +503,7 @@ impl<'p> Engine<'p> {
                 let _ = self.submit(e, params);
             }
         }
-        if let (Some((net, t)), Some(e)) = (livelock, p.event_id("livelock")) {
+        if let (Some((net, t)), Some(e)) = (livelock, self.livelock) {
             let n = &p.nets[net as usize];
             let params = vec![
                 Value::Text(n.name.clone()),
