@@ -1,5 +1,78 @@
-//! The one place that knows iceoryx2: service names for a vehicle, `#[repr(C)]` message types,
-//! parameter encoding into loaned shared memory.
+//! The one place that knows iceoryx2: service names for a vehicle, the wire format of the
+//! messages, the ports that carry them through shared memory, waiting for them, and the
+//! liveness of the vehicle's processes.
 //!
-//! Empty until the player's runtime is built (issue 4): no code here pretends to exist before
-//! it does.
+//! ```text
+//!  programs, CAN bridge, tools --EventMsg--> petrel/<vehicle>/events ----------> player
+//!  player --CallMsg--> petrel/<vehicle>/calls/<PROGRAM> ------------------------> program
+//!  player --MarkingMsg--> petrel/<vehicle>/marking -----------------------------> monitors
+//!  anyone --Heartbeat--> petrel/<vehicle>/heartbeat ----------------------------> anyone
+//! ```
+//!
+//! Each arrow is an iceoryx2 publish-subscribe service on `[u8]` (a bincode body, see
+//! [`wire`]) with a fixed [`wire::MsgHeader`] (sender, sequence number), paired with an event
+//! service of the same name whose notifications wake the receiver.
+//!
+//! - [`naming`] holds [`Vehicle`] (service names, the file prefix that isolates a vehicle or a test)
+//!   and [`Role`] (the node name of a process).
+//! - [`wire`] holds [`Value`], [`EventMsg`], [`CallMsg`], [`MarkingMsg`], [`Heartbeat`], the header,
+//!   encoding straight into loaned shared memory.
+//! - [`Participant`] is one process of a vehicle; it opens the ports.
+//! - [`port`] holds [`Sender`] and [`Receiver`] (aliased as [`EventSender`], [`EventReceiver`],
+//!   [`CallSender`], [`CallReceiver`], [`MarkingPublisher`], [`MarkingSubscriber`],
+//!   [`HeartbeatPublisher`], [`HeartbeatSubscriber`]), buffer sizes, accounting of every message.
+//! - [`reactor`] holds [`Reactor`] and [`WaitStrategy`] (block, spin, spin then block).
+//! - [`liveness`] tells nodes alive and dead, cleanup of dead ones, program status.
+//!
+//! ```no_run
+//! use petrel_ipc::{EventMsg, Participant, Reactor, Role, Value, Vehicle, WaitStrategy};
+//!
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let vehicle = Vehicle::new("redermor")?;
+//! // In the player:
+//! let player = Participant::join(&vehicle, Role::Player)?;
+//! let events = player.event_receiver()?;
+//! // In a program:
+//! let pln = Participant::join(&vehicle, Role::program("PLN")?)?;
+//! let to_player = pln.event_sender()?;
+//! to_player.send(&EventMsg::new("waypoint", vec![Value::FloatList(vec![43.1, 5.9])]))?;
+//! // Back in the player:
+//! let reactor = Reactor::new(WaitStrategy::Block)?;
+//! let ready = reactor.wait(&[&events], None)?;
+//! if ready.is_ready(0) {
+//!     events.drain(|event| println!("{event:?}"))?;
+//! }
+//! # Ok(())
+//! # }
+//! ```
+//!
+//! Every process of a vehicle must be built with the same `petrel-ipc` (and so the same
+//! iceoryx2, pinned at `=0.10.0`: the shared-memory layout is versioned).
+
+#![warn(missing_docs)]
+
+pub mod liveness;
+pub mod naming;
+mod participant;
+pub mod port;
+pub mod reactor;
+pub mod wire;
+
+/// The iceoryx2 this crate is built on, for what it does not wrap (use this path rather than a
+/// dependency of your own, so that every crate of Petrel agrees on the version).
+pub use iceoryx2;
+
+pub use liveness::{
+    cleanup_dead_nodes, dead_nodes, is_program_alive, list_nodes, program_status,
+    remove_vehicle_files, CleanupReport, LivenessError, NodeInfo, NodeStatus, ProgramChange,
+    ProgramStatus, ProgramWatch,
+};
+pub use naming::{NameError, Role, Vehicle};
+pub use participant::{Participant, ServiceFailure, SetupError};
+pub use port::{
+    CallReceiver, CallSender, Drained, EventReceiver, EventSender, HeartbeatPublisher,
+    HeartbeatSubscriber, MarkingPublisher, MarkingSubscriber, Received, Receiver, ReceiverStats,
+    RecvError, SendError, Sender, SenderAccount, SenderStats, Sent, ServiceSpec, Wakeups,
+};
+pub use reactor::{FdSource, Reactor, ReactorError, Ready, Source, WaitStrategy};
+pub use wire::{CallMsg, EventMsg, Heartbeat, MarkingMsg, Origin, Value, WireError};

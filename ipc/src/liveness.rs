@@ -1,0 +1,360 @@
+//! Which processes of a vehicle are alive, which died, and cleaning up after the dead.
+//!
+//! Every [`Participant`](crate::Participant) is an iceoryx2 node named after its role
+//! (`player`, `program/PLN`, ...). A process killed without warning (SIGKILL, a crash) leaves
+//! its node's files in `/dev/shm` and `/tmp/iceoryx2`; iceoryx2 sees that the node's owner is
+//! gone (its file lock was released) and reports it dead until someone removes the stale
+//! resources. `petrel play` calls [`cleanup_dead_nodes`] at start; the player turns a dead
+//! program into a `program_lost(name)` event with [`program_status`].
+//!
+//! Only nodes of the given [`Vehicle`] are seen: its file prefix keeps the others apart.
+
+use std::fmt;
+use std::time::Duration;
+
+use iceoryx2::node::{NodeCleanupFailure, NodeListFailure, NodeView};
+use iceoryx2::prelude::{ipc, CallbackProgression, Node, NodeState};
+
+use crate::naming::{program_node_name, Vehicle};
+
+/// Whether a node's process lives.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum NodeStatus {
+    /// The process runs.
+    Alive,
+    /// The process died without removing its resources.
+    Dead,
+    /// This process may not inspect the node (another user's).
+    Inaccessible,
+    /// The node's files are incomplete or inconsistent (being created or removed).
+    Undefined,
+}
+
+/// A node of the vehicle.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NodeInfo {
+    /// iceoryx2's unique id of the node.
+    pub id: u128,
+    /// The node's name (`player`, `program/PLN`...); empty when its details are unreadable.
+    pub name: String,
+    /// The owning process, when known.
+    pub pid: Option<i32>,
+    /// The owning process's executable, when known.
+    pub executable: Option<String>,
+    /// Alive or not.
+    pub status: NodeStatus,
+}
+
+/// The node list could not be read, or files could not be removed.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum LivenessError {
+    /// Listing the nodes failed.
+    List {
+        /// The vehicle.
+        vehicle: String,
+        /// iceoryx2's reason.
+        error: NodeListFailure,
+    },
+    /// [`remove_vehicle_files`] found nodes of the vehicle.
+    InUse {
+        /// The vehicle.
+        vehicle: String,
+        /// Names of its nodes.
+        nodes: Vec<String>,
+    },
+    /// A file could not be removed.
+    Io {
+        /// The file.
+        path: String,
+        /// The system's reason.
+        error: String,
+    },
+}
+
+impl fmt::Display for LivenessError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            LivenessError::List { vehicle, error } => write!(
+                f,
+                "cannot list the processes of vehicle `{vehicle}` ({error:?}); check the permissions of /tmp/iceoryx2"
+            ),
+            LivenessError::InUse { vehicle, nodes } => write!(
+                f,
+                "vehicle `{vehicle}` still has nodes ({}); stop its processes and clean up dead ones first",
+                nodes.join(", ")
+            ),
+            LivenessError::Io { path, error } => write!(f, "cannot remove `{path}`: {error}"),
+        }
+    }
+}
+
+impl std::error::Error for LivenessError {}
+
+fn info_of<V: NodeView>(view: &V, status: NodeStatus) -> NodeInfo {
+    let details = view.details().as_ref();
+    NodeInfo {
+        id: view.id().value(),
+        name: details
+            .map(|d| d.name().as_str().to_owned())
+            .unwrap_or_default(),
+        pid: details.map(|d| d.process_id().value()),
+        executable: details.map(|d| d.executable().to_string()),
+        status,
+    }
+}
+
+fn visit(
+    vehicle: &Vehicle,
+    mut f: impl FnMut(NodeState<ipc::Service>),
+) -> Result<(), LivenessError> {
+    Node::<ipc::Service>::list(vehicle.config(), |state| {
+        f(state);
+        CallbackProgression::Continue
+    })
+    .map_err(|error| LivenessError::List {
+        vehicle: vehicle.name().to_owned(),
+        error,
+    })
+}
+
+fn info(state: &NodeState<ipc::Service>) -> NodeInfo {
+    match state {
+        NodeState::Alive(view) => info_of(view, NodeStatus::Alive),
+        NodeState::Dead(view) => info_of(view, NodeStatus::Dead),
+        NodeState::Inaccessible(id) => NodeInfo {
+            id: id.value(),
+            name: String::new(),
+            pid: None,
+            executable: None,
+            status: NodeStatus::Inaccessible,
+        },
+        NodeState::Undefined(id) => NodeInfo {
+            id: id.value(),
+            name: String::new(),
+            pid: None,
+            executable: None,
+            status: NodeStatus::Undefined,
+        },
+    }
+}
+
+/// Every node of the vehicle, alive or not, sorted by name.
+pub fn list_nodes(vehicle: &Vehicle) -> Result<Vec<NodeInfo>, LivenessError> {
+    let mut nodes = Vec::new();
+    visit(vehicle, |state| nodes.push(info(&state)))?;
+    nodes.sort_by(|a, b| (&a.name, a.id).cmp(&(&b.name, b.id)));
+    Ok(nodes)
+}
+
+/// The nodes of the vehicle whose process died without cleaning up.
+pub fn dead_nodes(vehicle: &Vehicle) -> Result<Vec<NodeInfo>, LivenessError> {
+    Ok(list_nodes(vehicle)?
+        .into_iter()
+        .filter(|n| n.status == NodeStatus::Dead)
+        .collect())
+}
+
+/// What [`cleanup_dead_nodes`] did.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct CleanupReport {
+    /// Dead nodes whose resources were removed.
+    pub cleaned: Vec<NodeInfo>,
+    /// Dead nodes that could not be cleaned, with iceoryx2's reason.
+    pub failed: Vec<(NodeInfo, NodeCleanupFailure)>,
+}
+
+/// Removes the resources of every dead node of the vehicle (what `petrel play` does at start).
+///
+/// A node another process is already cleaning is waited for up to `timeout`. Receivers of
+/// services the dead node sent on are woken with a "sender died" notification
+/// ([`Wakeups::senders_died`](crate::port::Wakeups::senders_died)).
+pub fn cleanup_dead_nodes(
+    vehicle: &Vehicle,
+    timeout: Duration,
+) -> Result<CleanupReport, LivenessError> {
+    let mut dead = Vec::new();
+    visit(vehicle, |state| {
+        if let NodeState::Dead(view) = state {
+            dead.push(view);
+        }
+    })?;
+    let mut report = CleanupReport::default();
+    for view in dead {
+        let info = info_of(&view, NodeStatus::Dead);
+        match view.blocking_remove_stale_resources(timeout) {
+            Ok(()) | Err(NodeCleanupFailure::ResourcesAlreadyCleanedUp) => {
+                report.cleaned.push(info)
+            }
+            Err(error) => report.failed.push((info, error)),
+        }
+    }
+    Ok(report)
+}
+
+/// Whether a program runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ProgramStatus {
+    /// A node of the program is alive.
+    Alive,
+    /// The program's node is dead (killed, crashed) and not yet cleaned up.
+    Dead,
+    /// No node of the program exists: never started, stopped in good order, or cleaned up.
+    Absent,
+}
+
+/// The status of program `name`: alive if any of its nodes is alive, else dead if one is dead.
+pub fn program_status(vehicle: &Vehicle, name: &str) -> Result<ProgramStatus, LivenessError> {
+    node_status(vehicle, &program_node_name(name))
+}
+
+/// The status of the node named `node_name` (`player`, `can_bridge`, `program/PLN`...).
+pub fn node_status(vehicle: &Vehicle, node_name: &str) -> Result<ProgramStatus, LivenessError> {
+    let mut status = ProgramStatus::Absent;
+    visit(vehicle, |state| {
+        let n = info(&state);
+        if n.name == node_name {
+            match n.status {
+                NodeStatus::Alive => status = ProgramStatus::Alive,
+                NodeStatus::Dead if status == ProgramStatus::Absent => status = ProgramStatus::Dead,
+                _ => {}
+            }
+        }
+    })?;
+    Ok(status)
+}
+
+/// Whether program `name` has a live node.
+pub fn is_program_alive(vehicle: &Vehicle, name: &str) -> Result<bool, LivenessError> {
+    Ok(program_status(vehicle, name)? == ProgramStatus::Alive)
+}
+
+/// A change of a program's status, seen by [`ProgramWatch::check`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ProgramChange {
+    /// The program.
+    pub program: String,
+    /// Its status at the previous check.
+    pub from: ProgramStatus,
+    /// Its status now.
+    pub to: ProgramStatus,
+}
+
+impl ProgramChange {
+    /// The program was running and is not any more (the player's `program_lost`).
+    pub fn is_lost(&self) -> bool {
+        self.from == ProgramStatus::Alive && self.to != ProgramStatus::Alive
+    }
+}
+
+/// Watches the status of a set of programs, one node listing per [`check`](Self::check).
+///
+/// iceoryx2 does not watch processes by itself: a dead node is noticed when someone lists the
+/// nodes. The player checks on an interval of its reactor, and whenever a receiver reports
+/// [`senders_died`](crate::port::Wakeups::senders_died).
+#[derive(Debug, Clone)]
+pub struct ProgramWatch {
+    vehicle: Vehicle,
+    known: std::collections::BTreeMap<String, ProgramStatus>,
+}
+
+impl ProgramWatch {
+    /// Watches `programs`, all taken as [`ProgramStatus::Absent`] until the first check.
+    pub fn new<I, S>(vehicle: &Vehicle, programs: I) -> Self
+    where
+        I: IntoIterator<Item = S>,
+        S: Into<String>,
+    {
+        ProgramWatch {
+            vehicle: vehicle.clone(),
+            known: programs
+                .into_iter()
+                .map(|p| (p.into(), ProgramStatus::Absent))
+                .collect(),
+        }
+    }
+
+    /// The status of `program` at the last check.
+    pub fn status(&self, program: &str) -> Option<ProgramStatus> {
+        self.known.get(program).copied()
+    }
+
+    /// Lists the nodes once and returns the programs whose status changed, in name order.
+    pub fn check(&mut self) -> Result<Vec<ProgramChange>, LivenessError> {
+        let nodes = list_nodes(&self.vehicle)?;
+        let mut changes = Vec::new();
+        for (program, known) in self.known.iter_mut() {
+            let node_name = program_node_name(program);
+            let mut now = ProgramStatus::Absent;
+            for n in nodes.iter().filter(|n| n.name == node_name) {
+                match n.status {
+                    NodeStatus::Alive => now = ProgramStatus::Alive,
+                    NodeStatus::Dead if now == ProgramStatus::Absent => now = ProgramStatus::Dead,
+                    _ => {}
+                }
+            }
+            if now != *known {
+                changes.push(ProgramChange {
+                    program: program.clone(),
+                    from: *known,
+                    to: now,
+                });
+                *known = now;
+            }
+        }
+        Ok(changes)
+    }
+}
+
+/// Removes every file the vehicle's prefix still names once no node of the vehicle exists
+/// (iceoryx2 keeps a 16-byte global management segment per prefix in `/dev/shm` after the last
+/// node is gone). For tests and tools with a throw-away prefix; returns the number of files
+/// removed.
+///
+/// Refuses with [`LivenessError::InUse`] while any node of the vehicle, alive or dead, exists.
+/// Do not call it while a process of the vehicle may be starting.
+pub fn remove_vehicle_files(vehicle: &Vehicle) -> Result<usize, LivenessError> {
+    let nodes = list_nodes(vehicle)?;
+    if !nodes.is_empty() {
+        return Err(LivenessError::InUse {
+            vehicle: vehicle.name().to_owned(),
+            nodes: nodes.into_iter().map(|n| n.name).collect(),
+        });
+    }
+    let mut removed = 0;
+    let root = vehicle.config().global.root_path().to_string();
+    for dir in [
+        std::path::PathBuf::from("/dev/shm"),
+        std::path::PathBuf::from(root),
+    ] {
+        removed += remove_prefixed(&dir, vehicle.prefix())?;
+    }
+    Ok(removed)
+}
+
+fn remove_prefixed(dir: &std::path::Path, prefix: &str) -> Result<usize, LivenessError> {
+    let io = |path: &std::path::Path, e: std::io::Error| LivenessError::Io {
+        path: path.display().to_string(),
+        error: e.to_string(),
+    };
+    let entries = match std::fs::read_dir(dir) {
+        Ok(entries) => entries,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(0),
+        Err(e) => return Err(io(dir, e)),
+    };
+    let mut removed = 0;
+    for entry in entries {
+        let entry = entry.map_err(|e| io(dir, e))?;
+        let path = entry.path();
+        let file_type = entry.file_type().map_err(|e| io(&path, e))?;
+        if file_type.is_dir() {
+            removed += remove_prefixed(&path, prefix)?;
+        } else if entry.file_name().to_string_lossy().starts_with(prefix) {
+            match std::fs::remove_file(&path) {
+                Ok(()) => removed += 1,
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => return Err(io(&path, e)),
+            }
+        }
+    }
+    Ok(removed)
+}

@@ -1,0 +1,410 @@
+//! A process taking part in a vehicle: its iceoryx2 node, named after its [`Role`], and the ports
+//! it opens.
+
+use std::fmt;
+use std::thread;
+use std::time::Duration;
+
+use iceoryx2::node::NodeCreationFailure;
+use iceoryx2::port::listener::ListenerCreateError;
+use iceoryx2::port::notifier::NotifierCreateError;
+use iceoryx2::port::publisher::PublisherCreateError;
+use iceoryx2::port::subscriber::SubscriberCreateError;
+use iceoryx2::prelude::{
+    ipc, AllocationStrategy, BackpressureStrategy, EventId, Node, NodeBuilder, NodeName,
+    ServiceName,
+};
+use iceoryx2::service::builder::event::{EventOpenError, EventOpenOrCreateError};
+use iceoryx2::service::builder::publish_subscribe::{
+    PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
+};
+use iceoryx2::service::port_factory::{event, publish_subscribe};
+
+use crate::naming::{NameError, Role, Vehicle};
+use crate::port::{
+    CallReceiver, CallSender, EventReceiver, EventSender, HeartbeatPublisher, HeartbeatSubscriber,
+    MarkingPublisher, MarkingSubscriber, Receiver, Sender, ServiceSpec, CALLS, EVENTS, HEARTBEAT,
+    MARKING, WAKE_MAX, WAKE_SENDER_DIED, WAKE_SENDER_JOINED, WAKE_SENDER_LEFT,
+};
+use crate::wire::{Message, MsgHeader, Origin};
+
+/// Why iceoryx2 could not set up a service or a port.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ServiceFailure {
+    /// Opening or creating the publish-subscribe service failed.
+    PubSub(PublishSubscribeOpenOrCreateError),
+    /// Opening or creating the paired event service failed.
+    Event(EventOpenOrCreateError),
+    /// Creating the publisher failed.
+    Publisher(PublisherCreateError),
+    /// Creating the subscriber failed.
+    Subscriber(SubscriberCreateError),
+    /// Creating the notifier failed.
+    Notifier(NotifierCreateError),
+    /// Creating the listener failed.
+    Listener(ListenerCreateError),
+}
+
+impl ServiceFailure {
+    fn hint(&self) -> &'static str {
+        use PublishSubscribeOpenError as O;
+        match self {
+            ServiceFailure::PubSub(PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+                O::IncompatibleTypes | O::IncompatibleOverflowBehavior | O::VersionMismatch,
+            )) => "a process built from another version of Petrel uses this service; rebuild every process of the vehicle together",
+            ServiceFailure::PubSub(PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+                O::DoesNotSupportRequestedMinBufferSize
+                | O::DoesNotSupportRequestedAmountOfPublishers
+                | O::DoesNotSupportRequestedAmountOfSubscribers
+                | O::DoesNotSupportRequestedAmountOfNodes,
+            )) => "a process built with other service settings created this service; rebuild every process of the vehicle together",
+            ServiceFailure::PubSub(PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+                O::ExceedsMaxNumberOfNodes,
+            ))
+            | ServiceFailure::Event(EventOpenOrCreateError::EventOpenError(
+                EventOpenError::ExceedsMaxNumberOfNodes,
+            )) => "too many processes use this service",
+            ServiceFailure::PubSub(PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+                O::InsufficientPermissions,
+            )) => "another user created this service; run every process of the vehicle as one user",
+            ServiceFailure::Subscriber(SubscriberCreateError::ExceedsMaxSupportedSubscribers)
+            | ServiceFailure::Listener(ListenerCreateError::ExceedsMaxSupportedListeners) => {
+                "the service already has all the receivers it accepts (is a second player or program instance running? `petrel play` cleans up dead ones at start)"
+            }
+            ServiceFailure::Publisher(PublisherCreateError::ExceedsMaxSupportedPublishers)
+            | ServiceFailure::Notifier(NotifierCreateError::ExceedsMaxSupportedNotifiers) => {
+                "the service already has all the senders it accepts"
+            }
+            _ => "check that /dev/shm and /tmp/iceoryx2 are writable and not full",
+        }
+    }
+}
+
+/// A participant or one of its ports could not be set up.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum SetupError {
+    /// A name was refused.
+    Name(NameError),
+    /// The iceoryx2 node could not be created.
+    Node {
+        /// The node's name.
+        node: String,
+        /// iceoryx2's reason.
+        error: NodeCreationFailure,
+    },
+    /// A service or a port could not be set up.
+    Service {
+        /// The service.
+        service: String,
+        /// iceoryx2's reason.
+        failure: ServiceFailure,
+    },
+    /// Only a program receives calls, on its own service.
+    NotAProgram {
+        /// The participant's role.
+        role: Role,
+    },
+}
+
+impl fmt::Display for SetupError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            SetupError::Name(e) => e.fmt(f),
+            SetupError::Node { node, error } => write!(
+                f,
+                "cannot create the iceoryx2 node `{node}` ({error:?}); check that /dev/shm and /tmp/iceoryx2 are writable"
+            ),
+            SetupError::Service { service, failure } => write!(
+                f,
+                "cannot set up `{service}` ({failure:?}): {}",
+                failure.hint()
+            ),
+            SetupError::NotAProgram { role } => write!(
+                f,
+                "`{role}` is not a program: only a program receives calls (join with Role::Program)"
+            ),
+        }
+    }
+}
+
+impl std::error::Error for SetupError {}
+
+impl From<NameError> for SetupError {
+    fn from(e: NameError) -> Self {
+        SetupError::Name(e)
+    }
+}
+
+/// One process of a vehicle: an iceoryx2 node named after its role, from which it opens ports.
+///
+/// Create one per process (a node's ports are single-threaded: open them on the thread that
+/// uses them). Dropping it, and all its ports, removes the process's resources; a process killed
+/// before that leaves them for [`cleanup_dead_nodes`](crate::liveness::cleanup_dead_nodes).
+#[derive(Debug)]
+pub struct Participant {
+    vehicle: Vehicle,
+    role: Role,
+    origin: Origin,
+    node: Node<ipc::Service>,
+}
+
+/// How many times a service is opened again when another process is creating or removing it at
+/// the same moment.
+const OPEN_ATTEMPTS: usize = 50;
+const OPEN_RETRY_PAUSE: Duration = Duration::from_millis(10);
+
+fn is_transient_pubsub(e: &PublishSubscribeOpenOrCreateError) -> bool {
+    use iceoryx2::service::builder::publish_subscribe::PublishSubscribeCreateError as C;
+    use PublishSubscribeOpenError as O;
+    matches!(
+        e,
+        PublishSubscribeOpenOrCreateError::SystemInFlux
+            | PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+                O::IsMarkedForDestruction | O::HangsInCreation | O::DoesNotExist
+            )
+            | PublishSubscribeOpenOrCreateError::PublishSubscribeCreateError(
+                C::AlreadyExists | C::IsBeingCreatedByAnotherInstance
+            )
+    )
+}
+
+fn is_transient_event(e: &EventOpenOrCreateError) -> bool {
+    use iceoryx2::service::builder::event::EventCreateError as C;
+    matches!(
+        e,
+        EventOpenOrCreateError::SystemInFlux
+            | EventOpenOrCreateError::EventOpenError(
+                EventOpenError::IsMarkedForDestruction
+                    | EventOpenError::HangsInCreation
+                    | EventOpenError::DoesNotExist
+            )
+            | EventOpenOrCreateError::EventCreateError(
+                C::AlreadyExists | C::IsBeingCreatedByAnotherInstance
+            )
+    )
+}
+
+impl Participant {
+    /// Joins `vehicle` as `role`: creates the process's iceoryx2 node, named after the role.
+    pub fn join(vehicle: &Vehicle, role: Role) -> Result<Self, SetupError> {
+        role.check()?;
+        let node_name = role.node_name();
+        let name = NodeName::new(&node_name).map_err(|_| {
+            SetupError::Name(NameError::Refused {
+                what: "node",
+                name: node_name.clone(),
+            })
+        })?;
+        let node = NodeBuilder::new()
+            .name(&name)
+            .config(vehicle.config())
+            .create::<ipc::Service>()
+            .map_err(|error| SetupError::Node {
+                node: node_name.clone(),
+                error,
+            })?;
+        Ok(Participant {
+            vehicle: vehicle.clone(),
+            origin: Origin::new(&node_name),
+            role,
+            node,
+        })
+    }
+
+    /// The vehicle joined.
+    pub fn vehicle(&self) -> &Vehicle {
+        &self.vehicle
+    }
+
+    /// The role this process plays.
+    pub fn role(&self) -> &Role {
+        &self.role
+    }
+
+    /// The iceoryx2 node, for what this crate does not wrap.
+    pub fn node(&self) -> &Node<ipc::Service> {
+        &self.node
+    }
+
+    /// A sender of events to the player.
+    pub fn event_sender(&self) -> Result<EventSender, SetupError> {
+        self.sender(self.vehicle.events_service(), EVENTS)
+    }
+
+    /// The player's receiver of events. The events service accepts one receiver.
+    pub fn event_receiver(&self) -> Result<EventReceiver, SetupError> {
+        self.receiver(self.vehicle.events_service(), EVENTS)
+    }
+
+    /// A sender of calls to `program`.
+    pub fn call_sender(&self, program: &str) -> Result<CallSender, SetupError> {
+        self.sender(self.vehicle.calls_service(program)?, CALLS)
+    }
+
+    /// The receiver of this program's calls. Only a [`Role::Program`] has one.
+    pub fn call_receiver(&self) -> Result<CallReceiver, SetupError> {
+        match &self.role {
+            Role::Program(name) => self.receiver(self.vehicle.calls_service(name)?, CALLS),
+            role => Err(SetupError::NotAProgram { role: role.clone() }),
+        }
+    }
+
+    /// A publisher of marking deltas.
+    pub fn marking_publisher(&self) -> Result<MarkingPublisher, SetupError> {
+        self.sender(self.vehicle.marking_service(), MARKING)
+    }
+
+    /// A subscriber to marking deltas.
+    pub fn marking_subscriber(&self) -> Result<MarkingSubscriber, SetupError> {
+        self.receiver(self.vehicle.marking_service(), MARKING)
+    }
+
+    /// A publisher of heartbeats.
+    pub fn heartbeat_publisher(&self) -> Result<HeartbeatPublisher, SetupError> {
+        self.sender(self.vehicle.heartbeat_service(), HEARTBEAT)
+    }
+
+    /// A subscriber to heartbeats (from the next heartbeat each sender sends).
+    pub fn heartbeat_subscriber(&self) -> Result<HeartbeatSubscriber, SetupError> {
+        self.receiver(self.vehicle.heartbeat_service(), HEARTBEAT)
+    }
+
+    fn service_name(&self, service: &str) -> Result<ServiceName, SetupError> {
+        ServiceName::new(service).map_err(|_| {
+            SetupError::Name(NameError::Refused {
+                what: "service",
+                name: service.to_owned(),
+            })
+        })
+    }
+
+    fn open_pubsub(
+        &self,
+        service: &str,
+        spec: &ServiceSpec,
+    ) -> Result<publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>, SetupError> {
+        let name = self.service_name(service)?;
+        let mut attempt = 0;
+        loop {
+            let result = self
+                .node
+                .service_builder(&name)
+                .publish_subscribe::<[u8]>()
+                .user_header::<MsgHeader>()
+                .enable_safe_overflow(spec.safe_overflow)
+                .subscriber_max_buffer_size(spec.subscriber_buffer)
+                .subscriber_max_borrowed_samples(2)
+                .history_size(spec.history)
+                .max_publishers(spec.max_publishers)
+                .max_subscribers(spec.max_subscribers)
+                .max_nodes(spec.max_nodes)
+                .open_or_create();
+            match result {
+                Ok(factory) => return Ok(factory),
+                Err(e) if is_transient_pubsub(&e) && attempt + 1 < OPEN_ATTEMPTS => {
+                    attempt += 1;
+                    thread::sleep(OPEN_RETRY_PAUSE);
+                }
+                Err(e) => {
+                    return Err(SetupError::Service {
+                        service: service.to_owned(),
+                        failure: ServiceFailure::PubSub(e),
+                    })
+                }
+            }
+        }
+    }
+
+    fn open_event(
+        &self,
+        service: &str,
+        spec: &ServiceSpec,
+    ) -> Result<event::PortFactory<ipc::Service>, SetupError> {
+        let name = self.service_name(service)?;
+        let mut attempt = 0;
+        loop {
+            let result = self
+                .node
+                .service_builder(&name)
+                .event()
+                .max_notifiers(spec.max_publishers)
+                .max_listeners(spec.max_subscribers)
+                .max_nodes(spec.max_nodes)
+                .event_id_max_value(WAKE_MAX)
+                .notifier_created_event(EventId::new(WAKE_SENDER_JOINED))
+                .notifier_dropped_event(EventId::new(WAKE_SENDER_LEFT))
+                .notifier_dead_event(EventId::new(WAKE_SENDER_DIED))
+                .open_or_create();
+            match result {
+                Ok(factory) => return Ok(factory),
+                Err(e) if is_transient_event(&e) && attempt + 1 < OPEN_ATTEMPTS => {
+                    attempt += 1;
+                    thread::sleep(OPEN_RETRY_PAUSE);
+                }
+                Err(e) => {
+                    return Err(SetupError::Service {
+                        service: service.to_owned(),
+                        failure: ServiceFailure::Event(e),
+                    })
+                }
+            }
+        }
+    }
+
+    fn sender<M: Message>(
+        &self,
+        service: String,
+        spec: ServiceSpec,
+    ) -> Result<Sender<M>, SetupError> {
+        let failed = |failure| SetupError::Service {
+            service: service.clone(),
+            failure,
+        };
+        let factory = self.open_pubsub(&service, &spec)?;
+        let events = self.open_event(&service, &spec)?;
+        let publisher = factory
+            .publisher_builder()
+            .initial_max_slice_len(spec.initial_slice_len)
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .backpressure_strategy(BackpressureStrategy::DiscardData)
+            .max_loaned_samples(2)
+            .create()
+            .map_err(|e| failed(ServiceFailure::Publisher(e)))?;
+        let notifier = events
+            .notifier_builder()
+            .create()
+            .map_err(|e| failed(ServiceFailure::Notifier(e)))?;
+        Ok(Sender::new(
+            service.clone(),
+            spec,
+            self.origin,
+            publisher,
+            notifier,
+            factory,
+        ))
+    }
+
+    fn receiver<M: Message>(
+        &self,
+        service: String,
+        spec: ServiceSpec,
+    ) -> Result<Receiver<M>, SetupError> {
+        let failed = |failure| SetupError::Service {
+            service: service.clone(),
+            failure,
+        };
+        let factory = self.open_pubsub(&service, &spec)?;
+        let events = self.open_event(&service, &spec)?;
+        // The listener first: a sender that delivers between the two still wakes us.
+        let listener = events
+            .listener_builder()
+            .create()
+            .map_err(|e| failed(ServiceFailure::Listener(e)))?;
+        let subscriber = factory
+            .subscriber_builder()
+            .buffer_size(spec.subscriber_buffer)
+            .create()
+            .map_err(|e| failed(ServiceFailure::Subscriber(e)))?;
+        Ok(Receiver::new(service.clone(), spec, subscriber, listener))
+    }
+}

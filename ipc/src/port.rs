@@ -1,0 +1,935 @@
+//! Sending and receiving ports: a [`Sender`] and a [`Receiver`] per message kind, each a
+//! publish-subscribe port on `[u8]` paired with an event port that wakes the receiving side.
+//!
+//! Every service of a vehicle is set up from one [`ServiceSpec`] (see [`EVENTS`], [`CALLS`],
+//! [`MARKING`], [`HEARTBEAT`]) so that every process opens it with the same settings.
+//!
+//! **Nothing is lost unseen.** Except for heartbeats, services do not overwrite: iceoryx2's
+//! `safe_overflow` is off and publishers discard a sample for a receiver whose buffer is full.
+//! [`Sender::send`] compares the delivery count iceoryx2 returns with the number of connected
+//! receivers and reports the difference as [`SendError::NoReceiver`] or
+//! [`SendError::Refused`]. The refused message keeps its sequence number, so the receiver sees
+//! the gap ([`Received::missed`], [`ReceiverStats::missing`]): for every sender, messages
+//! sent = received + refused.
+//!
+//! Ports of `ipc::Service` are single-threaded (not `Send`): create them on the thread that uses
+//! them. Their methods take `&self`, so a [`Reactor`](crate::reactor::Reactor) can watch
+//! receivers while the caller drains them.
+
+use std::cell::{Cell, RefCell};
+use std::collections::HashMap;
+use std::fmt;
+use std::marker::PhantomData;
+
+use iceoryx2::port::listener::{Listener, ListenerWaitError};
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::{LoanError, ReceiveError};
+use iceoryx2::prelude::{ipc, EventId, PortFactory};
+use iceoryx2::service::port_factory::publish_subscribe;
+
+use crate::wire::{self, Message, MsgHeader, MsgKind, Origin, WireError, WIRE_VERSION};
+
+/// Event id a sender notifies after delivering a sample.
+pub const WAKE_SAMPLE: usize = 1;
+/// Event id iceoryx2 emits when a sender (its notifier) joins the service.
+pub const WAKE_SENDER_JOINED: usize = 2;
+/// Event id iceoryx2 emits when a sender leaves the service in good order.
+pub const WAKE_SENDER_LEFT: usize = 3;
+/// Event id iceoryx2 emits when the node of a sender was found dead and cleaned up.
+pub const WAKE_SENDER_DIED: usize = 4;
+/// Largest event id of the paired event services.
+pub const WAKE_MAX: usize = 7;
+
+/// How one kind of service is set up. Every process opens a service with the same spec.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ServiceSpec {
+    /// The body the service carries.
+    pub kind: MsgKind,
+    /// Samples one receiver holds for one sender before further ones are refused
+    /// (or, with `safe_overflow`, overwritten).
+    pub subscriber_buffer: usize,
+    /// Samples a sender keeps for receivers that connect later.
+    pub history: usize,
+    /// Senders at most.
+    pub max_publishers: usize,
+    /// Receivers at most.
+    pub max_subscribers: usize,
+    /// Processes (nodes) that may open the service at most.
+    pub max_nodes: usize,
+    /// Slice length every sample starts with; larger bodies grow the sender's memory by powers
+    /// of two, up to `max_body_len`.
+    pub initial_slice_len: usize,
+    /// Largest encoded body accepted by [`Sender::send`].
+    pub max_body_len: usize,
+    /// Overwrite the oldest sample when a receiver's buffer is full (latest-value semantics)
+    /// instead of refusing the new one.
+    pub safe_overflow: bool,
+}
+
+/// Events into the player: a burst of 16,384 events from one sender fits in the player's
+/// buffer; one player receives (a second one is refused).
+pub const EVENTS: ServiceSpec = ServiceSpec {
+    kind: MsgKind::Event,
+    subscriber_buffer: 16_384,
+    history: 0,
+    max_publishers: 32,
+    max_subscribers: 1,
+    max_nodes: 64,
+    initial_slice_len: 512,
+    max_body_len: 64 * 1024,
+    safe_overflow: false,
+};
+
+/// Calls from the player to one program (one service per program). No history: a restarted
+/// program never receives stale calls.
+pub const CALLS: ServiceSpec = ServiceSpec {
+    kind: MsgKind::Call,
+    subscriber_buffer: 4_096,
+    history: 0,
+    max_publishers: 4,
+    max_subscribers: 1,
+    max_nodes: 16,
+    initial_slice_len: 512,
+    max_body_len: 64 * 1024,
+    safe_overflow: false,
+};
+
+/// Marking deltas to monitors. A monitor that falls 1,024 steps behind is refused further
+/// deltas (counted by the player, seen as a gap by the monitor) until it catches up, and must
+/// wait for a snapshot.
+pub const MARKING: ServiceSpec = ServiceSpec {
+    kind: MsgKind::Marking,
+    subscriber_buffer: 1_024,
+    history: 0,
+    max_publishers: 2,
+    max_subscribers: 8,
+    max_nodes: 16,
+    initial_slice_len: 1_024,
+    max_body_len: wire::MAX_BODY_LEN,
+    safe_overflow: false,
+};
+
+/// Heartbeats: latest-value semantics (a slow listener loses old heartbeats, never new ones).
+///
+/// No history: iceoryx2 hands its history to a new subscriber only when the publisher next
+/// sends (or updates its connections), and by then the next heartbeat is there anyway.
+pub const HEARTBEAT: ServiceSpec = ServiceSpec {
+    kind: MsgKind::Heartbeat,
+    subscriber_buffer: 4,
+    history: 0,
+    max_publishers: 64,
+    max_subscribers: 16,
+    max_nodes: 80,
+    initial_slice_len: 64,
+    max_body_len: 1_024,
+    safe_overflow: true,
+};
+
+/// What a successful [`Sender::send`] did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Sent {
+    /// The message's sequence number.
+    pub seq: u64,
+    /// Receivers that got it.
+    pub delivered: usize,
+}
+
+/// Counters of a sender. `sent = delivered + refused`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SenderStats {
+    /// Messages handed to the transport (sequence numbers used).
+    pub sent: u64,
+    /// Messages delivered to every connected receiver.
+    pub delivered: u64,
+    /// Messages some receiver did not get: nobody listened, a buffer was full, or the
+    /// transport failed.
+    pub refused: u64,
+    /// Messages never handed to the transport (too large, no shared memory left); they used no
+    /// sequence number.
+    pub not_sent: u64,
+    /// Deliveries whose wake-up notification failed (the receiver finds the sample at its next
+    /// wake-up).
+    pub wake_failures: u64,
+}
+
+/// A message could not be sent, or not to everyone.
+#[derive(Debug)]
+pub enum SendError {
+    /// The body could not be encoded or is too large; nothing was sent.
+    Wire {
+        /// The service.
+        service: String,
+        /// Why.
+        error: WireError,
+    },
+    /// No shared memory could be loaned for the sample; nothing was sent.
+    Loan {
+        /// The service.
+        service: String,
+        /// iceoryx2's reason.
+        error: LoanError,
+    },
+    /// Nobody receives on the service: the message was dropped.
+    NoReceiver {
+        /// The service.
+        service: String,
+        /// Kind of the message.
+        kind: MsgKind,
+        /// The dropped message's sequence number.
+        seq: u64,
+    },
+    /// Some receiver's buffer was full: it did not get the message.
+    Refused {
+        /// The service.
+        service: String,
+        /// The message's sequence number.
+        seq: u64,
+        /// Receivers that got it.
+        delivered: usize,
+        /// Receivers connected.
+        receivers: usize,
+    },
+    /// iceoryx2 failed while delivering.
+    Transport {
+        /// The service.
+        service: String,
+        /// The message's sequence number.
+        seq: u64,
+        /// iceoryx2's reason.
+        error: iceoryx2::port::SendError,
+    },
+}
+
+impl SendError {
+    /// The sequence number the message used, if it was handed to the transport.
+    pub fn seq(&self) -> Option<u64> {
+        match self {
+            SendError::Wire { .. } | SendError::Loan { .. } => None,
+            SendError::NoReceiver { seq, .. }
+            | SendError::Refused { seq, .. }
+            | SendError::Transport { seq, .. } => Some(*seq),
+        }
+    }
+
+    /// True when the message was handed over but not delivered to every receiver; such a
+    /// message shows as a gap at the receivers that missed it.
+    pub fn is_refusal(&self) -> bool {
+        self.seq().is_some()
+    }
+}
+
+impl fmt::Display for SendError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            SendError::Wire { service, error } => {
+                write!(f, "cannot send on `{service}`: {error}")
+            }
+            SendError::Loan { service, error } => write!(
+                f,
+                "cannot send on `{service}`: no shared memory for the sample ({error:?}); \
+                 the receivers may hold too many samples"
+            ),
+            SendError::NoReceiver { service, kind, seq } => {
+                let hint = match kind {
+                    MsgKind::Event => "is the player running?",
+                    MsgKind::Call => "is the program running?",
+                    MsgKind::Marking | MsgKind::Heartbeat => "no monitor is connected",
+                };
+                write!(
+                    f,
+                    "message {seq} on `{service}` was dropped: nobody receives ({hint})"
+                )
+            }
+            SendError::Refused {
+                service,
+                seq,
+                delivered,
+                receivers,
+            } => write!(
+                f,
+                "message {seq} on `{service}` reached {delivered} of {receivers} receivers: \
+                 a receiver's buffer is full (it does not keep up)"
+            ),
+            SendError::Transport {
+                service,
+                seq,
+                error,
+            } => write!(
+                f,
+                "message {seq} on `{service}` could not be delivered: {error}"
+            ),
+        }
+    }
+}
+
+impl std::error::Error for SendError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            SendError::Wire { error, .. } => Some(error),
+            SendError::Loan { error, .. } => Some(error),
+            SendError::Transport { error, .. } => Some(error),
+            _ => None,
+        }
+    }
+}
+
+/// The sending side of one service: encodes bodies straight into loaned shared memory, numbers
+/// them, and wakes the receivers.
+pub struct Sender<M: Message> {
+    service: String,
+    spec: ServiceSpec,
+    origin: Origin,
+    sender_id: u64,
+    publisher: Publisher<ipc::Service, [u8], MsgHeader>,
+    notifier: Notifier<ipc::Service>,
+    factory: publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>,
+    next_seq: Cell<u64>,
+    stats: Cell<SenderStats>,
+    _kind: PhantomData<fn(&M)>,
+}
+
+/// Sends events to the player (programs, CAN bridge, tools).
+pub type EventSender = Sender<wire::EventMsg>;
+/// Sends calls to one program (the player).
+pub type CallSender = Sender<wire::CallMsg>;
+/// Publishes marking deltas (the player).
+pub type MarkingPublisher = Sender<wire::MarkingMsg>;
+/// Publishes heartbeats.
+pub type HeartbeatPublisher = Sender<wire::Heartbeat>;
+
+impl<M: Message> fmt::Debug for Sender<M> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Sender")
+            .field("service", &self.service)
+            .field("origin", &self.origin)
+            .field("sender_id", &self.sender_id)
+            .field("stats", &self.stats.get())
+            .finish()
+    }
+}
+
+fn fold_id(id: u128) -> u64 {
+    (id as u64) ^ ((id >> 64) as u64)
+}
+
+impl<M: Message> Sender<M> {
+    pub(crate) fn new(
+        service: String,
+        spec: ServiceSpec,
+        origin: Origin,
+        publisher: Publisher<ipc::Service, [u8], MsgHeader>,
+        notifier: Notifier<ipc::Service>,
+        factory: publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>,
+    ) -> Self {
+        let sender_id = fold_id(publisher.id().value());
+        Sender {
+            service,
+            spec,
+            origin,
+            sender_id,
+            publisher,
+            notifier,
+            factory,
+            next_seq: Cell::new(1),
+            stats: Cell::new(SenderStats::default()),
+            _kind: PhantomData,
+        }
+    }
+
+    /// The service this sender publishes on.
+    pub fn service(&self) -> &str {
+        &self.service
+    }
+
+    /// The spec the service was opened with.
+    pub fn spec(&self) -> &ServiceSpec {
+        &self.spec
+    }
+
+    /// This sender's id, as receivers see it in [`Received::sender`].
+    pub fn sender_id(&self) -> u64 {
+        self.sender_id
+    }
+
+    /// This sender's origin (its participant's node name).
+    pub fn origin(&self) -> Origin {
+        self.origin
+    }
+
+    /// The sequence number the next message will use.
+    pub fn next_seq(&self) -> u64 {
+        self.next_seq.get()
+    }
+
+    /// The counters of this sender.
+    pub fn stats(&self) -> SenderStats {
+        self.stats.get()
+    }
+
+    /// Receivers connected to the service now.
+    pub fn receivers(&self) -> usize {
+        self.factory.dynamic_config().number_of_subscribers()
+    }
+
+    /// Encodes `msg` into loaned shared memory, sends it and wakes the receivers.
+    ///
+    /// Returns an error when the message was not delivered to every connected receiver, so the
+    /// caller can count refusals; [`SendError::seq`] tells whether it used a sequence number.
+    pub fn send(&self, msg: &M) -> Result<Sent, SendError> {
+        let len = match wire::encoded_len(msg) {
+            Ok(len) => len,
+            Err(error) => return Err(self.not_sent_wire(error)),
+        };
+        if len > self.spec.max_body_len {
+            return Err(self.not_sent_wire(WireError::TooLarge {
+                len,
+                max: self.spec.max_body_len,
+            }));
+        }
+        let sample = match self.publisher.loan_slice_uninit(len) {
+            Ok(sample) => sample,
+            Err(error) => return Err(self.not_sent_loan(error)),
+        };
+        // Zero the loaned bytes (a memset of `len` bytes) so that encoding writes into an
+        // initialised `&mut [u8]` without `unsafe`; no intermediate buffer is built.
+        let mut sample = sample.write_from_fn(|_| 0u8);
+        match wire::encode_into(msg, sample.payload_mut()) {
+            Ok(written) if written == len => {}
+            Ok(written) => {
+                return Err(self.not_sent_wire(WireError::LengthMismatch {
+                    measured: len,
+                    written,
+                }))
+            }
+            Err(error) => return Err(self.not_sent_wire(error)),
+        }
+        let seq = self.take_seq();
+        *sample.user_header_mut() = self.header(seq);
+        let result = sample.send();
+        self.account(seq, result)
+    }
+
+    /// Sends a body that is already encoded (for relays that forward messages without decoding
+    /// them). The body is not checked: receivers report what does not decode.
+    pub fn send_encoded(&self, body: &[u8]) -> Result<Sent, SendError> {
+        if body.len() > self.spec.max_body_len {
+            return Err(self.not_sent_wire(WireError::TooLarge {
+                len: body.len(),
+                max: self.spec.max_body_len,
+            }));
+        }
+        let sample = match self.publisher.loan_slice_uninit(body.len()) {
+            Ok(sample) => sample,
+            Err(error) => return Err(self.not_sent_loan(error)),
+        };
+        let mut sample = sample.write_from_slice(body);
+        let seq = self.take_seq();
+        *sample.user_header_mut() = self.header(seq);
+        let result = sample.send();
+        self.account(seq, result)
+    }
+
+    fn header(&self, seq: u64) -> MsgHeader {
+        MsgHeader {
+            sender: self.sender_id,
+            seq,
+            version: WIRE_VERSION,
+            kind: M::KIND as u16,
+            reserved: 0,
+            origin: self.origin.bytes(),
+        }
+    }
+
+    fn take_seq(&self) -> u64 {
+        let seq = self.next_seq.get();
+        self.next_seq.set(seq + 1);
+        seq
+    }
+
+    fn update(&self, f: impl FnOnce(&mut SenderStats)) {
+        let mut stats = self.stats.get();
+        f(&mut stats);
+        self.stats.set(stats);
+    }
+
+    fn not_sent_wire(&self, error: WireError) -> SendError {
+        self.update(|s| s.not_sent += 1);
+        SendError::Wire {
+            service: self.service.clone(),
+            error,
+        }
+    }
+
+    fn not_sent_loan(&self, error: LoanError) -> SendError {
+        self.update(|s| s.not_sent += 1);
+        SendError::Loan {
+            service: self.service.clone(),
+            error,
+        }
+    }
+
+    fn account(
+        &self,
+        seq: u64,
+        result: Result<usize, iceoryx2::port::SendError>,
+    ) -> Result<Sent, SendError> {
+        let delivered = match result {
+            Ok(delivered) => delivered,
+            Err(error) => {
+                self.update(|s| {
+                    s.sent += 1;
+                    s.refused += 1;
+                });
+                return Err(SendError::Transport {
+                    service: self.service.clone(),
+                    seq,
+                    error,
+                });
+            }
+        };
+        if delivered > 0 {
+            let woke = self
+                .notifier
+                .notify_with_custom_event_id(EventId::new(WAKE_SAMPLE));
+            if woke.is_err() {
+                self.update(|s| s.wake_failures += 1);
+            }
+        }
+        let receivers = self.receivers();
+        if delivered >= receivers && delivered > 0 {
+            self.update(|s| {
+                s.sent += 1;
+                s.delivered += 1;
+            });
+            return Ok(Sent { seq, delivered });
+        }
+        self.update(|s| {
+            s.sent += 1;
+            s.refused += 1;
+        });
+        if receivers == 0 {
+            Err(SendError::NoReceiver {
+                service: self.service.clone(),
+                kind: M::KIND,
+                seq,
+            })
+        } else {
+            Err(SendError::Refused {
+                service: self.service.clone(),
+                seq,
+                delivered,
+                receivers,
+            })
+        }
+    }
+}
+
+/// A message taken from a receiver.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Received<M> {
+    /// The message.
+    pub msg: M,
+    /// Who sent it.
+    pub origin: Origin,
+    /// The sending port's id.
+    pub sender: u64,
+    /// Its sequence number at the sender.
+    pub seq: u64,
+    /// Messages of this sender missed just before this one (refused by this receiver's full
+    /// buffer, or sent while it was not connected).
+    pub missed: u64,
+}
+
+/// Counters of a receiver, all senders together.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ReceiverStats {
+    /// Samples taken from the buffer, decodable or not.
+    pub received: u64,
+    /// Samples whose body did not decode, or of another wire version or kind.
+    pub undecodable: u64,
+    /// Sequence numbers skipped by senders: messages this receiver never got.
+    pub missing: u64,
+    /// Samples whose sequence number went backwards (should never happen).
+    pub out_of_order: u64,
+}
+
+/// What a receiver knows of one sender.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SenderAccount {
+    /// The sending port's id.
+    pub sender: u64,
+    /// Its origin.
+    pub origin: Origin,
+    /// The last sequence number seen.
+    pub last_seq: u64,
+    /// Samples taken, decodable or not.
+    pub received: u64,
+    /// Samples that did not decode.
+    pub undecodable: u64,
+    /// Sequence numbers skipped.
+    pub missing: u64,
+}
+
+/// Notifications consumed from a receiver's paired event service.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Wakeups {
+    /// Sample notifications (coalesced: one may stand for many samples).
+    pub samples: u64,
+    /// Senders that joined.
+    pub senders_joined: u64,
+    /// Senders that left in good order.
+    pub senders_left: u64,
+    /// Senders whose process died and whose resources were cleaned up: time to check which
+    /// programs are alive.
+    pub senders_died: u64,
+}
+
+impl Wakeups {
+    fn add(&mut self, other: Wakeups) {
+        self.samples += other.samples;
+        self.senders_joined += other.senders_joined;
+        self.senders_left += other.senders_left;
+        self.senders_died += other.senders_died;
+    }
+}
+
+/// A sample could not be received or decoded. The receiver carries on with the next one.
+#[derive(Debug)]
+pub enum RecvError {
+    /// The body did not decode.
+    Undecodable {
+        /// The service.
+        service: String,
+        /// Who sent it.
+        origin: Origin,
+        /// The sending port's id.
+        sender: u64,
+        /// Its sequence number.
+        seq: u64,
+        /// Why it did not decode.
+        error: WireError,
+    },
+    /// The header names another wire version or another kind of body.
+    Foreign {
+        /// The service.
+        service: String,
+        /// Who sent it.
+        origin: Origin,
+        /// Its sequence number.
+        seq: u64,
+        /// The wire version in the header.
+        version: u16,
+        /// The kind in the header.
+        kind: u16,
+    },
+    /// iceoryx2 failed to receive.
+    Transport {
+        /// The service.
+        service: String,
+        /// iceoryx2's reason.
+        error: ReceiveError,
+    },
+    /// Consuming the wake-up notifications failed.
+    Wakeup {
+        /// The service.
+        service: String,
+        /// iceoryx2's reason.
+        error: ListenerWaitError,
+    },
+}
+
+impl fmt::Display for RecvError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            RecvError::Undecodable {
+                service,
+                origin,
+                seq,
+                error,
+                ..
+            } => write!(
+                f,
+                "message {seq} from `{origin}` on `{service}` is refused: {error}"
+            ),
+            RecvError::Foreign {
+                service,
+                origin,
+                seq,
+                version,
+                kind,
+            } => write!(
+                f,
+                "message {seq} from `{origin}` on `{service}` is refused: wire version {version}, \
+                 kind {kind} (expected version {WIRE_VERSION}); build every process of the vehicle \
+                 from the same Petrel"
+            ),
+            RecvError::Transport { service, error } => {
+                write!(f, "cannot receive on `{service}`: {error}")
+            }
+            RecvError::Wakeup { service, error } => {
+                write!(f, "cannot consume wake-ups on `{service}`: {error:?}")
+            }
+        }
+    }
+}
+
+impl std::error::Error for RecvError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            RecvError::Undecodable { error, .. } => Some(error),
+            RecvError::Transport { error, .. } => Some(error),
+            _ => None,
+        }
+    }
+}
+
+/// What [`Receiver::drain`] did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Drained {
+    /// Messages handed over.
+    pub messages: usize,
+    /// Errors handed over.
+    pub errors: usize,
+    /// Notifications consumed.
+    pub wakeups: Wakeups,
+}
+
+/// The receiving side of one service: takes samples, checks their headers, accounts for every
+/// sender's sequence, and decodes bodies.
+pub struct Receiver<M: Message> {
+    service: String,
+    spec: ServiceSpec,
+    subscriber: Subscriber<ipc::Service, [u8], MsgHeader>,
+    listener: Listener<ipc::Service>,
+    stats: Cell<ReceiverStats>,
+    senders: RefCell<HashMap<u64, SenderAccount>>,
+    pending_wakeups: Cell<Wakeups>,
+    _kind: PhantomData<fn() -> M>,
+}
+
+/// Receives the events of the vehicle (the player).
+pub type EventReceiver = Receiver<wire::EventMsg>;
+/// Receives the calls of one program (the program).
+pub type CallReceiver = Receiver<wire::CallMsg>;
+/// Receives marking deltas (monitors).
+pub type MarkingSubscriber = Receiver<wire::MarkingMsg>;
+/// Receives heartbeats.
+pub type HeartbeatSubscriber = Receiver<wire::Heartbeat>;
+
+impl<M: Message> fmt::Debug for Receiver<M> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Receiver")
+            .field("service", &self.service)
+            .field("stats", &self.stats.get())
+            .finish()
+    }
+}
+
+impl<M: Message> Receiver<M> {
+    pub(crate) fn new(
+        service: String,
+        spec: ServiceSpec,
+        subscriber: Subscriber<ipc::Service, [u8], MsgHeader>,
+        listener: Listener<ipc::Service>,
+    ) -> Self {
+        Receiver {
+            service,
+            spec,
+            subscriber,
+            listener,
+            stats: Cell::new(ReceiverStats::default()),
+            senders: RefCell::new(HashMap::new()),
+            pending_wakeups: Cell::new(Wakeups::default()),
+            _kind: PhantomData,
+        }
+    }
+
+    /// The service this receiver takes from.
+    pub fn service(&self) -> &str {
+        &self.service
+    }
+
+    /// The spec the service was opened with.
+    pub fn spec(&self) -> &ServiceSpec {
+        &self.spec
+    }
+
+    /// The listener of the paired event service, to attach to an iceoryx2 `WaitSet` (it is
+    /// file-descriptor based). After it wakes a `WaitSet`, call [`take_wakeups`](Self::take_wakeups)
+    /// or [`drain`](Self::drain), otherwise the `WaitSet` wakes again at once.
+    pub fn listener(&self) -> &Listener<ipc::Service> {
+        &self.listener
+    }
+
+    /// The counters of this receiver.
+    pub fn stats(&self) -> ReceiverStats {
+        self.stats.get()
+    }
+
+    /// What this receiver knows of each sender it heard from.
+    pub fn senders(&self) -> Vec<SenderAccount> {
+        let mut v: Vec<_> = self.senders.borrow().values().copied().collect();
+        v.sort_by_key(|a| (a.origin.bytes(), a.sender));
+        v
+    }
+
+    /// True when a sample waits in the buffer (a shared-memory read, no system call).
+    pub fn has_pending(&self) -> bool {
+        // A connection failure still lets the caller try to receive and see the error.
+        self.subscriber.has_samples().unwrap_or(true)
+    }
+
+    /// Consumes the notifications of the paired event service and returns them, with those a
+    /// [`Reactor`](crate::reactor::Reactor) already consumed on this receiver's behalf.
+    pub fn take_wakeups(&self) -> Result<Wakeups, RecvError> {
+        self.consume_notifications()?;
+        Ok(self.pending_wakeups.replace(Wakeups::default()))
+    }
+
+    pub(crate) fn consume_notifications(&self) -> Result<(), RecvError> {
+        let mut fresh = Wakeups::default();
+        self.listener
+            .try_wait(|activation| match activation.id.as_value() {
+                WAKE_SAMPLE => fresh.samples += activation.count,
+                WAKE_SENDER_JOINED => fresh.senders_joined += activation.count,
+                WAKE_SENDER_LEFT => fresh.senders_left += activation.count,
+                WAKE_SENDER_DIED => fresh.senders_died += activation.count,
+                _ => {}
+            })
+            .map_err(|error| RecvError::Wakeup {
+                service: self.service.clone(),
+                error,
+            })?;
+        let mut pending = self.pending_wakeups.get();
+        pending.add(fresh);
+        self.pending_wakeups.set(pending);
+        Ok(())
+    }
+
+    /// Whether consumed notifications report a sender that joined, left or died, not yet taken
+    /// with [`take_wakeups`](Self::take_wakeups).
+    pub fn has_sender_news(&self) -> bool {
+        let w = self.pending_wakeups.get();
+        w.senders_joined + w.senders_left + w.senders_died > 0
+    }
+
+    /// Takes the next sample, if any, without waiting and without a system call.
+    ///
+    /// `Ok(None)` when the buffer is empty. A sample whose body does not decode is taken, counted
+    /// and reported as [`RecvError::Undecodable`]; the next call goes on with the next sample.
+    pub fn try_recv(&self) -> Result<Option<Received<M>>, RecvError> {
+        let sample = match self.subscriber.receive() {
+            Ok(Some(sample)) => sample,
+            Ok(None) => return Ok(None),
+            Err(error) => {
+                return Err(RecvError::Transport {
+                    service: self.service.clone(),
+                    error,
+                })
+            }
+        };
+        let header = *sample.user_header();
+        let origin = Origin::from_bytes(header.origin);
+        let missed = self.account(&header, origin);
+        if header.version != WIRE_VERSION || header.kind != M::KIND as u16 {
+            self.count_undecodable(header.sender);
+            return Err(RecvError::Foreign {
+                service: self.service.clone(),
+                origin,
+                seq: header.seq,
+                version: header.version,
+                kind: header.kind,
+            });
+        }
+        match wire::decode::<M>(sample.payload()) {
+            Ok(msg) => Ok(Some(Received {
+                msg,
+                origin,
+                sender: header.sender,
+                seq: header.seq,
+                missed,
+            })),
+            Err(error) => {
+                self.count_undecodable(header.sender);
+                Err(RecvError::Undecodable {
+                    service: self.service.clone(),
+                    origin,
+                    sender: header.sender,
+                    seq: header.seq,
+                    error,
+                })
+            }
+        }
+    }
+
+    /// Consumes the wake-ups, then hands every waiting sample to `f`, in order, until the
+    /// buffer is empty. Undecodable samples are handed over as errors and draining goes on; a
+    /// transport error is handed over and ends this drain.
+    pub fn drain(
+        &self,
+        mut f: impl FnMut(Result<Received<M>, RecvError>),
+    ) -> Result<Drained, RecvError> {
+        let wakeups = self.take_wakeups()?;
+        let mut drained = Drained {
+            wakeups,
+            ..Drained::default()
+        };
+        loop {
+            match self.try_recv() {
+                Ok(Some(received)) => {
+                    drained.messages += 1;
+                    f(Ok(received));
+                }
+                Ok(None) => break,
+                Err(error @ RecvError::Transport { .. }) => {
+                    drained.errors += 1;
+                    f(Err(error));
+                    break;
+                }
+                Err(error) => {
+                    drained.errors += 1;
+                    f(Err(error));
+                }
+            }
+        }
+        Ok(drained)
+    }
+
+    fn account(&self, header: &MsgHeader, origin: Origin) -> u64 {
+        let mut stats = self.stats.get();
+        stats.received += 1;
+        let mut senders = self.senders.borrow_mut();
+        let account = senders.entry(header.sender).or_insert(SenderAccount {
+            sender: header.sender,
+            origin,
+            last_seq: 0,
+            received: 0,
+            undecodable: 0,
+            missing: 0,
+        });
+        account.received += 1;
+        let missed = if header.seq > account.last_seq {
+            let missed = header.seq - account.last_seq - 1;
+            account.last_seq = header.seq;
+            missed
+        } else {
+            stats.out_of_order += 1;
+            0
+        };
+        account.missing += missed;
+        stats.missing += missed;
+        self.stats.set(stats);
+        missed
+    }
+
+    fn count_undecodable(&self, sender: u64) {
+        let mut stats = self.stats.get();
+        stats.undecodable += 1;
+        self.stats.set(stats);
+        if let Some(account) = self.senders.borrow_mut().get_mut(&sender) {
+            account.undecodable += 1;
+        }
+    }
+}

@@ -1,0 +1,560 @@
+//! The wire format: what travels in the shared-memory samples.
+//!
+//! Every sample is a byte slice (`publish_subscribe::<[u8]>()`) holding one message body encoded
+//! with bincode 2 (standard configuration: little endian, variable-length integers), preceded by
+//! a fixed [`MsgHeader`] in iceoryx2's user-header slot. The header says who sent the message
+//! ([`Origin`], sender id) and its per-sender sequence number, so a receiver accounts for every
+//! message: for each sender, messages sent = received + refused, and a refused message shows as a
+//! gap in the sequence.
+//!
+//! Bodies:
+//!
+//! | service   | body          | direction                              |
+//! |-----------|---------------|----------------------------------------|
+//! | events    | [`EventMsg`]  | programs, CAN bridge, tools to player  |
+//! | calls     | [`CallMsg`]   | player to one program                  |
+//! | marking   | [`MarkingMsg`]| player to monitors                     |
+//! | heartbeat | [`Heartbeat`] | anyone to anyone who listens           |
+//!
+//! Events travel by **name**: programs do not know the player's event indices.
+//!
+//! Encoding never builds an intermediate buffer: [`encoded_len`] measures the body (bincode's
+//! size writer), the sender loans a slice of exactly that length and [`encode_into`] writes it
+//! in place. [`decode`] reads a body from the received slice; a body that does not decode is a
+//! [`WireError`], never a panic, and decoding never allocates more than [`MAX_BODY_LEN`] bytes
+//! whatever the lengths a corrupt body claims.
+
+use std::fmt;
+
+use bincode::config::{Configuration, Limit, LittleEndian, Varint};
+use bincode::enc::write::SizeWriter;
+use bincode::enc::EncoderImpl;
+use bincode::{Decode, Encode};
+use iceoryx2::prelude::ZeroCopySend;
+
+/// Version of the wire format. It is written in every header, and it is part of the header's
+/// iceoryx2 type name, so a process built with another wire version cannot even open the
+/// services.
+pub const WIRE_VERSION: u16 = 1;
+
+/// Length of the origin field of a header, in bytes.
+pub const ORIGIN_LEN: usize = 32;
+
+/// The largest body any service carries (marking snapshots); decoding refuses to read more.
+pub const MAX_BODY_LEN: usize = 1 << 20;
+
+type WireConfig = Configuration<LittleEndian, Varint, Limit<MAX_BODY_LEN>>;
+
+const CONFIG: WireConfig = bincode::config::standard()
+    .with_little_endian()
+    .with_variable_int_encoding()
+    .with_limit::<MAX_BODY_LEN>();
+
+/// A parameter of an event or an argument of a call.
+#[derive(Debug, Clone, PartialEq, Encode, Decode)]
+pub enum Value {
+    /// A signed integer.
+    Int(i64),
+    /// A float.
+    Float(f64),
+    /// A boolean.
+    Bool(bool),
+    /// A text.
+    Text(String),
+    /// A list of floats (a position, a waypoint list...).
+    FloatList(Vec<f64>),
+}
+
+impl Value {
+    /// The name of the value's type, as the net language writes it.
+    pub fn type_name(&self) -> &'static str {
+        match self {
+            Value::Int(_) => "int",
+            Value::Float(_) => "float",
+            Value::Bool(_) => "bool",
+            Value::Text(_) => "text",
+            Value::FloatList(_) => "[float]",
+        }
+    }
+}
+
+impl From<i64> for Value {
+    fn from(v: i64) -> Self {
+        Value::Int(v)
+    }
+}
+impl From<f64> for Value {
+    fn from(v: f64) -> Self {
+        Value::Float(v)
+    }
+}
+impl From<bool> for Value {
+    fn from(v: bool) -> Self {
+        Value::Bool(v)
+    }
+}
+impl From<String> for Value {
+    fn from(v: String) -> Self {
+        Value::Text(v)
+    }
+}
+impl From<&str> for Value {
+    fn from(v: &str) -> Self {
+        Value::Text(v.to_owned())
+    }
+}
+impl From<Vec<f64>> for Value {
+    fn from(v: Vec<f64>) -> Self {
+        Value::FloatList(v)
+    }
+}
+
+/// An event for the player, by name, with its parameters in declaration order.
+#[derive(Debug, Clone, PartialEq, Encode, Decode)]
+pub struct EventMsg {
+    /// The event's name as the manifest declares it.
+    pub name: String,
+    /// The parameters, by position.
+    pub params: Vec<Value>,
+}
+
+impl EventMsg {
+    /// An event with its parameters.
+    pub fn new(name: impl Into<String>, params: Vec<Value>) -> Self {
+        EventMsg {
+            name: name.into(),
+            params,
+        }
+    }
+}
+
+/// A call from the player to one program: a function and its arguments. The program answers,
+/// if it has to, with events.
+#[derive(Debug, Clone, PartialEq, Encode, Decode)]
+pub struct CallMsg {
+    /// The function's name as the manifest declares it.
+    pub function: String,
+    /// The arguments, by position.
+    pub args: Vec<Value>,
+}
+
+impl CallMsg {
+    /// A call with its arguments.
+    pub fn new(function: impl Into<String>, args: Vec<Value>) -> Self {
+        CallMsg {
+            function: function.into(),
+            args,
+        }
+    }
+}
+
+/// What one step of the player changed in the marking, for monitors. Names are text
+/// (`NET.transition`, `NET.place`, global places by their own name) so that a monitor needs
+/// nothing but the project to follow along.
+#[derive(Debug, Clone, PartialEq, Default, Encode, Decode)]
+pub struct MarkingMsg {
+    /// The player's step number (one per processed event, 0 for the initial state).
+    pub step: u64,
+    /// The event processed in this step, if any.
+    pub event: Option<String>,
+    /// Transitions fired, in firing order, as `NET.transition`.
+    pub fired: Vec<String>,
+    /// Places that received a token.
+    pub marked: Vec<String>,
+    /// Places that lost their token.
+    pub unmarked: Vec<String>,
+    /// Nets activated in this step.
+    pub activated: Vec<String>,
+    /// Nets deactivated in this step.
+    pub deactivated: Vec<String>,
+    /// True when `marked` and `activated` list the whole state rather than a change (sent at
+    /// start, and whenever a monitor may have lost track).
+    pub snapshot: bool,
+}
+
+/// A sign of life, with what the sender promises and what it has done.
+#[derive(Debug, Clone, PartialEq, Default, Encode, Decode)]
+pub struct Heartbeat {
+    /// Milliseconds since the sender started.
+    pub uptime_ms: u64,
+    /// The period the sender promises between two heartbeats, in milliseconds; a listener may
+    /// declare the sender stale after a few periods of silence.
+    pub period_ms: u32,
+    /// A counter of work done (events processed, frames read...), to tell a stuck process from
+    /// an idle one.
+    pub progress: u64,
+    /// A short status word ("running", "catastrophic"...).
+    pub status: String,
+}
+
+/// The kinds of message bodies, as written in the header.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u16)]
+pub enum MsgKind {
+    /// [`EventMsg`].
+    Event = 1,
+    /// [`CallMsg`].
+    Call = 2,
+    /// [`MarkingMsg`].
+    Marking = 3,
+    /// [`Heartbeat`].
+    Heartbeat = 4,
+}
+
+impl MsgKind {
+    /// The kind written as `value` in a header, if any.
+    pub fn from_u16(value: u16) -> Option<Self> {
+        match value {
+            1 => Some(MsgKind::Event),
+            2 => Some(MsgKind::Call),
+            3 => Some(MsgKind::Marking),
+            4 => Some(MsgKind::Heartbeat),
+            _ => None,
+        }
+    }
+}
+
+impl fmt::Display for MsgKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            MsgKind::Event => "event",
+            MsgKind::Call => "call",
+            MsgKind::Marking => "marking",
+            MsgKind::Heartbeat => "heartbeat",
+        })
+    }
+}
+
+mod sealed {
+    pub trait Sealed {}
+    impl Sealed for super::EventMsg {}
+    impl Sealed for super::CallMsg {}
+    impl Sealed for super::MarkingMsg {}
+    impl Sealed for super::Heartbeat {}
+}
+
+/// A message body of this crate. Sealed: only the four bodies above travel on Petrel's
+/// services, so that every process agrees on what each service carries.
+pub trait Message: Encode + Decode<()> + fmt::Debug + sealed::Sealed {
+    /// The kind written in the header.
+    const KIND: MsgKind;
+}
+
+impl Message for EventMsg {
+    const KIND: MsgKind = MsgKind::Event;
+}
+impl Message for CallMsg {
+    const KIND: MsgKind = MsgKind::Call;
+}
+impl Message for MarkingMsg {
+    const KIND: MsgKind = MsgKind::Marking;
+}
+impl Message for Heartbeat {
+    const KIND: MsgKind = MsgKind::Heartbeat;
+}
+
+/// The fixed header of every sample, in iceoryx2's user-header slot.
+///
+/// `#[repr(C)]` and [`ZeroCopySend`] with an explicit type name, so that its identity does not
+/// depend on the module path and changes with [`WIRE_VERSION`].
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+#[type_name("petrel::MsgHeader/v1")]
+pub struct MsgHeader {
+    /// The sending port's id, unique among the vehicle's live ports.
+    pub sender: u64,
+    /// Per-sender sequence number: 1 for the sender's first message, then one more for every
+    /// message it offered to the transport, delivered or not.
+    pub seq: u64,
+    /// [`WIRE_VERSION`] of the sender.
+    pub version: u16,
+    /// [`MsgKind`] of the body, as a number.
+    pub kind: u16,
+    /// Reserved, zero.
+    pub reserved: u32,
+    /// The sender's role (its node name, such as `program/PLN`), NUL-padded UTF-8.
+    pub origin: [u8; ORIGIN_LEN],
+}
+
+/// The role of a message's sender (`player`, `program/PLN`, `can_bridge`, `tool/NAME`).
+#[derive(Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Origin([u8; ORIGIN_LEN]);
+
+impl Origin {
+    /// The origin for `name`, cut at [`ORIGIN_LEN`] bytes (on a character boundary).
+    pub fn new(name: &str) -> Self {
+        let mut bytes = [0u8; ORIGIN_LEN];
+        let mut end = name.len().min(ORIGIN_LEN);
+        while !name.is_char_boundary(end) {
+            end -= 1;
+        }
+        bytes[..end].copy_from_slice(&name.as_bytes()[..end]);
+        Origin(bytes)
+    }
+
+    /// The origin as found in a header.
+    pub fn from_bytes(bytes: [u8; ORIGIN_LEN]) -> Self {
+        Origin(bytes)
+    }
+
+    /// The raw bytes, NUL-padded.
+    pub fn bytes(&self) -> [u8; ORIGIN_LEN] {
+        self.0
+    }
+
+    /// The origin as text; the valid UTF-8 prefix if a foreign sender wrote anything else.
+    pub fn as_str(&self) -> &str {
+        let end = self.0.iter().position(|b| *b == 0).unwrap_or(ORIGIN_LEN);
+        match std::str::from_utf8(&self.0[..end]) {
+            Ok(s) => s,
+            Err(e) => std::str::from_utf8(&self.0[..e.valid_up_to()]).unwrap_or_default(),
+        }
+    }
+}
+
+impl fmt::Debug for Origin {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "Origin({:?})", self.as_str())
+    }
+}
+
+impl fmt::Display for Origin {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// A body could not be encoded or decoded.
+#[derive(Debug)]
+pub enum WireError {
+    /// bincode refused to encode the body.
+    Encode(bincode::error::EncodeError),
+    /// The bytes are not a valid body of the expected kind.
+    Decode(bincode::error::DecodeError),
+    /// A body decoded from the start of the slice but bytes were left over.
+    TrailingBytes {
+        /// Bytes the body used.
+        used: usize,
+        /// Bytes in the slice.
+        len: usize,
+    },
+    /// The body is larger than the service carries.
+    TooLarge {
+        /// The body's length in bytes.
+        len: usize,
+        /// The largest body accepted.
+        max: usize,
+    },
+    /// The encoder wrote another length than it measured (a bug in a body's encoding).
+    LengthMismatch {
+        /// Length measured first.
+        measured: usize,
+        /// Length written.
+        written: usize,
+    },
+}
+
+impl fmt::Display for WireError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            WireError::Encode(e) => write!(f, "cannot encode the message: {e}"),
+            WireError::Decode(e) => write!(f, "the body does not decode: {e}"),
+            WireError::TrailingBytes { used, len } => write!(
+                f,
+                "the body holds {len} bytes but the message used only {used}; sender and receiver disagree on the format"
+            ),
+            WireError::TooLarge { len, max } => write!(
+                f,
+                "the encoded message is {len} bytes, more than the {max} bytes this service carries; send less data per message"
+            ),
+            WireError::LengthMismatch { measured, written } => write!(
+                f,
+                "encoding measured {measured} bytes but wrote {written}: this is a bug in petrel-ipc"
+            ),
+        }
+    }
+}
+
+impl std::error::Error for WireError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            WireError::Encode(e) => Some(e),
+            WireError::Decode(e) => Some(e),
+            _ => None,
+        }
+    }
+}
+
+/// The exact number of bytes [`encode_into`] will write for `msg`, measured without allocating.
+pub fn encoded_len<M: Message>(msg: &M) -> Result<usize, WireError> {
+    let mut encoder = EncoderImpl::new(SizeWriter::default(), CONFIG);
+    msg.encode(&mut encoder).map_err(WireError::Encode)?;
+    Ok(encoder.into_writer().bytes_written)
+}
+
+/// Encodes `msg` at the start of `dst` and returns the number of bytes written.
+pub fn encode_into<M: Message>(msg: &M, dst: &mut [u8]) -> Result<usize, WireError> {
+    bincode::encode_into_slice(msg, dst, CONFIG).map_err(WireError::Encode)
+}
+
+/// Decodes a whole body: every byte of `bytes` must belong to the message.
+pub fn decode<M: Message>(bytes: &[u8]) -> Result<M, WireError> {
+    if bytes.len() > MAX_BODY_LEN {
+        return Err(WireError::TooLarge {
+            len: bytes.len(),
+            max: MAX_BODY_LEN,
+        });
+    }
+    let (msg, used) =
+        bincode::decode_from_slice::<M, _>(bytes, CONFIG).map_err(WireError::Decode)?;
+    if used != bytes.len() {
+        return Err(WireError::TrailingBytes {
+            used,
+            len: bytes.len(),
+        });
+    }
+    Ok(msg)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn every_value() -> Vec<Value> {
+        vec![
+            Value::Int(-42),
+            Value::Int(i64::MAX),
+            Value::Float(3.25),
+            Value::Float(f64::NEG_INFINITY),
+            Value::Bool(true),
+            Value::Text("héllo".into()),
+            Value::Text(String::new()),
+            Value::FloatList(vec![1.0, -2.5, 1e300]),
+            Value::FloatList(vec![]),
+        ]
+    }
+
+    fn round_trip<M: Message + PartialEq + Clone>(msg: M) {
+        let len = encoded_len(&msg).unwrap();
+        let mut buf = vec![0u8; len];
+        assert_eq!(encode_into(&msg, &mut buf).unwrap(), len);
+        let back: M = decode(&buf).unwrap();
+        assert_eq!(back, msg);
+    }
+
+    #[test]
+    fn bodies_round_trip() {
+        round_trip(EventMsg::new("waypoint", every_value()));
+        round_trip(CallMsg::new("climb", vec![Value::Int(300)]));
+        round_trip(MarkingMsg {
+            step: 7,
+            event: Some("go".into()),
+            fired: vec!["mission.t1".into()],
+            marked: vec!["mission.p2".into()],
+            unmarked: vec!["mission.p1".into()],
+            activated: vec![],
+            deactivated: vec!["nav".into()],
+            snapshot: false,
+        });
+        round_trip(Heartbeat {
+            uptime_ms: 1,
+            period_ms: 100,
+            progress: 3,
+            status: "running".into(),
+        });
+    }
+
+    #[test]
+    fn nan_survives() {
+        let msg = EventMsg::new("x", vec![Value::Float(f64::NAN)]);
+        let len = encoded_len(&msg).unwrap();
+        let mut buf = vec![0u8; len];
+        encode_into(&msg, &mut buf).unwrap();
+        let back: EventMsg = decode(&buf).unwrap();
+        assert!(matches!(back.params[0], Value::Float(f) if f.is_nan()));
+    }
+
+    #[test]
+    fn short_destination_is_an_error() {
+        let msg = EventMsg::new("waypoint", every_value());
+        let mut buf = vec![0u8; 3];
+        assert!(matches!(
+            encode_into(&msg, &mut buf),
+            Err(WireError::Encode(_))
+        ));
+    }
+
+    #[test]
+    fn trailing_bytes_are_refused() {
+        let msg = EventMsg::new("go", vec![]);
+        let len = encoded_len(&msg).unwrap();
+        let mut buf = vec![0u8; len + 2];
+        encode_into(&msg, &mut buf).unwrap();
+        assert!(matches!(
+            decode::<EventMsg>(&buf),
+            Err(WireError::TrailingBytes { used, len: l }) if used == len && l == len + 2
+        ));
+    }
+
+    #[test]
+    fn huge_claimed_lengths_are_refused_without_allocating() {
+        // name length claims u64::MAX bytes.
+        let bytes = [0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0x01];
+        let mut varint = vec![253u8];
+        varint.extend_from_slice(&u64::MAX.to_le_bytes());
+        assert!(decode::<EventMsg>(&varint).is_err());
+        assert!(decode::<EventMsg>(&bytes).is_err());
+    }
+
+    #[test]
+    fn garbage_never_panics() {
+        // xorshift: deterministic pseudo-random bodies, and mutations of a valid one.
+        let mut state = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        let valid = {
+            let msg = EventMsg::new("waypoint", every_value());
+            let mut buf = vec![0u8; encoded_len(&msg).unwrap()];
+            encode_into(&msg, &mut buf).unwrap();
+            buf
+        };
+        for i in 0..20_000 {
+            let bytes: Vec<u8> = if i % 2 == 0 {
+                let len = (next() % 64) as usize;
+                (0..len).map(|_| next() as u8).collect()
+            } else {
+                let mut b = valid.clone();
+                let at = (next() as usize) % b.len();
+                b[at] = next() as u8;
+                b.truncate(b.len() - (next() as usize % 3).min(b.len()));
+                b
+            };
+            let _ = decode::<EventMsg>(&bytes);
+            let _ = decode::<CallMsg>(&bytes);
+            let _ = decode::<MarkingMsg>(&bytes);
+            let _ = decode::<Heartbeat>(&bytes);
+        }
+    }
+
+    #[test]
+    fn origin_text() {
+        assert_eq!(Origin::new("program/PLN").as_str(), "program/PLN");
+        let long = "é".repeat(40);
+        let o = Origin::new(&long);
+        assert_eq!(o.as_str().len(), 32);
+        let mut raw = [0u8; ORIGIN_LEN];
+        raw[0] = b'a';
+        raw[1] = 0xFF;
+        assert_eq!(Origin::from_bytes(raw).as_str(), "a");
+    }
+
+    #[test]
+    fn header_layout_is_stable() {
+        assert_eq!(std::mem::size_of::<MsgHeader>(), 56);
+        assert_eq!(std::mem::align_of::<MsgHeader>(), 8);
+    }
+}

@@ -1,0 +1,345 @@
+//! Ports, accounting and the reactor within one process (two participants of one isolated
+//! vehicle). Cross-process behaviour is in `cross_process.rs`.
+
+mod common;
+
+use std::time::{Duration, Instant};
+
+use common::TestVehicle;
+
+use petrel_ipc::port::EVENTS;
+use petrel_ipc::{
+    CallMsg, EventMsg, Heartbeat, MarkingMsg, Participant, Reactor, RecvError, Role, SendError,
+    SetupError, Value, Vehicle, WaitStrategy,
+};
+
+fn pair(vehicle: &Vehicle) -> (Participant, Participant) {
+    let player = Participant::join(vehicle, Role::Player).unwrap();
+    let pln = Participant::join(vehicle, Role::program("PLN").unwrap()).unwrap();
+    (player, pln)
+}
+
+#[test]
+fn event_round_trip_with_origin_and_sequence() {
+    let vehicle = TestVehicle::new("auv");
+    let (player, pln) = pair(&vehicle);
+    let rx = player.event_receiver().unwrap();
+    let tx = pln.event_sender().unwrap();
+    for i in 0..3 {
+        let sent = tx
+            .send(&EventMsg::new("depth", vec![Value::Float(i as f64)]))
+            .unwrap();
+        assert_eq!(sent.seq, i + 1);
+        assert_eq!(sent.delivered, 1);
+    }
+    for i in 0..3u64 {
+        let r = rx.try_recv().unwrap().unwrap();
+        assert_eq!(r.msg, EventMsg::new("depth", vec![Value::Float(i as f64)]));
+        assert_eq!(r.origin.as_str(), "program/PLN");
+        assert_eq!(r.seq, i + 1);
+        assert_eq!(r.missed, 0);
+        assert_eq!(r.sender, tx.sender_id());
+    }
+    assert!(rx.try_recv().unwrap().is_none());
+    assert_eq!(tx.stats().sent, 3);
+    assert_eq!(tx.stats().delivered, 3);
+    let accounts = rx.senders();
+    assert_eq!(accounts.len(), 1);
+    assert_eq!(accounts[0].last_seq, 3);
+    assert_eq!(accounts[0].received, 3);
+}
+
+#[test]
+fn no_receiver_is_reported_and_leaves_a_gap() {
+    let vehicle = TestVehicle::new("auv");
+    let (player, pln) = pair(&vehicle);
+    let tx = pln.event_sender().unwrap();
+    let err = tx.send(&EventMsg::new("early", vec![])).unwrap_err();
+    assert!(matches!(err, SendError::NoReceiver { seq: 1, .. }), "{err}");
+    assert!(err.to_string().contains("is the player running?"), "{err}");
+    let rx = player.event_receiver().unwrap();
+    tx.send(&EventMsg::new("late", vec![])).unwrap();
+    let r = rx.try_recv().unwrap().unwrap();
+    assert_eq!((r.seq, r.missed), (2, 1));
+    assert_eq!(rx.stats().missing, 1);
+    let s = tx.stats();
+    assert_eq!((s.sent, s.delivered, s.refused), (2, 1, 1));
+}
+
+#[test]
+fn a_full_buffer_refuses_and_the_receiver_counts_the_gap() {
+    let vehicle = TestVehicle::new("auv");
+    let (player, pln) = pair(&vehicle);
+    let rx = player.event_receiver().unwrap();
+    let tx = pln.event_sender().unwrap();
+    let over = 5;
+    let total = EVENTS.subscriber_buffer + over;
+    let mut refused = 0;
+    for i in 0..total {
+        match tx.send(&EventMsg::new("tick", vec![Value::Int(i as i64)])) {
+            Ok(_) => {}
+            Err(SendError::Refused {
+                delivered: 0,
+                receivers: 1,
+                ..
+            }) => refused += 1,
+            Err(e) => panic!("{e}"),
+        }
+    }
+    assert_eq!(refused, over);
+    // Nothing already buffered was overwritten: the first BUFFER messages are all there.
+    let mut seqs = Vec::new();
+    rx.drain(|r| seqs.push(r.unwrap().seq)).unwrap();
+    assert_eq!(seqs.len(), EVENTS.subscriber_buffer);
+    assert!(seqs.iter().enumerate().all(|(i, s)| *s == i as u64 + 1));
+    // The next delivered message shows the refused ones as missed.
+    tx.send(&EventMsg::new("tick", vec![])).unwrap();
+    let r = rx.try_recv().unwrap().unwrap();
+    assert_eq!(r.missed, over as u64);
+    let s = tx.stats();
+    assert_eq!(s.sent, total as u64 + 1);
+    assert_eq!(s.sent, rx.stats().received + s.refused);
+    assert_eq!(rx.stats().missing, s.refused);
+}
+
+#[test]
+fn undecodable_bodies_are_typed_errors() {
+    let vehicle = TestVehicle::new("auv");
+    let (player, pln) = pair(&vehicle);
+    let rx = player.event_receiver().unwrap();
+    let tx = pln.event_sender().unwrap();
+    tx.send_encoded(&[0xFF, 0xFF, 0xFF]).unwrap();
+    tx.send(&EventMsg::new("ok", vec![])).unwrap();
+    match rx.try_recv() {
+        Err(RecvError::Undecodable { seq: 1, origin, .. }) => {
+            assert_eq!(origin.as_str(), "program/PLN")
+        }
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(rx.try_recv().unwrap().unwrap().msg.name, "ok");
+    assert_eq!(rx.stats().undecodable, 1);
+}
+
+#[test]
+fn too_large_is_refused_before_sending() {
+    let vehicle = TestVehicle::new("auv");
+    let (player, pln) = pair(&vehicle);
+    let _rx = player.event_receiver().unwrap();
+    let tx = pln.event_sender().unwrap();
+    let big = EventMsg::new("big", vec![Value::FloatList(vec![0.5; 10_000])]);
+    let err = tx.send(&big).unwrap_err();
+    assert!(err.seq().is_none(), "{err}");
+    assert!(err.to_string().contains("more than"), "{err}");
+    assert_eq!(tx.stats().not_sent, 1);
+    assert_eq!(tx.next_seq(), 1);
+    // A large message that fits grows the sample memory.
+    let grown = EventMsg::new("grown", vec![Value::FloatList(vec![0.25; 4_000])]);
+    tx.send(&grown).unwrap();
+}
+
+#[test]
+fn a_second_event_receiver_is_refused_with_a_hint() {
+    let vehicle = TestVehicle::new("auv");
+    let (player, pln) = pair(&vehicle);
+    let _rx = player.event_receiver().unwrap();
+    let err = pln.event_receiver().unwrap_err();
+    assert!(err.to_string().contains("second player"), "{err}");
+}
+
+#[test]
+fn calls_reach_only_their_program() {
+    let vehicle = TestVehicle::new("auv");
+    let (player, pln) = pair(&vehicle);
+    assert!(matches!(
+        player.call_receiver(),
+        Err(SetupError::NotAProgram { .. })
+    ));
+    let calls = pln.call_receiver().unwrap();
+    let to_pln = player.call_sender("PLN").unwrap();
+    let to_gui = player.call_sender("GUI").unwrap();
+    to_pln
+        .send(&CallMsg::new("climb", vec![Value::Int(300)]))
+        .unwrap();
+    let err = to_gui.send(&CallMsg::new("show", vec![])).unwrap_err();
+    assert!(err.to_string().contains("is the program running?"), "{err}");
+    let r = calls.try_recv().unwrap().unwrap();
+    assert_eq!(r.msg.function, "climb");
+    assert_eq!(r.origin.as_str(), "player");
+    assert!(calls.try_recv().unwrap().is_none());
+}
+
+#[test]
+fn marking_reports_a_lagging_monitor() {
+    let vehicle = TestVehicle::new("auv");
+    let player = Participant::join(&vehicle, Role::Player).unwrap();
+    let monitor = Participant::join(&vehicle, Role::tool("monitor").unwrap()).unwrap();
+    let publisher = player.marking_publisher().unwrap();
+    let fast = monitor.marking_subscriber().unwrap();
+    let slow = monitor.marking_subscriber().unwrap();
+    let buffer = publisher.spec().subscriber_buffer;
+    let mut partial = 0;
+    for step in 0..buffer as u64 + 2 {
+        let delta = MarkingMsg {
+            step,
+            fired: vec!["mission.t1".into()],
+            ..MarkingMsg::default()
+        };
+        match publisher.send(&delta) {
+            Ok(_) => {}
+            Err(SendError::Refused {
+                delivered: 1,
+                receivers: 2,
+                ..
+            }) => partial += 1,
+            Err(e) => panic!("{e}"),
+        }
+        // The fast monitor keeps up.
+        while fast.try_recv().unwrap().is_some() {}
+    }
+    assert_eq!(partial, 2);
+    assert_eq!(fast.stats().received, buffer as u64 + 2);
+    let mut n = 0;
+    slow.drain(|r| {
+        r.unwrap();
+        n += 1;
+    })
+    .unwrap();
+    assert_eq!(n, buffer);
+}
+
+#[test]
+fn heartbeats_keep_the_latest() {
+    let vehicle = TestVehicle::new("auv");
+    let player = Participant::join(&vehicle, Role::Player).unwrap();
+    let beats = player.heartbeat_publisher().unwrap();
+    let beat = |progress| Heartbeat {
+        uptime_ms: progress * 100,
+        period_ms: 100,
+        progress,
+        status: "running".into(),
+    };
+    assert!(matches!(
+        beats.send(&beat(0)),
+        Err(SendError::NoReceiver { .. })
+    ));
+    let monitor = Participant::join(&vehicle, Role::tool("monitor").unwrap()).unwrap();
+    let listener = monitor.heartbeat_subscriber().unwrap();
+    beats.send(&beat(1)).unwrap();
+    assert_eq!(listener.try_recv().unwrap().unwrap().msg, beat(1));
+    // Overflow overwrites old heartbeats rather than refusing new ones.
+    for progress in 2..30 {
+        beats.send(&beat(progress)).unwrap();
+    }
+    let mut seen = Vec::new();
+    listener
+        .drain(|r| seen.push(r.unwrap().msg.progress))
+        .unwrap();
+    assert_eq!(seen.len(), listener.spec().subscriber_buffer);
+    assert_eq!(seen.last(), Some(&29));
+    assert_eq!(listener.stats().missing, 1 + 28 - seen.len() as u64);
+}
+
+#[test]
+fn reactor_strategies_wake_on_events_and_time_out() {
+    let vehicle = TestVehicle::new("auv");
+    let (player, pln) = pair(&vehicle);
+    let rx = player.event_receiver().unwrap();
+    let tx = pln.event_sender().unwrap();
+    assert_eq!(rx.take_wakeups().unwrap().senders_joined, 1);
+    for strategy in [
+        WaitStrategy::Block,
+        WaitStrategy::Spin,
+        WaitStrategy::SpinThenBlock(Duration::from_micros(200)),
+    ] {
+        let reactor = Reactor::without_signal_handling(strategy).unwrap();
+        let start = Instant::now();
+        let ready = reactor
+            .wait(&[&rx], Some(Duration::from_millis(20)))
+            .unwrap();
+        assert!(ready.timed_out() && !ready.any(), "{strategy}: {ready:?}");
+        assert!(start.elapsed() >= Duration::from_millis(20), "{strategy}");
+        tx.send(&EventMsg::new("go", vec![])).unwrap();
+        let ready = reactor.wait(&[&rx], Some(Duration::from_secs(5))).unwrap();
+        assert!(ready.is_ready(0), "{strategy}: {ready:?}");
+        let drained = rx.drain(|r| assert!(r.is_ok())).unwrap();
+        assert_eq!(drained.messages, 1, "{strategy}");
+    }
+}
+
+#[test]
+fn reactor_reports_a_sender_joining() {
+    let vehicle = TestVehicle::new("auv");
+    let (player, pln) = pair(&vehicle);
+    let rx = player.event_receiver().unwrap();
+    let reactor = Reactor::without_signal_handling(WaitStrategy::Block).unwrap();
+    let _tx = pln.event_sender().unwrap();
+    let ready = reactor.wait(&[&rx], Some(Duration::from_secs(5))).unwrap();
+    assert!(ready.is_ready(0), "{ready:?}");
+    let wakeups = rx.take_wakeups().unwrap();
+    assert_eq!(wakeups.senders_joined, 1);
+    // The wake-up was consumed: the next wait times out.
+    let ready = reactor
+        .wait(&[&rx], Some(Duration::from_millis(10)))
+        .unwrap();
+    assert!(ready.timed_out(), "{ready:?}");
+}
+
+#[test]
+fn fd_sources_wake_the_reactor() {
+    use std::io::Write;
+    use std::os::fd::AsRawFd;
+    use std::os::unix::net::UnixStream;
+
+    let (mut a, b) = UnixStream::pair().unwrap();
+    let source = petrel_ipc::FdSource::new(b.as_raw_fd()).unwrap();
+    assert!(petrel_ipc::FdSource::new(-1).is_err());
+    for strategy in [WaitStrategy::Block, WaitStrategy::Spin] {
+        let reactor = Reactor::without_signal_handling(strategy).unwrap();
+        let ready = reactor
+            .wait(&[&source], Some(Duration::from_millis(5)))
+            .unwrap();
+        assert!(ready.timed_out(), "{strategy}");
+    }
+    a.write_all(b"x").unwrap();
+    for strategy in [WaitStrategy::Block, WaitStrategy::Spin] {
+        let reactor = Reactor::without_signal_handling(strategy).unwrap();
+        let ready = reactor
+            .wait(&[&source], Some(Duration::from_secs(5)))
+            .unwrap();
+        assert!(ready.is_ready(0), "{strategy}");
+    }
+}
+
+#[test]
+fn program_watch_sees_programs_come_and_go() {
+    let vehicle = TestVehicle::new("auv");
+    let mut watch = petrel_ipc::ProgramWatch::new(&vehicle, ["PLN"]);
+    assert!(watch.check().unwrap().is_empty());
+    let pln = Participant::join(&vehicle, Role::program("PLN").unwrap()).unwrap();
+    let changes = watch.check().unwrap();
+    assert_eq!(changes.len(), 1);
+    assert!(!changes[0].is_lost());
+    assert_eq!(watch.status("PLN"), Some(petrel_ipc::ProgramStatus::Alive));
+    drop(pln);
+    let changes = watch.check().unwrap();
+    assert!(changes[0].is_lost(), "{changes:?}");
+    assert_eq!(changes[0].to, petrel_ipc::ProgramStatus::Absent);
+}
+
+#[test]
+fn a_reactor_without_sources_is_a_timer() {
+    for strategy in [
+        WaitStrategy::Block,
+        WaitStrategy::SpinThenBlock(Duration::from_millis(1)),
+    ] {
+        let reactor = Reactor::without_signal_handling(strategy).unwrap();
+        let start = Instant::now();
+        let ready = reactor.wait(&[], Some(Duration::from_millis(5))).unwrap();
+        assert!(ready.timed_out());
+        assert!(start.elapsed() >= Duration::from_millis(5));
+        assert!(matches!(
+            reactor.wait(&[], None),
+            Err(petrel_ipc::ReactorError::NothingToWaitFor)
+        ));
+    }
+}
