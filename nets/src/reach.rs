@@ -12,10 +12,11 @@
 //! The graph is never stored: only the set of markings is, and edges are counted as they are
 //! found. Markings live back to back in one flat arena `Vec`, in the order they are discovered, so
 //! the arena is also the breadth-first queue (state `i` is expanded when the cursor reaches `i`)
-//! and a state is named by its `u32` position. A `hashbrown::HashTable<u32>` of those positions
-//! deduplicates: 4 bytes and one control byte per bucket, no copy of the marking. A `u32` parent
-//! per state gives the shortest traces; the transition of each step is found again at the end by
-//! trying the transitions of the parent, so no transition id is stored.
+//! and a state is named by its `u32` position. An open-addressing table of those positions
+//! deduplicates: 8 bytes a slot (the position and a 32-bit hash tag), no copy of the marking, and
+//! it grows from the tags alone. A `u32` parent per state gives the shortest traces; the
+//! transition of each step is found again at the end by trying the transitions of the parent, so
+//! no transition id is stored.
 //!
 //! Two representations, the cheap one first:
 //!
@@ -41,10 +42,9 @@
 //! `max_states`, the `u32` store limit, or a 64-bit token overflow stop it with a clear error.
 
 #![forbid(unsafe_code)]
+#![deny(missing_docs)]
 
 use crate::pnml::{PtNet, PtNode};
-use hashbrown::hash_table::Entry;
-use hashbrown::HashTable;
 use std::fmt;
 use std::fmt::Write as _;
 use std::time::Instant;
@@ -743,8 +743,8 @@ fn empty_report(representation: Representation) -> PtReport {
     }
 }
 
-/// wyhash's multiply-fold: the 128-bit product's halves XORed, so every input bit reaches both
-/// the low bits (hashbrown's bucket) and the high bits (its 7-bit tag).
+/// wyhash's multiply-fold: the 128-bit product's halves XORed, so every input bit reaches the
+/// high bits, which pick the home slot and the tag in [`StateTable`].
 #[inline(always)]
 fn fold_mul(a: u64, b: u64) -> u64 {
     let r = u128::from(a) * u128::from(b);
@@ -781,25 +781,134 @@ fn oom(states: usize, store_bytes: usize) -> ExploreError {
     }
 }
 
-/// Doubles the table of states `0..n`. Done here, where a failed allocation can be reported,
-/// rather than inside `entry`, where it would abort. And done by reinserting the states in
-/// arena order rather than with hashbrown's own rehash: reading the arena sequentially to
-/// recompute hashes is several times faster than reading it in bucket order.
-fn grow(
-    table: &mut HashTable<u32>,
-    n: usize,
-    hash: impl Fn(u32) -> u64,
-) -> Result<(), hashbrown::TryReserveError> {
-    let mut fresh: HashTable<u32> = HashTable::new();
-    fresh.try_reserve(n.saturating_mul(2).max(64), |&j| hash(j))?;
-    // Free the old buckets before filling the new ones: the peak is then the same as
-    // hashbrown's own resize, and the fill touches only fresh memory.
-    *table = HashTable::new();
-    for j in 0..n as u32 {
-        fresh.insert_unique(hash(j), j, |&k| hash(k));
+/// The set of stored markings: an open-addressing table of state positions, linear probing.
+///
+/// Each slot is one `u64`: the top 32 bits of the marking's hash (the tag) above the state's
+/// position plus one (0 marks an empty slot). A marking's home slot is given by the top bits of
+/// its hash, so the tag alone says where an entry goes in a table twice as large: growing never
+/// reads the markings again. The tag also filters nearly every probe that is not a match, so the
+/// arena is read (one cache miss) only for the marking that is almost surely the one sought.
+/// 8 bytes a slot, at most half full (short probes matter more than the bytes): 16 to 32
+/// bytes per state.
+struct StateTable {
+    slots: Vec<u64>,
+    /// `slots.len() == 1 << bits`, `bits <= 32` (the tag's width bounds the home index).
+    bits: u32,
+    len: usize,
+}
+
+impl StateTable {
+    const FIRST_BITS: u32 = 10;
+
+    fn new() -> Result<Self, ()> {
+        Ok(StateTable {
+            slots: zeroed(1 << Self::FIRST_BITS)?,
+            bits: Self::FIRST_BITS,
+            len: 0,
+        })
     }
-    *table = fresh;
-    Ok(())
+
+    #[inline(always)]
+    fn home(&self, hash: u64) -> usize {
+        (hash >> (64 - self.bits)) as usize
+    }
+
+    /// The stored state whose marking `eq` accepts among those with this hash, or the empty
+    /// slot where it belongs.
+    #[inline(always)]
+    fn find(&self, hash: u64, mut eq: impl FnMut(u32) -> bool) -> Result<u32, usize> {
+        let tag = hash >> 32;
+        let mask = self.slots.len() - 1;
+        let mut pos = self.home(hash);
+        // The table is never full (`grow` keeps half of it free), so the probe ends.
+        loop {
+            let e = self.slots[pos];
+            if e == 0 {
+                return Err(pos);
+            }
+            if e >> 32 == tag {
+                let j = (e as u32).wrapping_sub(1);
+                if eq(j) {
+                    return Ok(j);
+                }
+            }
+            pos = (pos + 1) & mask;
+        }
+    }
+
+    /// Stores state `state` in the empty slot `slot` that `find` returned.
+    #[inline(always)]
+    fn insert_at(&mut self, slot: usize, hash: u64, state: u32) {
+        if let Some(e) = self.slots.get_mut(slot) {
+            *e = (hash >> 32) << 32 | (u64::from(state) + 1);
+            self.len += 1;
+        }
+    }
+
+    /// True when the next insertion must wait for `grow`.
+    #[inline(always)]
+    fn full(&self) -> bool {
+        self.len * 2 >= self.slots.len()
+    }
+
+    /// Brings into cache the home slot of each hash and the first word of the marking it
+    /// names, without acting on them. The loads are independent and branch-free, so the
+    /// processor overlaps their cache misses; the real lookups that follow then hit the cache.
+    /// (Prefetch instructions would say this more directly but need `unsafe`.)
+    #[inline(always)]
+    fn touch<T: Copy + Default + Into<u64>>(&self, hashes: &[u64], arena: &[T], stride: usize) {
+        let mut sink = 0u64;
+        for &h in hashes {
+            let e = self.slots[self.home(h)];
+            let j = if e >> 32 == h >> 32 {
+                (e as u32).wrapping_sub(1) as usize
+            } else {
+                0
+            };
+            sink ^= arena
+                .get(j.wrapping_mul(stride))
+                .copied()
+                .unwrap_or_default()
+                .into();
+        }
+        std::hint::black_box(sink);
+    }
+
+    /// Doubles the table, placing each entry by its tag.
+    fn grow(&mut self) -> Result<(), ()> {
+        let bits = self.bits + 1;
+        if bits > 32 || bits >= usize::BITS {
+            // 2^32 slots would hold more states than `u32` positions name; unreachable
+            // because the state limit stops first, but refuse rather than misplace entries.
+            return Err(());
+        }
+        let mut slots = zeroed(1usize << bits)?;
+        let mask = slots.len() - 1;
+        for &e in &self.slots {
+            if e != 0 {
+                let mut pos = ((e >> 32) >> (32 - bits)) as usize;
+                while slots[pos] != 0 {
+                    pos = (pos + 1) & mask;
+                }
+                slots[pos] = e;
+            }
+        }
+        self.slots = slots;
+        self.bits = bits;
+        Ok(())
+    }
+
+    fn bytes(&self) -> usize {
+        self.slots.capacity() * 8
+    }
+}
+
+/// `len` zeros, or the allocation failure instead of an abort.
+fn zeroed(len: usize) -> Result<Vec<u64>, ()> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(len).map_err(|_| ())?;
+    v.resize(len, 0);
+    Ok(v)
 }
 
 /// The positions on the breadth-first tree from the root to `state`, both included.
@@ -1035,12 +1144,11 @@ fn run_bits<const N: usize>(
     ctl: &mut Ctl,
 ) -> Result<Option<PtReport>, ExploreError> {
     let w = if N > 0 { N } else { bn.words };
-    eprintln!("DEBUG N={N} w={w}");
     let mut arena: Vec<u64> = Vec::new();
     let mut parents: Vec<u32> = Vec::new();
-    let mut table: HashTable<u32> = HashTable::new();
-    let store_bytes = |arena: &Vec<u64>, parents: &Vec<u32>, table: &HashTable<u32>| {
-        arena.capacity() * 8 + parents.capacity() * 4 + table.allocation_size()
+    let mut table = StateTable::new().map_err(|_| oom(0, 0))?;
+    let store_bytes = |arena: &Vec<u64>, parents: &Vec<u32>, table: &StateTable| {
+        arena.capacity() * 8 + parents.capacity() * 4 + table.bytes()
     };
 
     let init = bn.initial.clone();
@@ -1052,11 +1160,14 @@ fn run_bits<const N: usize>(
     if ctl.keep_traces {
         parents.push(0);
     }
-    let hasher = |arena: &[u64], j: u32| hash_words(&arena[j as usize * w..][..w]);
-    table.insert_unique(hash_words(&init[..w]), 0, |&j| hasher(&arena, j));
+    let h0 = hash_words(&init[..w]);
+    if let Err(slot) = table.find(h0, |_| false) {
+        table.insert_at(slot, h0, 0);
+    }
 
     let mut cur = vec![0u64; w];
-    let mut next = vec![0u64; w];
+    let mut succ: Vec<u64> = Vec::new();
+    let mut hashes: Vec<u64> = Vec::new();
     let mut enabled: Vec<u32> = Vec::new();
     let (mut n, mut i) = (1usize, 0usize);
     let mut edges = 0u64;
@@ -1084,10 +1195,8 @@ fn run_bits<const N: usize>(
             }
             bn.build_index(c.places, &freq);
         }
-        // Slicing to `w` everywhere lets the compiler see the constant length (N > 0) and turn
-        // copies and comparisons into a few loads instead of memcpy and memcmp calls.
+        // Slicing to `w` everywhere lets the compiler see the constant length (N > 0).
         let cur = &mut cur[..w];
-        let next = &mut next[..w];
         cur.copy_from_slice(&arena[i * w..][..w]);
         let cur = &*cur;
         let h = hash_words(cur);
@@ -1115,46 +1224,38 @@ fn run_bits<const N: usize>(
         }
         edges += enabled.len() as u64;
 
-        for &t in &enabled {
-            let delta = match bits_fire(bn.touches(t as usize), cur, next) {
-                Ok(d) => d,
+        // All successors first, then their lookups: see `StateTable::touch`.
+        succ.clear();
+        succ.resize(enabled.len() * w, 0);
+        hashes.clear();
+        for (&t, next) in enabled.iter().zip(succ.chunks_exact_mut(w)) {
+            match bits_fire(bn.touches(t as usize), cur, &mut next[..w]) {
+                Ok(delta) => hashes.push(h ^ delta),
                 Err(_) => return Ok(None),
+            }
+        }
+        table.touch(&hashes, &arena, w);
+        for (&hn, next) in hashes.iter().zip(succ.chunks_exact(w)) {
+            let next = &next[..w];
+            let slot = match table.find(hn, |j| words_eq(&arena[j as usize * w..][..w], next)) {
+                Ok(_) => continue,
+                Err(slot) => slot,
             };
-            let hn = h ^ delta;
-            let fresh = {
-                let arena = &arena;
-                match table.entry(
-                    hn,
-                    |&j| words_eq(&arena[j as usize * w..][..w], next),
-                    |&j| hasher(arena, j),
-                ) {
-                    Entry::Occupied(_) => false,
-                    Entry::Vacant(v) => {
-                        if n as u64 >= ctl.limit {
-                            return Err(ctl.too_many(n));
-                        }
-                        v.insert(n as u32);
-                        true
-                    }
-                }
-            };
-            if fresh {
-                if arena.try_reserve(w).is_err()
-                    || (ctl.keep_traces && parents.try_reserve(1).is_err())
-                {
-                    return Err(oom(n, store_bytes(&arena, &parents, &table)));
-                }
-                arena.extend_from_slice(next);
-                if ctl.keep_traces {
-                    parents.push(i as u32);
-                }
-                n += 1;
-                if table.len() == table.capacity() {
-                    let arena = &arena;
-                    if grow(&mut table, n, |j| hasher(arena, j)).is_err() {
-                        return Err(oom(n, store_bytes(arena, &parents, &table)));
-                    }
-                }
+            if n as u64 >= ctl.limit {
+                return Err(ctl.too_many(n));
+            }
+            if arena.try_reserve(w).is_err() || (ctl.keep_traces && parents.try_reserve(1).is_err())
+            {
+                return Err(oom(n, store_bytes(&arena, &parents, &table)));
+            }
+            table.insert_at(slot, hn, n as u32);
+            arena.extend_from_slice(next);
+            if ctl.keep_traces {
+                parents.push(i as u32);
+            }
+            n += 1;
+            if table.full() && table.grow().is_err() {
+                return Err(oom(n, store_bytes(&arena, &parents, &table)));
             }
         }
         i += 1;
@@ -1168,7 +1269,7 @@ fn run_bits<const N: usize>(
     Ok(Some(PtReport {
         states: n as u64,
         edges,
-        max_tokens_in_place: u64::from(arena.iter().any(|&x| x != 0)),
+        max_tokens_in_place: u64::from(max_total > 0),
         max_tokens_per_marking: max_total,
         safe: true,
         deadlock: dead > 0,
@@ -1363,12 +1464,11 @@ fn run_counts<C: Count>(c: &Compiled, ctl: &mut Ctl) -> Result<Option<PtReport>,
     let stride = c.places.max(1);
     let mut arena: Vec<C> = Vec::new();
     let mut parents: Vec<u32> = Vec::new();
-    let mut table: HashTable<u32> = HashTable::new();
+    let mut table = StateTable::new().map_err(|_| oom(0, 0))?;
     let size = std::mem::size_of::<C>();
-    let store_bytes = |arena: &Vec<C>, parents: &Vec<u32>, table: &HashTable<u32>| {
-        arena.capacity() * size + parents.capacity() * 4 + table.allocation_size()
+    let store_bytes = |arena: &Vec<C>, parents: &Vec<u32>, table: &StateTable| {
+        arena.capacity() * size + parents.capacity() * 4 + table.bytes()
     };
-    let hasher = |arena: &[C], j: u32| hash_counts(&arena[j as usize * stride..][..stride]);
 
     let mut init = vec![C::default(); stride];
     for (p, &m) in c.initial.iter().enumerate() {
@@ -1384,7 +1484,10 @@ fn run_counts<C: Count>(c: &Compiled, ctl: &mut Ctl) -> Result<Option<PtReport>,
     arena.try_reserve(stride).map_err(|_| oom(0, 0))?;
     arena.extend_from_slice(&init);
     parents.push(0);
-    table.insert_unique(hash_counts(&init), 0, |&j| hasher(&arena, j));
+    let h0 = hash_counts(&init);
+    if let Err(slot) = table.find(h0, |_| false) {
+        table.insert_at(slot, h0, 0);
+    }
 
     // Bounds and the first unsafe marking are measured as states are stored.
     let mut max_place = 0u64;
@@ -1473,38 +1576,24 @@ fn run_counts<C: Count>(c: &Compiled, ctl: &mut Ctl) -> Result<Option<PtReport>,
                 }
             };
             let hn = h ^ delta;
-            let fresh = {
-                let arena = &arena;
-                match table.entry(
-                    hn,
-                    |&j| arena[j as usize * stride..][..stride] == next[..],
-                    |&j| hasher(arena, j),
-                ) {
-                    Entry::Occupied(_) => false,
-                    Entry::Vacant(v) => {
-                        if n as u64 >= ctl.limit {
-                            return Err(ctl.too_many(n));
-                        }
-                        v.insert(n as u32);
-                        true
-                    }
-                }
+            let slot = match table.find(hn, |j| arena[j as usize * stride..][..stride] == next[..])
+            {
+                Ok(_) => continue,
+                Err(slot) => slot,
             };
-            if !fresh {
-                continue;
+            if n as u64 >= ctl.limit {
+                return Err(ctl.too_many(n));
             }
             if arena.try_reserve(stride).is_err() || parents.try_reserve(1).is_err() {
                 return Err(oom(n, store_bytes(&arena, &parents, &table)));
             }
+            table.insert_at(slot, hn, n as u32);
             arena.extend_from_slice(&next);
             parents.push(i as u32);
             let s = n;
             n += 1;
-            if table.len() == table.capacity() {
-                let arena = &arena;
-                if grow(&mut table, n, |j| hasher(arena, j)).is_err() {
-                    return Err(oom(n, store_bytes(arena, &parents, &table)));
-                }
+            if table.full() && table.grow().is_err() {
+                return Err(oom(n, store_bytes(&arena, &parents, &table)));
             }
             let total = measure(s, &next);
             if total > record {

@@ -348,6 +348,9 @@ impl Sim {
 
 type Arcs<'a> = &'a [(&'a str, u64)];
 
+/// Arcs of one side of a generated transition: `(place, weight)`.
+type ArcList<'a> = Vec<(&'a str, u64)>;
+
 /// A net from places `(name, initial)` and transitions `(name, inputs, outputs)`.
 fn net(places: &[(&str, u64)], transitions: &[(&str, Arcs, Arcs)]) -> PtNet {
     let place = |n: &str| {
@@ -756,9 +759,9 @@ fn random_net(rng: &mut Rng, safe_start: bool) -> PtNet {
             (names[p].as_str(), m)
         })
         .collect();
-    let mut arcs: Vec<(Vec<(&str, u64)>, Vec<(&str, u64)>)> = Vec::new();
+    let mut arcs: Vec<(ArcList, ArcList)> = Vec::new();
     for _ in 0..transitions {
-        let mut side = |rng: &mut Rng| {
+        let side = |rng: &mut Rng| {
             (0..rng.below(3))
                 .map(|_| {
                     let w = if safe_start || rng.below(4) > 0 { 1 } else { 2 };
