@@ -307,6 +307,11 @@ impl<'p> Engine<'p> {
         self.sem.layout.is_over(&self.state)
     }
 
+    /// Where each part of the project lives in [`Engine::state`].
+    pub fn layout(&self) -> &petrel_nets::semantics::Layout {
+        &self.sem.layout
+    }
+
     /// The state, as bits (see [`petrel_nets::semantics::Layout`]).
     pub fn state(&self) -> &[u64] {
         &self.state

@@ -2,6 +2,8 @@
 //!
 //! - [`engine`]: sans-I/O; events in, actions out, time injected.
 //! - [`script`]: missions as unit tests, in virtual time (`petrel run --script`).
+//! - [`runtime`]: the player process on iceoryx2 (`petrel play`).
 
 pub mod engine;
+pub mod runtime;
 pub mod script;

@@ -46,9 +46,10 @@ enum Command {
         no_verify: bool,
     },
     /// Verify a project (or one net of it): safety, dead markings, loops, conflicts, with the
-    /// shortest event sequence to each finding.
+    /// shortest event sequence to each finding. Given a PNML file, explore it as a plain P/T
+    /// net (arc weights and token counts above one allowed).
     Verify {
-        /// The project directory.
+        /// The project directory, or a PNML file.
         dir: PathBuf,
         /// Verify this net alone, its global places and events being free choices.
         #[arg(long)]
@@ -59,6 +60,45 @@ enum Command {
         /// Stop with an error beyond this many states.
         #[arg(long)]
         max_states: Option<u64>,
+    },
+    /// Play the mission: the player process on iceoryx2, talking to the vehicle's programs.
+    /// Stops on SIGINT or SIGTERM.
+    Play {
+        /// The project directory.
+        dir: PathBuf,
+        /// The vehicle (its services are petrel/<vehicle>/...); default: the project's name.
+        #[arg(long)]
+        vehicle: Option<String>,
+        /// How the reactor waits: block, spin, or spin-then-block:<microseconds>.
+        #[arg(long, default_value = "block")]
+        wait: String,
+        /// Stop after this many seconds (for demos and tests).
+        #[arg(long)]
+        run_for: Option<f64>,
+    },
+    /// Send an event to a running player, as the operator: `petrel send DIR 'payload_failure("camera")'`.
+    Send {
+        /// The project directory (the event is checked against it before sending).
+        dir: PathBuf,
+        /// The event, as in a script: `name` or `name(1, 2.5, "text", [1.0, 2.0])`.
+        event: String,
+        /// The vehicle; default: the project's name.
+        #[arg(long)]
+        vehicle: Option<String>,
+        /// Send the event this many times, as fast as possible (a stress test of the vehicle).
+        #[arg(long, default_value_t = 1)]
+        count: u64,
+    },
+    /// Print the live marking of every active net and the player's counters.
+    Status {
+        /// The project directory.
+        dir: PathBuf,
+        /// The vehicle; default: the project's name.
+        #[arg(long)]
+        vehicle: Option<String>,
+        /// Print the status as JSON.
+        #[arg(long)]
+        json: bool,
     },
     /// Run a mission script in virtual time, with no process: events at given times and
     /// expectations; each step prints as a JSON line. A failed expectation exits 1.
@@ -131,6 +171,15 @@ impl From<LoadError> for Outcome {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // Logs go to stderr; RUST_LOG sets the level (default: warnings and info of the player).
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .init();
     let outcome = match cli.command {
         Command::Check {
             dir,
@@ -145,6 +194,19 @@ fn main() -> ExitCode {
         } => verify(&dir, net, format, max_states),
         Command::Fmt { dir, check } => fmt(&dir, check),
         Command::Run { dir, script, quiet } => run(&dir, &script, quiet),
+        Command::Play {
+            dir,
+            vehicle,
+            wait,
+            run_for,
+        } => play(&dir, vehicle, &wait, run_for),
+        Command::Send {
+            dir,
+            event,
+            vehicle,
+            count,
+        } => send(&dir, &event, vehicle, count),
+        Command::Status { dir, vehicle, json } => status(&dir, vehicle, json),
         Command::Dot { dir, net, output } => dot(&dir, net.as_deref(), output.as_deref()),
         Command::Export { dir, output, .. } => export(&dir, output.as_deref()),
         Command::Import {
@@ -259,7 +321,82 @@ fn check(dir: &Path, format: Format, quick_verify: bool) -> Outcome {
     }
 }
 
+fn verify_pnml(file: &Path, format: Format, max_states: Option<u64>) -> Outcome {
+    use petrel_nets::reach;
+    let text = match std::fs::read_to_string(file) {
+        Ok(t) => t,
+        Err(e) => return Outcome::Usage(format!("cannot read {}: {e}", file.display())),
+    };
+    let mut sources = SourceMap::new();
+    let id = sources.add(file.display().to_string(), text.clone());
+    let mut d = Diagnostics::new();
+    let nets = petrel_nets::pnml::parse_pnml(id, &text, &mut d);
+    report(&d, &sources);
+    if d.has_errors() || nets.is_empty() {
+        return Outcome::Errors;
+    }
+    let interactive =
+        format == Format::Human && std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let mut clean = true;
+    let mut docs = Vec::new();
+    for net in &nets {
+        let opts = reach::ExploreOptions {
+            max_states,
+            progress: interactive.then(|| {
+                Box::new(|p: reach::Progress| {
+                    eprint!(
+                        "\r{} states, {:.0} states/s   ",
+                        p.states, p.states_per_second
+                    );
+                }) as Box<dyn FnMut(reach::Progress)>
+            }),
+            ..Default::default()
+        };
+        let result = reach::explore(net, opts);
+        if interactive {
+            eprint!("\r\x1b[K");
+        }
+        match (result, format) {
+            (Ok(r), Format::Human) => {
+                clean &= r.safe && !r.deadlock;
+                out(&reach::render_human(net, &r));
+            }
+            (Ok(r), Format::Json) => {
+                clean &= r.safe && !r.deadlock;
+                docs.push(reach::to_json(net, &r));
+            }
+            (Err(e), Format::Human) => {
+                clean = false;
+                eprintln!("error: {}", reach::render_error(net, &e));
+            }
+            (Err(e), Format::Json) => {
+                clean = false;
+                docs.push(reach::error_to_json(net, &e));
+            }
+        }
+    }
+    if format == Format::Json {
+        let doc = if docs.len() == 1 {
+            docs.pop().unwrap_or_default()
+        } else {
+            serde_json::Value::Array(docs)
+        };
+        out(&format!(
+            "{}\n",
+            serde_json::to_string_pretty(&doc).unwrap_or_default()
+        ));
+    }
+    if clean {
+        Outcome::Clean
+    } else {
+        Outcome::Errors
+    }
+}
+
 fn verify(dir: &Path, net: Option<String>, format: Format, max_states: Option<u64>) -> Outcome {
+    if dir.is_file() {
+        return verify_pnml(dir, format, max_states);
+    }
     let (loaded, compiled, d) = match project::load_and_check(dir) {
         Ok(r) => r,
         Err(e) => return e.into(),
@@ -362,6 +499,240 @@ fn run(dir: &Path, script_path: &Path, quiet: bool) -> Outcome {
             Outcome::Clean
         }
     }
+}
+
+/// Loads and checks a project for the commands that talk to a vehicle.
+fn compiled(dir: &Path) -> Result<petrel_nets::compiled::CompiledProject, Outcome> {
+    let (loaded, compiled, d) = project::load_and_check(dir)?;
+    report(&d, &loaded.sources);
+    compiled.ok_or_else(|| {
+        eprintln!("fix the errors above first (`petrel check` lists them)");
+        Outcome::Errors
+    })
+}
+
+fn play(dir: &Path, vehicle: Option<String>, wait: &str, run_for: Option<f64>) -> Outcome {
+    let c = match compiled(dir) {
+        Ok(c) => c,
+        Err(o) => return o,
+    };
+    let strategy: petrel_ipc::WaitStrategy = match wait.parse() {
+        Ok(s) => s,
+        Err(e) => return Outcome::Usage(e),
+    };
+    let mut opts = petrel_player::runtime::PlayOptions::new(vehicle.as_deref().unwrap_or(&c.name));
+    opts.wait = strategy;
+    if let Some(secs) = run_for {
+        if !(secs.is_finite() && secs >= 0.0) {
+            return Outcome::Usage(format!("--run-for takes a number of seconds, not {secs}"));
+        }
+        opts.run_for = Some(std::time::Duration::from_secs_f64(secs));
+    }
+    match petrel_player::runtime::play(&c, &opts) {
+        Ok(r) => {
+            let s = r.stats;
+            eprintln!(
+                "player stopped: {} messages ({} refused before the engine), {} events received, {} processed, {} unused, {} refused; {} calls sent, {} failed",
+                r.messages, r.bad_messages, s.received, s.processed, s.unused, s.refused, r.calls_sent, r.calls_failed
+            );
+            Outcome::Clean
+        }
+        Err(e) => Outcome::Usage(e.to_string()),
+    }
+}
+
+fn vehicle_of(
+    c: &petrel_nets::compiled::CompiledProject,
+    vehicle: Option<String>,
+) -> Result<petrel_ipc::Vehicle, Outcome> {
+    let name = vehicle.unwrap_or_else(|| c.name.clone());
+    petrel_ipc::Vehicle::new(&name)
+        .map_err(|e| Outcome::Usage(format!("bad vehicle name `{name}`: {e}")))
+}
+
+fn send(dir: &Path, event: &str, vehicle: Option<String>, count: u64) -> Outcome {
+    let c = match compiled(dir) {
+        Ok(c) => c,
+        Err(o) => return o,
+    };
+    // The same reading as a script line, so the operator types what scripts hold.
+    let script = match petrel_player::script::parse_script(&format!("0 {event}"), &c) {
+        Ok(s) => s,
+        Err(errors) => {
+            return Outcome::Usage(
+                errors
+                    .into_iter()
+                    .map(|(_, e)| e)
+                    .collect::<Vec<_>>()
+                    .join("; "),
+            )
+        }
+    };
+    let Some((
+        _,
+        petrel_player::script::Line::At {
+            event: Some((name, params)),
+            ..
+        },
+    )) = script.lines.first()
+    else {
+        return Outcome::Usage(format!("`{event}` is not an event"));
+    };
+    let v = match vehicle_of(&c, vehicle) {
+        Ok(v) => v,
+        Err(o) => return o,
+    };
+    let role = match petrel_ipc::Role::tool(&format!("send{}", std::process::id())) {
+        Ok(r) => r,
+        Err(e) => return Outcome::Usage(e.to_string()),
+    };
+    let me = match petrel_ipc::Participant::join(&v, role) {
+        Ok(p) => p,
+        Err(e) => return Outcome::Usage(format!("cannot join vehicle `{}`: {e}", v.name())),
+    };
+    let sender = match me.event_sender() {
+        Ok(s) => s,
+        Err(e) => return Outcome::Usage(e.to_string()),
+    };
+    let wire: Vec<petrel_ipc::Value> = params
+        .iter()
+        .map(|p| match p {
+            petrel_nets::compiled::Value::Int(i) => petrel_ipc::Value::Int(*i),
+            petrel_nets::compiled::Value::Float(f) => petrel_ipc::Value::Float(*f),
+            petrel_nets::compiled::Value::Bool(b) => petrel_ipc::Value::Bool(*b),
+            petrel_nets::compiled::Value::Text(s) => petrel_ipc::Value::Text(s.clone()),
+            petrel_nets::compiled::Value::FloatList(l) => petrel_ipc::Value::FloatList(l.clone()),
+        })
+        .collect();
+    let msg = petrel_ipc::EventMsg::new(name.clone(), wire);
+    let beats = match me.heartbeat_subscriber() {
+        Ok(s) => s,
+        Err(e) => return Outcome::Usage(e.to_string()),
+    };
+    let (mut delivered, mut refused, mut absent, mut last_seq) = (0u64, 0u64, 0u64, 0u64);
+    for _ in 0..count {
+        match sender.send(&msg) {
+            Ok(sent) => {
+                delivered += 1;
+                last_seq = sent.seq;
+            }
+            Err(petrel_ipc::SendError::NoReceiver { .. }) => absent += 1,
+            Err(e) if e.is_refusal() => refused += 1,
+            Err(e) => return Outcome::Usage(format!("cannot send: {e}")),
+        }
+    }
+    if absent > 0 {
+        out(&format!(
+            "sent {count}: {delivered} delivered, {refused} refused, {absent} with no player\n"
+        ));
+        eprintln!(
+            "no player is running for vehicle `{}`: start one with `petrel play`",
+            v.name()
+        );
+        return Outcome::Errors;
+    }
+    // Shared memory dies with its process: stay until the player says (in its heartbeat) that
+    // it has taken our last event, so nothing delivered is lost when we exit.
+    let origin = sender.origin().to_string();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+    let mut taken = 0u64;
+    while delivered > 0 && taken < last_seq && std::time::Instant::now() < deadline {
+        let _ = beats.drain(|r| {
+            if let Ok(rcv) = r {
+                if rcv.origin.as_str() == "player" {
+                    let doc: serde_json::Value =
+                        serde_json::from_str(&rcv.msg.status).unwrap_or_default();
+                    taken = taken.max(doc["senders"][&origin]["last_seq"].as_u64().unwrap_or(0));
+                }
+            }
+        });
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    out(&format!(
+        "sent {count}: {delivered} delivered, {refused} refused (player's buffer full), {absent} with no player\n"
+    ));
+    if delivered > 0 && taken < last_seq {
+        eprintln!("the player did not acknowledge the events within 10 s: they may be lost");
+        return Outcome::Errors;
+    }
+    if refused > 0 {
+        Outcome::Errors
+    } else {
+        Outcome::Clean
+    }
+}
+
+fn status(dir: &Path, vehicle: Option<String>, json: bool) -> Outcome {
+    let c = match compiled(dir) {
+        Ok(c) => c,
+        Err(o) => return o,
+    };
+    let v = match vehicle_of(&c, vehicle) {
+        Ok(v) => v,
+        Err(o) => return o,
+    };
+    let role = match petrel_ipc::Role::tool(&format!("status{}", std::process::id())) {
+        Ok(r) => r,
+        Err(e) => return Outcome::Usage(e.to_string()),
+    };
+    let me = match petrel_ipc::Participant::join(&v, role) {
+        Ok(p) => p,
+        Err(e) => return Outcome::Usage(format!("cannot join vehicle `{}`: {e}", v.name())),
+    };
+    let beats = match me.heartbeat_subscriber() {
+        Ok(s) => s,
+        Err(e) => return Outcome::Usage(e.to_string()),
+    };
+    // The player's heartbeat carries its status; wait for the next one (about 100 ms).
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(2);
+    let mut latest = None;
+    while latest.is_none() && std::time::Instant::now() < deadline {
+        let _ = beats.drain(|r| {
+            if let Ok(rcv) = r {
+                if rcv.origin.as_str() == "player" {
+                    latest = Some(rcv.msg);
+                }
+            }
+        });
+        if latest.is_none() {
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+    }
+    let Some(beat) = latest else {
+        eprintln!(
+            "no player answered for vehicle `{}` within 2 s: is `petrel play` running?",
+            v.name()
+        );
+        return Outcome::Errors;
+    };
+    if json {
+        out(&format!("{}\n", beat.status));
+        return Outcome::Clean;
+    }
+    let doc: serde_json::Value = serde_json::from_str(&beat.status).unwrap_or_default();
+    let mut text = format!(
+        "vehicle `{}`, project `{}`, mission time {:.3} s{}\n",
+        v.name(),
+        doc["project"].as_str().unwrap_or("?"),
+        doc["time"].as_f64().unwrap_or(0.0),
+        if doc["over"].as_bool() == Some(true) {
+            ", OVER (catastrophic event)"
+        } else {
+            ""
+        }
+    );
+    if let Some(m) = doc["marking"].as_object() {
+        for (net, places) in m {
+            let list: Vec<&str> = places
+                .as_array()
+                .map(|a| a.iter().filter_map(|p| p.as_str()).collect())
+                .unwrap_or_default();
+            text.push_str(&format!("  {net}: {}\n", list.join(", ")));
+        }
+    }
+    text.push_str(&format!("  counters: {}\n", doc["stats"]));
+    out(&text);
+    Outcome::Clean
 }
 
 fn fmt(dir: &Path, check_only: bool) -> Outcome {
