@@ -30,3 +30,111 @@ pub fn petrel_bin() -> PathBuf {
     }
     bin
 }
+
+/// A vehicle name no other test run uses (iceoryx2 resources are per vehicle).
+pub fn unique_vehicle(tag: &str) -> String {
+    use std::sync::atomic::{AtomicU32, Ordering};
+    static N: AtomicU32 = AtomicU32::new(0);
+    format!(
+        "{tag}{}x{}",
+        std::process::id(),
+        N.fetch_add(1, Ordering::Relaxed)
+    )
+}
+
+/// A `petrel play` process, stopped (SIGTERM, then SIGKILL) when dropped.
+pub struct Player {
+    /// The process.
+    pub child: std::process::Child,
+    /// Its vehicle.
+    pub vehicle: String,
+    /// Its project directory.
+    pub dir: PathBuf,
+}
+
+impl Player {
+    /// Starts `petrel play DIR --vehicle VEHICLE` and waits until it answers `petrel status`.
+    pub fn start(dir: &Path, vehicle: &str) -> Player {
+        let log = std::env::temp_dir().join(format!("petrel-play-{vehicle}.log"));
+        let child = Command::new(petrel_bin())
+            .arg("play")
+            .arg(dir)
+            .args(["--vehicle", vehicle])
+            .stderr(std::fs::File::create(&log).expect("log file"))
+            .spawn()
+            .expect("petrel play starts");
+        let player = Player {
+            child,
+            vehicle: vehicle.to_string(),
+            dir: dir.to_path_buf(),
+        };
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        while std::time::Instant::now() < deadline {
+            if player.status().is_some() {
+                return player;
+            }
+        }
+        panic!("the player did not start; log in {}", log.display());
+    }
+
+    /// The player's live status (`petrel status --json`), if it answers.
+    pub fn status(&self) -> Option<serde_json::Value> {
+        let o = Command::new(petrel_bin())
+            .arg("status")
+            .arg(&self.dir)
+            .args(["--vehicle", &self.vehicle, "--json"])
+            .output()
+            .ok()?;
+        if !o.status.success() {
+            return None;
+        }
+        serde_json::from_slice(&o.stdout).ok()
+    }
+
+    /// Waits (up to `secs`) until `pred` holds on the status; returns the last status.
+    pub fn wait_for(
+        &self,
+        secs: f64,
+        pred: impl Fn(&serde_json::Value) -> bool,
+    ) -> serde_json::Value {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs_f64(secs);
+        loop {
+            let s = self.status().unwrap_or_default();
+            if pred(&s) || std::time::Instant::now() >= deadline {
+                return s;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+    }
+
+    /// `petrel send` to this player.
+    pub fn send(&self, event: &str, count: u64) -> std::process::Output {
+        Command::new(petrel_bin())
+            .arg("send")
+            .arg(&self.dir)
+            .arg(event)
+            .args(["--vehicle", &self.vehicle, "--count", &count.to_string()])
+            .output()
+            .expect("petrel send runs")
+    }
+
+    /// Stops the player with SIGTERM and returns its exit status.
+    pub fn stop(mut self) -> std::process::ExitStatus {
+        let _ = Command::new("kill")
+            .args(["-TERM", &self.child.id().to_string()])
+            .status();
+        self.child.wait().expect("player exits")
+    }
+}
+
+impl Drop for Player {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        // The vehicle was this test's alone: leave nothing in /dev/shm.
+        if let Ok(v) = petrel_ipc::Vehicle::new(&self.vehicle) {
+            let _ = petrel_ipc::cleanup_dead_nodes(&v, std::time::Duration::from_millis(200));
+            let _ = petrel_ipc::remove_vehicle_files(&v);
+        }
+    }
+}
