@@ -57,6 +57,8 @@ fn malformed_messages_are_refused_and_the_player_goes_on() {
     // Each bad message became a bad_message event (unused by this project), and the tick fired.
     assert_eq!(s["stats"]["processed"], 1, "{s}");
     assert_eq!(s["stats"]["unused"], 4, "{s}");
+    drop(tx);
+    drop(me);
     assert!(player.stop().success());
 }
 
@@ -192,4 +194,5 @@ fn send_without_a_player_says_so() {
         .unwrap();
     assert_eq!(o.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&o.stderr).contains("no player is running"));
+    let _ = petrel_ipc::remove_vehicle_files(&Vehicle::new(&vehicle).unwrap());
 }
