@@ -90,7 +90,7 @@ time_of() {
 }
 
 # A JSON number field from Petrel's one-line output.
-json_num() { grep -o "\"$1\":[0-9]*" "$2" | head -n1 | cut -d: -f2; }
+json_num() { grep -o "\"$1\": *[0-9]*" "$2" | head -n1 | sed 's/.*: *//'; }
 
 # A CSV column from answers.csv for a model.
 answer() {
