@@ -1,3 +1,48 @@
-//! The SDK for software programs (PLN, GUI, DEC...) and the vehicle's simulated programs.
+//! The SDK of Petrel's software programs: a process that plays one or several programs of a
+//! vehicle (GUI, DEC, PLD...) receives the calls the player's nets make
+//! (`call GUI.climb(300)`) and answers with events (`altitude_reached`), over iceoryx2 shared
+//! memory (the `petrel-ipc` crate).
 //!
-//! Empty until the player's runtime is built (issue 4).
+//! ```text
+//!   player --CallMsg--> petrel/<vehicle>/calls/<PROGRAM> --> Program::recv -> Call
+//!   player <--EventMsg-- petrel/<vehicle>/events <---------- Program::emit(name, params)
+//! ```
+//!
+//! - [`Program`] joins a vehicle as one or several programs ([`Program::connect`],
+//!   [`Program::connect_many`]), hands over calls one at a time ([`Program::recv`]) and sends
+//!   events ([`Program::emit`], [`Program::emit_as`]).
+//! - [`Call`] is a call, with typed accessors for its arguments ([`Call::float`],
+//!   [`Call::text`], [`Call::floats`]...) whose errors ([`ArgError`]) name the function, the
+//!   position and the types.
+//! - Events emitted while no player runs wait in a bounded outbox ([`ProgramConfig`]) and are
+//!   delivered in order when a player is there again; beyond the bound the oldest are dropped,
+//!   counted ([`ProgramStats`]) and reported ([`ProgramError::EventsDropped`]). A program
+//!   outlives the player: the calls of a restarted player arrive like the first one's.
+//! - SIGINT and SIGTERM end [`Program::recv`] with [`ProgramError::Terminated`], so that a
+//!   program leaves the vehicle in good order.
+//!
+//! The examples hold a minimal program (`echo`) and the simulated UAV of the ProCoSA mission
+//! (`uav_gui` playing GUI and PLD, `uav_dec` playing DEC).
+//!
+//! What a restart of the player can still lose: events the old player had received but not yet
+//! processed when it died, and events sent in the instant between its death and the liveness
+//! check. Everything else is delivered or counted.
+
+#![warn(missing_docs)]
+#![forbid(unsafe_code)]
+
+mod call;
+mod error;
+mod outbox;
+mod program;
+
+pub use call::{write_invocation, write_value, ArgError, Call};
+pub use error::ProgramError;
+pub use program::{
+    event_text, PlayerCheck, Program, ProgramConfig, ProgramStats, DEFAULT_OUTBOX_CAPACITY,
+    DEFAULT_RETRY_PERIOD,
+};
+
+/// The values that calls and events carry, and the wait strategies, re-exported so that a
+/// program needs no other dependency.
+pub use petrel_ipc::{EventMsg, Value, Vehicle, WaitStrategy};

@@ -138,3 +138,25 @@ impl Drop for Player {
         }
     }
 }
+
+/// An example program of `petrel-programs` (`uav_gui`, `uav_dec`, `echo`), built first if this
+/// test run did not build it.
+pub fn example_bin(name: &str) -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    let profile_dir = exe
+        .parent()
+        .and_then(Path::parent)
+        .expect("test binary lives in target/<profile>/deps");
+    let bin = profile_dir.join("examples").join(name);
+    if !bin.exists() {
+        let release = profile_dir.file_name().is_some_and(|n| n == "release");
+        let mut cmd = Command::new(env!("CARGO"));
+        cmd.args(["build", "-p", "petrel-programs", "--example", name]);
+        if release {
+            cmd.arg("--release");
+        }
+        let status = cmd.current_dir(repo()).status().expect("cargo runs");
+        assert!(status.success(), "building example {name} failed");
+    }
+    bin
+}

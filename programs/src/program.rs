@@ -1,0 +1,653 @@
+//! The connection of a program process to its vehicle: calls in, events out, an outbox for the
+//! events no player is there to receive.
+
+use std::io::Write;
+use std::os::fd::AsRawFd;
+use std::os::unix::net::UnixStream;
+use std::time::{Duration, Instant};
+
+use petrel_ipc::liveness::list_nodes;
+use petrel_ipc::port::EVENTS;
+use petrel_ipc::reactor::Source;
+use petrel_ipc::wire::{self, WireError};
+use petrel_ipc::{
+    CallReceiver, EventMsg, EventSender, FdSource, NodeStatus, Participant, Reactor, RecvError,
+    Role, SendError, Value, Vehicle, WaitStrategy,
+};
+
+use crate::call::{write_invocation, Call};
+use crate::error::ProgramError;
+use crate::outbox::{Outbox, Queued};
+
+/// Default capacity of the outbox: events kept while no player receives them.
+pub const DEFAULT_OUTBOX_CAPACITY: usize = 1024;
+
+/// Default period between two attempts to deliver queued events while waiting for calls.
+pub const DEFAULT_RETRY_PERIOD: Duration = Duration::from_millis(20);
+
+/// How a [`Program`] behaves. `ProgramConfig::default()` suits most programs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ProgramConfig {
+    /// Events kept while no player receives them (default 1024). Beyond it the oldest are
+    /// dropped, counted and reported ([`ProgramError::EventsDropped`]). 0 keeps none.
+    pub outbox_capacity: usize,
+    /// How [`Program::recv`] waits for calls (default [`WaitStrategy::Block`]).
+    pub wait: WaitStrategy,
+    /// Report SIGINT and SIGTERM as [`ProgramError::Terminated`] instead of dying at once
+    /// (default true). Seen only when the program sleeps in [`Program::recv`]: with
+    /// [`WaitStrategy::Spin`] it never does, and the signals keep their default action.
+    pub handle_signals: bool,
+    /// While events are queued, how often [`Program::recv`] tries to deliver them (default
+    /// 20 ms). A player that opens its call sender to this program is noticed at once.
+    pub retry_period: Duration,
+    /// When to check, before sending, that the player's process lives (default
+    /// [`PlayerCheck::Always`]).
+    pub player_check: PlayerCheck,
+}
+
+/// Whether [`Program`] checks that the player's process lives before it sends an event.
+///
+/// A player killed without warning (SIGKILL, a crash) leaves its receiving port behind until the
+/// next player cleans it up at start: events sent in between would fill a buffer that nobody
+/// reads, and be lost. The check lists the vehicle's nodes, which costs about 0.2 ms.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PlayerCheck {
+    /// Before every send: only an event sent in the instant between the check and the send can
+    /// reach a player that just died. For programs that emit a few events a second.
+    Always,
+    /// Trust a check that found the player alive for this long: events sent within it after
+    /// the player died are lost. For programs that emit at a high rate.
+    Every(Duration),
+    /// Never: an event is sent whenever a port receives. For receivers other than the player.
+    Never,
+}
+
+impl Default for ProgramConfig {
+    fn default() -> Self {
+        ProgramConfig {
+            outbox_capacity: DEFAULT_OUTBOX_CAPACITY,
+            wait: WaitStrategy::Block,
+            handle_signals: true,
+            retry_period: DEFAULT_RETRY_PERIOD,
+            player_check: PlayerCheck::Always,
+        }
+    }
+}
+
+/// What a [`Program`] did since it connected. Every emitted event is accounted for:
+/// `emitted = delivered + dropped + queued` (plus events refused as unsendable, which
+/// [`Program::emit`] reports and never counts as emitted).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ProgramStats {
+    /// Calls received and decoded.
+    pub calls: u64,
+    /// Calls refused: undecodable, or of another wire version.
+    pub bad_calls: u64,
+    /// Events given to [`Program::emit`] or [`Program::emit_as`] and accepted.
+    pub emitted: u64,
+    /// Events handed to a player.
+    pub delivered: u64,
+    /// Of the delivered events, those that waited in the outbox first.
+    pub delivered_late: u64,
+    /// Events dropped from a full outbox: lost.
+    pub dropped: u64,
+    /// Events in the outbox now, waiting for a player.
+    pub queued: usize,
+    /// Times a player that had received events from this process was found gone (stopped,
+    /// killed or not yet replaced).
+    pub player_losses: u64,
+}
+
+/// One program name hosted by the process. Fields drop in order: the ports before the node.
+#[derive(Debug)]
+struct Hosted {
+    calls: CallReceiver,
+    /// Recreated for each player: a new player sees its sequence numbers start at 1.
+    events: Option<EventSender>,
+    name: String,
+    participant: Participant,
+}
+
+/// A process playing one or several software programs of a vehicle.
+///
+/// It receives the calls the player addresses to each of its programs ([`recv`](Self::recv))
+/// and answers with events ([`emit`](Self::emit), [`emit_as`](Self::emit_as)). It outlives the
+/// player: events emitted while no player runs wait in a bounded outbox and are delivered, in
+/// order, once a player is there again; the calls of a new player arrive like those of the old
+/// one.
+///
+/// ```no_run
+/// use petrel_programs::{Program, ProgramError, Value};
+///
+/// # fn main() -> Result<(), ProgramError> {
+/// let mut program = Program::connect("redermor", "GUI")?;
+/// loop {
+///     match program.recv(None) {
+///         Ok(Some(call)) if call.function == "climb" => {
+///             let altitude = call.float(0)?;
+///             program.emit("altitude_reached", vec![Value::Float(altitude)])?;
+///         }
+///         Ok(Some(call)) => eprintln!("{}", call.unknown_function()),
+///         Ok(None) => {}
+///         Err(e) if e.is_termination() || e.is_fatal() => break,
+///         Err(e) => eprintln!("{e}"),
+///     }
+/// }
+/// # Ok(())
+/// # }
+/// ```
+///
+/// Like the ports it holds, a `Program` is single-threaded: create it on the thread that uses it.
+#[derive(Debug)]
+pub struct Program {
+    hosts: Vec<Hosted>,
+    reactor: Reactor,
+    outbox: Outbox,
+    config: ProgramConfig,
+    vehicle: Vehicle,
+    stats: ProgramStats,
+    next_host: usize,
+    next_retry: Instant,
+    /// When a check last found the player alive.
+    player_seen_alive: Option<Instant>,
+    terminated: bool,
+    closed: bool,
+}
+
+/// Makes iceoryx2 install its SIGINT/SIGTERM handlers now rather than at the reactor's first
+/// sleep in [`Program::recv`], which may come late (a call already waiting is taken without
+/// sleeping): until then a SIGTERM would kill the process on the spot, leaving its node behind.
+/// The reactor sleeps once on a descriptor that is already readable, so it returns at once.
+/// Returns whether a termination request was already pending.
+fn install_signal_handlers(reactor: &Reactor) -> Result<bool, ProgramError> {
+    let (mut writer, reader) = UnixStream::pair().map_err(ProgramError::Signals)?;
+    writer.write_all(&[1]).map_err(ProgramError::Signals)?;
+    let ready = FdSource::new(reader.as_raw_fd())?;
+    let ready = reactor.wait(&[&ready], Some(Duration::from_secs(5)))?;
+    Ok(ready.termination_requested())
+}
+
+/// The node name of the player (its [`Role::Player`]).
+fn player_node_name() -> String {
+    Role::Player.node_name()
+}
+
+impl Program {
+    /// Joins vehicle `vehicle` (default file prefix, see [`Vehicle::new`]) as program `name`.
+    pub fn connect(vehicle: &str, name: &str) -> Result<Self, ProgramError> {
+        Self::connect_many(vehicle, &[name])
+    }
+
+    /// Joins vehicle `vehicle` as every program of `names`, in one process (the UAV simulator
+    /// plays GUI and PLD). Each program is its own node, `program/NAME`, so the player sees each
+    /// alive or lost; calls come tagged with the program they were addressed to, and
+    /// [`emit`](Self::emit) sends as the first name.
+    pub fn connect_many(vehicle: &str, names: &[&str]) -> Result<Self, ProgramError> {
+        let vehicle = Vehicle::new(vehicle)?;
+        Self::connect_with(&vehicle, names, ProgramConfig::default())
+    }
+
+    /// Joins `vehicle` (any file prefix) as every program of `names`, with `config`.
+    pub fn connect_with(
+        vehicle: &Vehicle,
+        names: &[&str],
+        config: ProgramConfig,
+    ) -> Result<Self, ProgramError> {
+        if names.is_empty() {
+            return Err(ProgramError::NoProgram);
+        }
+        let mut hosts: Vec<Hosted> = Vec::with_capacity(names.len());
+        for name in names {
+            if hosts.iter().any(|h| h.name == *name) {
+                return Err(ProgramError::DuplicateProgram((*name).to_owned()));
+            }
+            let setup = |error| ProgramError::Setup {
+                program: (*name).to_owned(),
+                error: Box::new(error),
+            };
+            let participant = Participant::join(vehicle, Role::program(name)?).map_err(setup)?;
+            let calls = participant.call_receiver().map_err(setup)?;
+            let events = participant.event_sender().map_err(setup)?;
+            hosts.push(Hosted {
+                calls,
+                events: Some(events),
+                name: (*name).to_owned(),
+                participant,
+            });
+        }
+        // A spinning reactor never sleeps in the wait set, which is what reports signals: leave
+        // them their default action rather than swallow them.
+        let handle_signals = config.handle_signals && config.wait != WaitStrategy::Spin;
+        let mut reactor = if handle_signals {
+            Reactor::new(WaitStrategy::Block)?
+        } else {
+            Reactor::without_signal_handling(WaitStrategy::Block)?
+        };
+        let terminated = handle_signals && install_signal_handlers(&reactor)?;
+        reactor.set_strategy(config.wait);
+        Ok(Program {
+            hosts,
+            reactor,
+            outbox: Outbox::new(config.outbox_capacity),
+            config,
+            vehicle: vehicle.clone(),
+            stats: ProgramStats::default(),
+            next_host: 0,
+            next_retry: Instant::now(),
+            player_seen_alive: None,
+            terminated,
+            closed: false,
+        })
+    }
+
+    /// The vehicle joined.
+    pub fn vehicle(&self) -> &Vehicle {
+        &self.vehicle
+    }
+
+    /// The programs this process plays, in the order given to connect.
+    pub fn names(&self) -> impl Iterator<Item = &str> {
+        self.hosts.iter().map(|h| h.name.as_str())
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &ProgramConfig {
+        &self.config
+    }
+
+    /// The participant (iceoryx2 node) of program `name`, for what this crate does not wrap.
+    pub fn participant(&self, name: &str) -> Option<&Participant> {
+        self.hosts
+            .iter()
+            .find(|h| h.name == name)
+            .map(|h| &h.participant)
+    }
+
+    /// What the program did so far.
+    pub fn stats(&self) -> ProgramStats {
+        ProgramStats {
+            queued: self.outbox.len(),
+            ..self.stats
+        }
+    }
+
+    /// Events waiting in the outbox for a player.
+    pub fn queued(&self) -> usize {
+        self.outbox.len()
+    }
+
+    /// Whether SIGINT or SIGTERM was received.
+    pub fn terminated(&self) -> bool {
+        self.terminated
+    }
+
+    /// Waits for the next call to any hosted program, up to `timeout` (`None`: no limit), and
+    /// returns it, or `Ok(None)` when the timeout passed.
+    ///
+    /// While it waits it delivers queued events as soon as a player is there again. A call that
+    /// cannot be decoded is skipped and reported as [`ProgramError::BadCall`]: log it and call
+    /// `recv` again. Once SIGINT or SIGTERM was received, it returns
+    /// [`ProgramError::Terminated`] (every time).
+    pub fn recv(&mut self, timeout: Option<Duration>) -> Result<Option<Call>, ProgramError> {
+        if self.terminated {
+            return Err(ProgramError::Terminated);
+        }
+        let deadline = timeout.map(|t| Instant::now() + t);
+        loop {
+            if let Some(call) = self.try_take()? {
+                return Ok(Some(call));
+            }
+            let now = Instant::now();
+            if !self.outbox.is_empty() && now >= self.next_retry {
+                self.next_retry = now + self.config.retry_period;
+                self.flush()?;
+            }
+            let now = Instant::now();
+            let mut wait = match deadline {
+                Some(d) if now >= d => return Ok(None),
+                Some(d) => Some(d - now),
+                None => None,
+            };
+            if !self.outbox.is_empty() {
+                let retry = self.next_retry.saturating_duration_since(now);
+                wait = Some(wait.map_or(retry, |w| w.min(retry)));
+            }
+            let sources: Vec<&dyn Source> =
+                self.hosts.iter().map(|h| &h.calls as &dyn Source).collect();
+            let ready = self.reactor.wait(&sources, wait)?;
+            if ready.termination_requested() {
+                self.terminated = true;
+                return Err(ProgramError::Terminated);
+            }
+            // A player that (re)opens its call sender, or whose death was cleaned up, is news:
+            // try the outbox at once.
+            for host in &self.hosts {
+                let news = host
+                    .calls
+                    .take_wakeups()
+                    .map_err(|error| ProgramError::BadCall {
+                        program: host.name.clone(),
+                        error: Box::new(error),
+                    })?;
+                if news.senders_joined + news.senders_left + news.senders_died > 0 {
+                    self.next_retry = Instant::now();
+                    self.player_seen_alive = None;
+                }
+            }
+        }
+    }
+
+    /// Takes a waiting call without waiting, the hosted programs in turn.
+    fn try_take(&mut self) -> Result<Option<Call>, ProgramError> {
+        let n = self.hosts.len();
+        for k in 0..n {
+            let i = (self.next_host + k) % n;
+            let host = &self.hosts[i];
+            match host.calls.try_recv() {
+                Ok(Some(received)) => {
+                    self.next_host = (i + 1) % n;
+                    self.stats.calls += 1;
+                    return Ok(Some(Call {
+                        program: host.name.clone(),
+                        function: received.msg.function,
+                        args: received.msg.args,
+                    }));
+                }
+                Ok(None) => {}
+                Err(error) => {
+                    self.next_host = (i + 1) % n;
+                    if matches!(
+                        error,
+                        RecvError::Undecodable { .. } | RecvError::Foreign { .. }
+                    ) {
+                        self.stats.bad_calls += 1;
+                    }
+                    return Err(ProgramError::BadCall {
+                        program: host.name.clone(),
+                        error: Box::new(error),
+                    });
+                }
+            }
+        }
+        Ok(None)
+    }
+
+    /// Emits event `name(params)` to the player, as the first hosted program.
+    ///
+    /// `Ok(())` when the player received it or, if no player receives events now, when it was
+    /// queued in the outbox to be delivered, in order, once one does. When the outbox was full
+    /// the oldest queued event was dropped to make room: the new one is queued all the same
+    /// and [`ProgramError::EventsDropped`] reports the loss. An event that can never be sent
+    /// (too large) is refused with [`ProgramError::Unsendable`] and not queued.
+    pub fn emit(
+        &mut self,
+        name: impl Into<String>,
+        params: Vec<Value>,
+    ) -> Result<(), ProgramError> {
+        self.emit_from(0, EventMsg::new(name, params))
+    }
+
+    /// Emits event `name(params)` as hosted program `program` (the player sees it as the
+    /// event's origin); otherwise like [`emit`](Self::emit).
+    pub fn emit_as(
+        &mut self,
+        program: &str,
+        name: impl Into<String>,
+        params: Vec<Value>,
+    ) -> Result<(), ProgramError> {
+        let host = self
+            .hosts
+            .iter()
+            .position(|h| h.name == program)
+            .ok_or_else(|| ProgramError::UnknownProgram {
+                program: program.to_owned(),
+                hosted: self.hosts.iter().map(|h| h.name.clone()).collect(),
+            })?;
+        self.emit_from(host, EventMsg::new(name, params))
+    }
+
+    fn emit_from(&mut self, host: usize, msg: EventMsg) -> Result<(), ProgramError> {
+        let unsendable = |error| ProgramError::Unsendable {
+            event: msg.name.clone(),
+            error,
+        };
+        match wire::encoded_len(&msg) {
+            Ok(len) if len <= EVENTS.max_body_len => {}
+            Ok(len) => {
+                return Err(unsendable(WireError::TooLarge {
+                    len,
+                    max: EVENTS.max_body_len,
+                }))
+            }
+            Err(error) => return Err(unsendable(error)),
+        }
+        self.stats.emitted += 1;
+        let ready = match self.player_ready() {
+            Ok(ready) => ready,
+            Err(e) => {
+                // Keep the event; report the loss of an older one first, if any.
+                return Err(self.enqueue(host, msg).err().unwrap_or(e));
+            }
+        };
+        if !ready {
+            self.player_gone();
+            return self.enqueue(host, msg);
+        }
+        if let Err(e) = self.deliver_queued() {
+            return Err(self.enqueue(host, msg).err().unwrap_or(e));
+        }
+        if self.outbox.is_empty() {
+            match self.send_now(host, &msg) {
+                Ok(true) => {
+                    self.stats.delivered += 1;
+                    return Ok(());
+                }
+                Ok(false) => {}
+                Err(e) => {
+                    self.stats.emitted -= 1;
+                    return Err(e);
+                }
+            }
+        }
+        self.enqueue(host, msg)
+    }
+
+    fn enqueue(&mut self, host: usize, msg: EventMsg) -> Result<(), ProgramError> {
+        match self.outbox.push(Queued { host, msg }) {
+            None => Ok(()),
+            Some(dropped) => {
+                self.stats.dropped += 1;
+                Err(ProgramError::EventsDropped {
+                    events: vec![dropped.msg.name],
+                    total: self.stats.dropped,
+                    capacity: self.outbox.capacity(),
+                })
+            }
+        }
+    }
+
+    /// Tries to deliver the queued events now, in order; returns how many were delivered. Does
+    /// nothing while no player receives. [`recv`](Self::recv) calls it while it waits.
+    pub fn flush(&mut self) -> Result<usize, ProgramError> {
+        if self.outbox.is_empty() {
+            return Ok(0);
+        }
+        if !self.player_ready()? {
+            self.player_gone();
+            return Ok(0);
+        }
+        self.deliver_queued()
+    }
+
+    /// Tries to deliver the queued events for up to `timeout` (sleeping between attempts,
+    /// without receiving calls); returns the number of events still queued, 0 when all were
+    /// delivered. For the end of a program: see [`close`](Self::close).
+    pub fn flush_for(&mut self, timeout: Duration) -> Result<usize, ProgramError> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            self.flush()?;
+            let now = Instant::now();
+            if self.outbox.is_empty() || now >= deadline {
+                return Ok(self.outbox.len());
+            }
+            std::thread::sleep(self.config.retry_period.min(deadline - now));
+        }
+    }
+
+    /// Ends the program: tries for up to `grace` to deliver the queued events, then leaves the
+    /// vehicle. The returned statistics tell what happened to every event; `queued` counts
+    /// those that were never delivered (their names are written to standard error).
+    pub fn close(mut self, grace: Duration) -> Result<ProgramStats, ProgramError> {
+        let flushed = self.flush_for(grace);
+        let stats = self.stats();
+        if !self.outbox.is_empty() {
+            self.report_undelivered();
+        }
+        self.closed = true;
+        flushed.map(|_| stats)
+    }
+
+    fn report_undelivered(&self) {
+        let names: Vec<&str> = self.outbox.names().collect();
+        eprintln!(
+            "petrel-programs: {} left the vehicle with {} event(s) never delivered (no player received them): {}",
+            self.hosts
+                .iter()
+                .map(|h| h.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", "),
+            names.len(),
+            names.join(", ")
+        );
+    }
+
+    /// Sends the queued events while the player takes them. The player is known to be ready.
+    fn deliver_queued(&mut self) -> Result<usize, ProgramError> {
+        let mut delivered = 0;
+        while let Some(item) = self.outbox.pop_front() {
+            match self.send_now(item.host, &item.msg) {
+                Ok(true) => {
+                    delivered += 1;
+                    self.stats.delivered += 1;
+                    self.stats.delivered_late += 1;
+                }
+                Ok(false) => {
+                    self.outbox.restore_front(item);
+                    break;
+                }
+                Err(e) => {
+                    // Cannot happen for an event checked before it was queued; it is lost.
+                    self.stats.dropped += 1;
+                    return Err(e);
+                }
+            }
+        }
+        Ok(delivered)
+    }
+
+    /// Sends `msg` as `host`: `Ok(true)` when the player got it, `Ok(false)` when it should be
+    /// tried again later.
+    fn send_now(&mut self, host: usize, msg: &EventMsg) -> Result<bool, ProgramError> {
+        let Some(sender) = self.hosts[host].events.as_ref() else {
+            return Ok(false);
+        };
+        match sender.send(msg) {
+            Ok(_) => Ok(true),
+            Err(SendError::NoReceiver { .. }) => {
+                self.player_gone();
+                Ok(false)
+            }
+            Err(error @ SendError::Wire { .. }) => Err(ProgramError::Send {
+                event: msg.name.clone(),
+                error: Box::new(error),
+            }),
+            // The player's buffer is full, shared memory ran short, or the transport failed:
+            // the player is there, try again later.
+            Err(_) => Ok(false),
+        }
+    }
+
+    /// Whether a live player receives events: someone receives on the events service and
+    /// (unless [`PlayerCheck::Never`]) the vehicle has a live player node and no dead one whose
+    /// port may still be what receives.
+    pub fn player_present(&mut self) -> Result<bool, ProgramError> {
+        self.player_ready()
+    }
+
+    fn player_ready(&mut self) -> Result<bool, ProgramError> {
+        for host in &mut self.hosts {
+            if host.events.is_none() {
+                let sender =
+                    host.participant
+                        .event_sender()
+                        .map_err(|error| ProgramError::Setup {
+                            program: host.name.clone(),
+                            error: Box::new(error),
+                        })?;
+                host.events = Some(sender);
+            }
+        }
+        let receivers = self.hosts[0].events.as_ref().map_or(0, |s| s.receivers());
+        if receivers == 0 {
+            self.player_seen_alive = None;
+            return Ok(false);
+        }
+        match (self.config.player_check, self.player_seen_alive) {
+            (PlayerCheck::Never, _) => return Ok(true),
+            (PlayerCheck::Every(period), Some(seen)) if seen.elapsed() < period => return Ok(true),
+            _ => {}
+        }
+        self.player_seen_alive = None;
+        let player = player_node_name();
+        let mut alive = false;
+        for node in list_nodes(&self.vehicle)?
+            .iter()
+            .filter(|n| n.name == player)
+        {
+            match node.status {
+                NodeStatus::Alive => alive = true,
+                // A dead player's port still counts as a receiver until the next player cleans
+                // it up: wait for that.
+                NodeStatus::Dead | NodeStatus::Undefined | NodeStatus::Inaccessible => {
+                    return Ok(false)
+                }
+            }
+        }
+        if alive {
+            self.player_seen_alive = Some(Instant::now());
+        }
+        Ok(alive)
+    }
+
+    /// The player is gone: senders that sent to it are recreated for the next player, whose
+    /// account of this process then starts afresh (sequence numbers from 1, no false gap).
+    fn player_gone(&mut self) {
+        self.player_seen_alive = None;
+        let mut recycled = false;
+        for host in &mut self.hosts {
+            if host.events.as_ref().is_some_and(|s| s.stats().sent > 0) {
+                host.events = None;
+                recycled = true;
+            }
+        }
+        if recycled {
+            self.stats.player_losses += 1;
+        }
+    }
+}
+
+impl Drop for Program {
+    fn drop(&mut self) {
+        if !self.closed && !self.outbox.is_empty() {
+            self.report_undelivered();
+        }
+    }
+}
+
+/// `name(v1, v2)`, as logs show an event.
+pub fn event_text(name: &str, params: &[Value]) -> String {
+    let mut s = String::new();
+    // Writing to a String cannot fail.
+    let _ = write_invocation(&mut s, name, params);
+    s
+}
