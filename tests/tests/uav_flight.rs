@@ -8,7 +8,17 @@ struct Programs(Vec<Child>);
 
 impl Drop for Programs {
     fn drop(&mut self) {
+        // SIGTERM: the programs leave the vehicle cleanly; SIGKILL only if they do not.
         for c in &mut self.0 {
+            let _ = Command::new("kill")
+                .args(["-TERM", &c.id().to_string()])
+                .status();
+        }
+        for c in &mut self.0 {
+            let deadline = std::time::Instant::now() + std::time::Duration::from_secs(5);
+            while matches!(c.try_wait(), Ok(None)) && std::time::Instant::now() < deadline {
+                std::thread::sleep(std::time::Duration::from_millis(10));
+            }
             let _ = c.kill();
             let _ = c.wait();
         }
@@ -57,11 +67,13 @@ fn wait_programs(vehicle: &str) {
 fn fly(gui_flags: &[&str], done: impl Fn(&serde_json::Value) -> bool) -> serde_json::Value {
     let vehicle = unique_vehicle("uav");
     let player = Player::start(&repo().join("missions/uav"), &vehicle);
-    let _programs = programs(&vehicle, gui_flags);
+    let programs = programs(&vehicle, gui_flags);
     wait_programs(&vehicle);
     let o = player.send("start_mission", 1);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let s = player.wait_for(30.0, &done);
+    // Programs first, so the player's cleanup finds the vehicle empty.
+    drop(programs);
     assert!(player.stop().success());
     s
 }
