@@ -34,7 +34,8 @@ pub enum ArgValue<'a> {
 }
 
 impl<'a> ArgValue<'a> {
-    fn of(v: &'a Value) -> Self {
+    /// The value `v`, borrowed.
+    pub fn of(v: &'a Value) -> Self {
         match v {
             Value::Int(i) => ArgValue::Int(*i),
             Value::Float(f) => ArgValue::Float(*f),

@@ -596,13 +596,7 @@ fn send(dir: &Path, event: &str, vehicle: Option<String>, count: u64) -> Outcome
     };
     let wire: Vec<petrel_ipc::Value> = params
         .iter()
-        .map(|p| match p {
-            petrel_nets::compiled::Value::Int(i) => petrel_ipc::Value::Int(*i),
-            petrel_nets::compiled::Value::Float(f) => petrel_ipc::Value::Float(*f),
-            petrel_nets::compiled::Value::Bool(b) => petrel_ipc::Value::Bool(*b),
-            petrel_nets::compiled::Value::Text(s) => petrel_ipc::Value::Text(s.clone()),
-            petrel_nets::compiled::Value::FloatList(l) => petrel_ipc::Value::FloatList(l.clone()),
-        })
+        .map(petrel_player::runtime::value_to_wire)
         .collect();
     let msg = petrel_ipc::EventMsg::new(name.clone(), wire);
     let beats = match me.heartbeat_subscriber() {

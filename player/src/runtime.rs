@@ -101,6 +101,11 @@ fn to_wire(v: ArgValue<'_>) -> petrel_ipc::Value {
     }
 }
 
+/// A checked value as it travels on the wire.
+pub fn value_to_wire(v: &Value) -> petrel_ipc::Value {
+    to_wire(crate::engine::ArgValue::of(v))
+}
+
 fn from_wire(v: petrel_ipc::Value) -> Value {
     match v {
         petrel_ipc::Value::Int(i) => Value::Int(i),
