@@ -419,6 +419,48 @@ impl<'p> Engine<'p> {
         }
     }
 
+    /// Replaces the state (active nets, markings, timers' running flags) with `state`, of
+    /// [`Layout::words`](petrel_nets::semantics::Layout) words: for a shadow re-synchronising on
+    /// its vehicle. Queued events are kept; timers' deadlines are not changed.
+    pub fn set_state(&mut self, state: &[u64]) {
+        if state.len() == self.state.len() {
+            self.state.copy_from_slice(state);
+        }
+    }
+
+    /// Processes `event` at once, as a step the vehicle took: whatever is queued is dropped
+    /// first (the vehicle reports the steps of its own emitted and timer events), parameters
+    /// are neutral values of the declared types (they steer no firing), and what the step
+    /// queues is dropped after it. For a shadow, which must follow, not decide.
+    pub fn follow(&mut self, event: EventId, sink: &mut impl Sink) -> Option<Step> {
+        for q in &mut self.queues {
+            q.clear();
+        }
+        let decl = self.sem.project.events.get(event as usize)?;
+        let params = decl
+            .params
+            .iter()
+            .map(|(_, t)| match t {
+                Type::Int => Value::Int(0),
+                Type::Float => Value::Float(0.0),
+                Type::Bool => Value::Bool(false),
+                Type::Text => Value::Text(String::new()),
+                Type::FloatList => Value::FloatList(Vec::new()),
+            })
+            .collect();
+        self.submit(event, params).ok()?;
+        let step = self.step(sink);
+        for q in &mut self.queues {
+            q.clear();
+        }
+        step
+    }
+
+    /// Each timer's deadline, if it runs.
+    pub fn deadlines(&self) -> &[Option<Micros>] {
+        &self.deadlines
+    }
+
     /// The earliest running timer's deadline.
     pub fn next_deadline(&self) -> Option<Micros> {
         self.deadlines.iter().flatten().min().copied()

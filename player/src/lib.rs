@@ -5,5 +5,8 @@
 //! - [`runtime`]: the player process on iceoryx2 (`petrel play`).
 
 pub mod engine;
+pub mod journal;
+pub mod replay;
 pub mod runtime;
 pub mod script;
+pub mod shadow;

@@ -32,6 +32,18 @@ enum Format {
 }
 
 #[derive(Subcommand)]
+enum JournalCommand {
+    /// Print every entry.
+    Show {
+        /// The journal directory (or one segment file).
+        journal: PathBuf,
+        /// Output format: text, json (one document a line) or csv.
+        #[arg(long, default_value = "text")]
+        format: String,
+    },
+}
+
+#[derive(Subcommand)]
 enum Command {
     /// Check a mission project: syntax, names, types, markings.
     Check {
@@ -75,6 +87,42 @@ enum Command {
         /// Stop after this many seconds (for demos and tests).
         #[arg(long)]
         run_for: Option<f64>,
+        /// The flight recorder's directory (default: journal/<vehicle>).
+        #[arg(long)]
+        journal: Option<PathBuf>,
+        /// Run without a flight recorder.
+        #[arg(long, conflicts_with_all = ["journal", "resume"])]
+        no_journal: bool,
+        /// When journal records reach the disk: record (every record, to the OS), sync (every
+        /// record, to the disk), or a period such as 50ms.
+        #[arg(long, default_value = "record")]
+        flush: String,
+        /// Start a new journal segment past this many megabytes.
+        #[arg(long, default_value_t = 64)]
+        rotate_mb: u64,
+        /// Restore the mission from the journal (after a crash) and carry on.
+        #[arg(long)]
+        resume: bool,
+        /// Ground-station shadow: follow the vehicle player's steps, run no action, and raise an
+        /// alarm the moment this copy's marking differs from the vehicle's.
+        #[arg(long, conflicts_with_all = ["resume"])]
+        shadow: bool,
+    },
+    /// Replay a journal through the engine and check every recorded marking.
+    Replay {
+        /// The journal directory (or one segment file).
+        journal: PathBuf,
+        /// The project (default: the directory recorded in the journal).
+        #[arg(long)]
+        project: Option<PathBuf>,
+        /// Stop at this mission time (seconds) and print the state there.
+        #[arg(long)]
+        until: Option<f64>,
+    },
+    /// Print a journal for people (text) or for plotting (json, csv).
+    Journal {
+        #[command(subcommand)]
+        command: JournalCommand,
     },
     /// Send an event to a running player, as the operator: `petrel send DIR 'payload_failure("camera")'`.
     Send {
@@ -199,7 +247,34 @@ fn main() -> ExitCode {
             vehicle,
             wait,
             run_for,
-        } => play(&dir, vehicle, &wait, run_for),
+            journal,
+            no_journal,
+            flush,
+            rotate_mb,
+            resume,
+            shadow,
+        } => play(
+            &dir,
+            PlayArgs {
+                vehicle,
+                wait,
+                run_for,
+                journal,
+                no_journal,
+                flush,
+                rotate_mb,
+                resume,
+                shadow,
+            },
+        ),
+        Command::Replay {
+            journal,
+            project,
+            until,
+        } => replay(&journal, project.as_deref(), until),
+        Command::Journal {
+            command: JournalCommand::Show { journal, format },
+        } => journal_show(&journal, &format),
         Command::Send {
             dir,
             event,
@@ -511,34 +586,345 @@ fn compiled(dir: &Path) -> Result<petrel_nets::compiled::CompiledProject, Outcom
     })
 }
 
-fn play(dir: &Path, vehicle: Option<String>, wait: &str, run_for: Option<f64>) -> Outcome {
+/// The options of `petrel play`.
+struct PlayArgs {
+    vehicle: Option<String>,
+    wait: String,
+    run_for: Option<f64>,
+    journal: Option<PathBuf>,
+    no_journal: bool,
+    flush: String,
+    rotate_mb: u64,
+    resume: bool,
+    shadow: bool,
+}
+
+fn play(dir: &Path, a: PlayArgs) -> Outcome {
     let c = match compiled(dir) {
         Ok(c) => c,
         Err(o) => return o,
     };
-    let strategy: petrel_ipc::WaitStrategy = match wait.parse() {
+    let strategy: petrel_ipc::WaitStrategy = match a.wait.parse() {
         Ok(s) => s,
         Err(e) => return Outcome::Usage(e),
     };
-    let mut opts = petrel_player::runtime::PlayOptions::new(vehicle.as_deref().unwrap_or(&c.name));
+    let vehicle = a.vehicle.clone().unwrap_or_else(|| c.name.clone());
+    let mut opts = petrel_player::runtime::PlayOptions::new(&vehicle);
     opts.wait = strategy;
+    opts.project_dir = dir.display().to_string();
+    opts.resume = a.resume;
+    opts.rotate_bytes = a.rotate_mb.saturating_mul(1 << 20);
+    opts.flush = match a.flush.parse() {
+        Ok(f) => f,
+        Err(e) => return Outcome::Usage(e),
+    };
+    if !a.no_journal && !a.shadow {
+        opts.journal = Some(
+            a.journal
+                .clone()
+                .unwrap_or_else(|| PathBuf::from("journal").join(&vehicle)),
+        );
+    }
+    let run_for = a.run_for;
     if let Some(secs) = run_for {
         if !(secs.is_finite() && secs >= 0.0) {
             return Outcome::Usage(format!("--run-for takes a number of seconds, not {secs}"));
         }
         opts.run_for = Some(std::time::Duration::from_secs_f64(secs));
     }
+    if a.shadow {
+        return match petrel_player::shadow::shadow(&c, &opts) {
+            Ok(r) => {
+                eprintln!(
+                    "shadow stopped: {} vehicle steps followed, {} divergence alarm(s)",
+                    r.steps, r.alarms
+                );
+                if r.alarms == 0 {
+                    Outcome::Clean
+                } else {
+                    Outcome::Errors
+                }
+            }
+            Err(e) => Outcome::Usage(e.to_string()),
+        };
+    }
     match petrel_player::runtime::play(&c, &opts) {
         Ok(r) => {
             let s = r.stats;
+            let per_record = if r.journal_records > 0 {
+                r.journal_busy.as_secs_f64() * 1e6 / r.journal_records as f64
+            } else {
+                0.0
+            };
             eprintln!(
-                "player stopped: {} messages ({} refused before the engine), {} events received, {} processed, {} unused, {} refused; {} calls sent, {} failed",
-                r.messages, r.bad_messages, s.received, s.processed, s.unused, s.refused, r.calls_sent, r.calls_failed
+                "player stopped: {} messages ({} refused before the engine), {} events received, {} processed, {} unused, {} refused; {} calls sent, {} failed; journal: {} records, {:.1} us each{}",
+                r.messages, r.bad_messages, s.received, s.processed, s.unused, s.refused, r.calls_sent, r.calls_failed,
+                r.journal_records, per_record,
+                if r.resumed_steps > 0 { format!("; resumed after {} steps", r.resumed_steps) } else { String::new() }
             );
             Outcome::Clean
         }
         Err(e) => Outcome::Usage(e.to_string()),
     }
+}
+
+fn replay(journal: &Path, project_dir: Option<&Path>, until: Option<f64>) -> Outcome {
+    use petrel_player::journal::{read_journal, Entry};
+    let read = match read_journal(journal) {
+        Ok(r) => r,
+        Err(e) => return Outcome::Usage(e.to_string()),
+    };
+    if let Some(t) = &read.torn {
+        eprintln!(
+            "warning: the last record of {} (byte {}) is torn: {}; replaying what precedes it",
+            t.segment.display(),
+            t.offset,
+            t.what
+        );
+    }
+    let (recorded_dir, digest) = match read.entries.first() {
+        Some(Entry::Header {
+            project_dir,
+            digest,
+            ..
+        }) => (PathBuf::from(project_dir), *digest),
+        _ => {
+            return Outcome::Usage(format!(
+                "{} does not start with a journal header",
+                journal.display()
+            ))
+        }
+    };
+    let dir = project_dir.map(Path::to_path_buf).unwrap_or(recorded_dir);
+    let c = match compiled(&dir) {
+        Ok(c) => c,
+        Err(o) => return o,
+    };
+    if petrel_player::journal::project_digest(&c) != digest {
+        eprintln!(
+            "error: {} is not the project this journal recorded (its nets or manifest changed): replay would not mean anything",
+            dir.display()
+        );
+        return Outcome::Errors;
+    }
+    let until_us = until.map(|s| (s * 1e6).round().max(0.0) as u64);
+    let (engine, r) = petrel_player::replay::replay(&c, &read.entries, until_us);
+    if let Some(d) = &r.divergence {
+        eprintln!(
+            "divergence at entry {} (t = {:.6} s), event `{}`: {}\n  recorded: {}\n  replayed: {}",
+            d.entry,
+            d.time as f64 / 1e6,
+            d.event,
+            d.what,
+            d.recorded.join(" "),
+            d.replayed.join(" ")
+        );
+        return Outcome::Errors;
+    }
+    if let Some(c) = &read.corrupt {
+        eprintln!(
+            "error: {} is damaged at record {} (byte {}): {}; the {} entries before it replay to the recorded markings",
+            c.segment.display(),
+            c.record,
+            c.offset,
+            c.what,
+            r.entries
+        );
+        return Outcome::Errors;
+    }
+    let marking: Vec<String> = engine
+        .marking()
+        .into_iter()
+        .map(|(n, p)| format!("{n}{{{}}}", p.join(", ")))
+        .collect();
+    out(&format!(
+        "replayed {} entries, {} steps: every recorded marking reproduced{}\nstate at t = {:.6} s: {}\n",
+        r.entries,
+        r.steps,
+        if r.stopped_early { " (stopped at --until)" } else { "" },
+        match until {
+            Some(u) if r.stopped_early => u,
+            _ => r.last_time as f64 / 1e6,
+        },
+        marking.join(" ")
+    ));
+    Outcome::Clean
+}
+
+fn journal_show(journal: &Path, format: &str) -> Outcome {
+    use petrel_player::journal::{read_journal, Entry};
+    let read = match read_journal(journal) {
+        Ok(r) => r,
+        Err(e) => return Outcome::Usage(e.to_string()),
+    };
+    let wire = |params: &[petrel_ipc::Value]| -> Vec<String> {
+        params
+            .iter()
+            .map(|v| match v {
+                petrel_ipc::Value::Int(i) => i.to_string(),
+                petrel_ipc::Value::Float(f) => petrel_nets::fmt::format_float(*f),
+                petrel_ipc::Value::Bool(b) => b.to_string(),
+                petrel_ipc::Value::Text(s) => petrel_nets::fmt::quote(s),
+                petrel_ipc::Value::FloatList(l) => format!(
+                    "[{}]",
+                    l.iter()
+                        .map(|f| petrel_nets::fmt::format_float(*f))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            })
+            .collect()
+    };
+    let csv_field = |s: &str| format!("\"{}\"", s.replace('"', "\"\""));
+    let mut text = String::new();
+    if format == "csv" {
+        text.push_str("index,time_s,kind,event,params,origin,outcome,fired,actions\n");
+    } else if format != "text" && format != "json" {
+        return Outcome::Usage(format!("unknown format `{format}`: use text, json or csv"));
+    }
+    for (i, e) in read.entries.iter().enumerate() {
+        let t = e.time().map(|t| t as f64 / 1e6);
+        let (kind, event, params, origin, outcome, fired, actions) = match e {
+            Entry::Header {
+                project, vehicle, ..
+            } => (
+                "header",
+                project.clone(),
+                vec![],
+                vehicle.clone(),
+                String::new(),
+                vec![],
+                vec![],
+            ),
+            Entry::Start { .. } => (
+                "start",
+                String::new(),
+                vec![],
+                String::new(),
+                String::new(),
+                vec![],
+                vec![],
+            ),
+            Entry::Resume { .. } => (
+                "resume",
+                String::new(),
+                vec![],
+                String::new(),
+                String::new(),
+                vec![],
+                vec![],
+            ),
+            Entry::Submit {
+                event,
+                params,
+                origin,
+                seq,
+                ..
+            } => (
+                "submit",
+                event.clone(),
+                wire(params),
+                format!("{origin}#{seq}"),
+                String::new(),
+                vec![],
+                vec![],
+            ),
+            Entry::Refused {
+                what,
+                reason,
+                origin,
+                ..
+            } => (
+                "refused",
+                what.clone(),
+                vec![],
+                origin.clone(),
+                reason.clone(),
+                vec![],
+                vec![],
+            ),
+            Entry::Step {
+                event,
+                params,
+                outcome,
+                fired,
+                actions,
+                ..
+            } => (
+                "step",
+                event.clone(),
+                wire(params),
+                String::new(),
+                outcome.clone(),
+                fired.clone(),
+                actions.clone(),
+            ),
+        };
+        match format {
+            "json" => {
+                let doc = serde_json::json!({
+                    "index": i, "time": t, "kind": kind, "event": event, "params": params,
+                    "origin": origin, "outcome": outcome, "fired": fired, "actions": actions,
+                });
+                text.push_str(&format!("{doc}\n"));
+            }
+            "csv" => text.push_str(&format!(
+                "{i},{},{kind},{},{},{},{},{},{}\n",
+                t.map(|t| format!("{t:.6}")).unwrap_or_default(),
+                csv_field(&event),
+                csv_field(&params.join(", ")),
+                csv_field(&origin),
+                csv_field(&outcome),
+                csv_field(&fired.join(" ")),
+                csv_field(&actions.join("; "))
+            )),
+            _ => {
+                let time = t
+                    .map(|t| format!("{t:>12.6}"))
+                    .unwrap_or_else(|| " ".repeat(12));
+                let args = if params.is_empty() {
+                    String::new()
+                } else {
+                    format!("({})", params.join(", "))
+                };
+                let mut line = format!("{i:>6} {time}  {kind:<7} {event}{args}");
+                if !origin.is_empty() {
+                    line.push_str(&format!("  from {origin}"));
+                }
+                if !outcome.is_empty() {
+                    line.push_str(&format!("  [{outcome}]"));
+                }
+                if !fired.is_empty() {
+                    line.push_str(&format!("  fired {}", fired.join(", ")));
+                }
+                if !actions.is_empty() {
+                    line.push_str(&format!("  => {}", actions.join("; ")));
+                }
+                text.push_str(&line);
+                text.push('\n');
+            }
+        }
+    }
+    out(&text);
+    if let Some(t) = &read.torn {
+        eprintln!(
+            "warning: torn last record in {} at byte {}: {}",
+            t.segment.display(),
+            t.offset,
+            t.what
+        );
+    }
+    if let Some(c) = &read.corrupt {
+        eprintln!(
+            "error: {} damaged at record {} (byte {}): {}",
+            c.segment.display(),
+            c.record,
+            c.offset,
+            c.what
+        );
+        return Outcome::Errors;
+    }
+    Outcome::Clean
 }
 
 fn vehicle_of(

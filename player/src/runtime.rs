@@ -4,17 +4,22 @@
 //! deadline, the heartbeat and the liveness check. On each wake-up it moves time forward,
 //! drains incoming events into the engine (refusing malformed ones with a `bad_message` event),
 //! turns dead programs into `program_lost`, processes the queue, sends calls (an absent program
-//! gives `call_failed`), and publishes marking deltas and a heartbeat carrying the live status.
+//! gives `call_failed`), journals every input and step, and publishes marking deltas and a
+//! heartbeat carrying the live status. The heartbeat is the acknowledgement senders wait for,
+//! and it goes out only after the journal is flushed: an acknowledged event is on record.
 
 use crate::engine::{ArgValue, Args, Engine, Micros, Refusal, Sink, Stats};
+use crate::journal::{Entry, FlushPolicy, JournalWriter};
+use crate::script::Recorder;
 use petrel_ipc::{
     CallMsg, CallSender, HeartbeatPublisher, MarkingMsg, MarkingPublisher, Participant,
     ProgramWatch, Reactor, RecvError, Role, SendError, Vehicle, WaitStrategy,
 };
-use petrel_nets::compiled::{CompiledProject, FunctionId, NetId, ProgramId, Value};
-use petrel_nets::semantics::Layout;
+use petrel_nets::compiled::{CompiledProject, EventId, FunctionId, NetId, ProgramId, Value};
+use petrel_nets::semantics::{Layout, Notice};
+use std::path::PathBuf;
 use std::time::{Duration, Instant};
-use tracing::{debug, info, warn};
+use tracing::{debug, error, info, warn};
 
 /// How to run the player.
 #[derive(Clone, Debug)]
@@ -29,10 +34,20 @@ pub struct PlayOptions {
     pub liveness: Duration,
     /// Stop after this long (tests and demos); `None` runs until SIGINT or SIGTERM.
     pub run_for: Option<Duration>,
+    /// The journal directory; `None`: no journal.
+    pub journal: Option<PathBuf>,
+    /// When journal records reach the disk.
+    pub flush: FlushPolicy,
+    /// Start a new journal segment past this size.
+    pub rotate_bytes: u64,
+    /// Restore the mission from the journal and carry on.
+    pub resume: bool,
+    /// The project directory, recorded in the journal header.
+    pub project_dir: String,
 }
 
 impl PlayOptions {
-    /// Defaults for `vehicle`: block, heartbeat every 100 ms, liveness every 50 ms.
+    /// Defaults for `vehicle`: block, heartbeat every 100 ms, liveness every 50 ms, no journal.
     pub fn new(vehicle: &str) -> Self {
         PlayOptions {
             vehicle: vehicle.to_string(),
@@ -40,6 +55,11 @@ impl PlayOptions {
             heartbeat: Duration::from_millis(100),
             liveness: Duration::from_millis(50),
             run_for: None,
+            journal: None,
+            flush: FlushPolicy::EveryRecord,
+            rotate_bytes: 64 << 20,
+            resume: false,
+            project_dir: String::new(),
         }
     }
 }
@@ -51,6 +71,8 @@ pub enum PlayError {
     Vehicle(String),
     /// iceoryx2 could not be set up (another player on the vehicle, say).
     Setup(String),
+    /// The journal could not be written or, for `--resume`, read.
+    Journal(String),
 }
 
 impl std::fmt::Display for PlayError {
@@ -58,6 +80,7 @@ impl std::fmt::Display for PlayError {
         match self {
             PlayError::Vehicle(e) => write!(f, "bad vehicle name: {e}"),
             PlayError::Setup(e) => write!(f, "cannot set up the player: {e}"),
+            PlayError::Journal(e) => write!(f, "journal: {e}"),
         }
     }
 }
@@ -77,17 +100,21 @@ pub struct PlayReport {
     pub calls_sent: u64,
     /// Calls to absent programs (each became `call_failed`).
     pub calls_failed: u64,
+    /// Journal records written.
+    pub journal_records: u64,
+    /// Time the reactor thread spent writing the journal.
+    pub journal_busy: Duration,
+    /// Steps restored from the journal by `--resume`.
+    pub resumed_steps: u64,
 }
 
-/// Sends what the engine asks for, during one step.
+/// Sends what the engine asks for, during one step, and keeps its record.
 struct RuntimeSink<'a> {
-    project: &'a CompiledProject,
+    log: Recorder<'a>,
     calls: &'a [CallSender],
     failed: Vec<(ProgramId, FunctionId)>,
-    fired: Vec<String>,
     activated: Vec<String>,
     deactivated: Vec<String>,
-    event: Option<String>,
     sent: u64,
 }
 
@@ -103,7 +130,7 @@ fn to_wire(v: ArgValue<'_>) -> petrel_ipc::Value {
 
 /// A checked value as it travels on the wire.
 pub fn value_to_wire(v: &Value) -> petrel_ipc::Value {
-    to_wire(crate::engine::ArgValue::of(v))
+    to_wire(ArgValue::of(v))
 }
 
 fn from_wire(v: petrel_ipc::Value) -> Value {
@@ -117,31 +144,31 @@ fn from_wire(v: petrel_ipc::Value) -> Value {
 }
 
 impl Sink for RuntimeSink<'_> {
-    fn taken(&mut self, event: petrel_nets::compiled::EventId, _params: &[Value]) {
-        self.event = Some(self.project.events[event as usize].name.clone());
+    fn taken(&mut self, event: EventId, params: &[Value]) {
+        self.log.taken(event, params);
     }
 
     fn fired(&mut self, net: NetId, transition: u32) {
-        let n = &self.project.nets[net as usize];
+        let n = &self.log.p.nets[net as usize];
         debug!(net = %n.name, transition = %n.transitions[transition as usize].name, "fired");
-        self.fired.push(format!(
-            "{}.{}",
-            n.name, n.transitions[transition as usize].name
-        ));
+        self.log.fired(net, transition);
     }
 
     fn activated(&mut self, net: NetId) {
         self.activated
-            .push(self.project.nets[net as usize].name.clone());
+            .push(self.log.p.nets[net as usize].name.clone());
+        self.log.activated(net);
     }
 
     fn deactivated(&mut self, net: NetId) {
         self.deactivated
-            .push(self.project.nets[net as usize].name.clone());
+            .push(self.log.p.nets[net as usize].name.clone());
+        self.log.deactivated(net);
     }
 
     fn call(&mut self, program: ProgramId, function: FunctionId, args: Args<'_>) {
-        let prog = &self.project.programs[program as usize];
+        self.log.call(program, function, args);
+        let prog = &self.log.p.programs[program as usize];
         let fname = &prog.functions[function as usize].name;
         let msg = CallMsg::new(fname.clone(), args.iter().map(to_wire).collect());
         match self.calls[program as usize].send(&msg) {
@@ -156,21 +183,40 @@ impl Sink for RuntimeSink<'_> {
         }
     }
 
+    fn emitted(&mut self, event: EventId) {
+        self.log.emitted(event);
+    }
+
+    fn timer_started(&mut self, timer: petrel_nets::compiled::TimerId, deadline: Micros) {
+        self.log.timer_started(timer, deadline);
+    }
+
+    fn timer_cancelled(&mut self, timer: petrel_nets::compiled::TimerId) {
+        self.log.timer_cancelled(timer);
+    }
+
     fn safety_violation(&mut self, net: NetId, transition: u32, place: &str) {
-        let n = &self.project.nets[net as usize];
+        let n = &self.log.p.nets[net as usize];
         warn!(net = %n.name, transition = %n.transitions[transition as usize].name, place, "firing refused: a second token; raising safety_violation");
+        self.log.safety_violation(net, transition, place);
+    }
+
+    fn conflict(&mut self, net: NetId, transition: u32) {
+        self.log.conflict(net, transition);
+    }
+
+    fn notice(&mut self, notice: Notice) {
+        info!(?notice, "notice");
+        self.log.notice(notice);
     }
 
     fn livelock(&mut self) {
         warn!("immediate transitions did not settle: fixpoint stopped, raising livelock");
+        self.log.livelock();
     }
 }
 
-fn now(t0: Instant) -> Micros {
-    t0.elapsed().as_micros().min(u64::MAX as u128) as u64
-}
-
-/// The marking as `NET.place` and `global.place`, for marking messages and the status.
+/// The marking as `NET.place` and `global.place`, for marking messages.
 fn marked_places(project: &CompiledProject, layout: &Layout, state: &[u64]) -> Vec<String> {
     let mut out = Vec::new();
     for (n, net) in project.nets.iter().enumerate() {
@@ -223,10 +269,46 @@ fn status_json(engine: &Engine, report: &PlayReport, events: &petrel_ipc::EventR
             "queued": engine.queued(),
             "calls_sent": report.calls_sent,
             "calls_failed": report.calls_failed,
+            "journal_records": report.journal_records,
+            "resumed_steps": report.resumed_steps,
         },
         "senders": senders,
     })
     .to_string()
+}
+
+/// The journal, if any: every failure to write it is logged loudly but never stops the player
+/// (a vehicle must keep flying), and is counted.
+struct Recorder2 {
+    writer: Option<JournalWriter>,
+    failures: u64,
+}
+
+impl Recorder2 {
+    fn append(&mut self, entry: &Entry) {
+        if let Some(w) = self.writer.as_mut() {
+            if let Err(e) = w.append(entry) {
+                self.failures += 1;
+                error!(error = %e, "journal write failed: the flight recorder is missing this entry");
+            }
+        }
+    }
+
+    fn flush(&mut self) {
+        if let Some(w) = self.writer.as_mut() {
+            if let Err(e) = w.flush() {
+                self.failures += 1;
+                error!(error = %e, "journal flush failed");
+            }
+        }
+    }
+}
+
+fn unix_ms() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_millis() as u64)
+        .unwrap_or(0)
 }
 
 /// Runs the player until SIGINT/SIGTERM (or `run_for`).
@@ -242,6 +324,49 @@ pub fn play(project: &CompiledProject, opts: &PlayOptions) -> Result<PlayReport,
         Ok(_) => {}
         Err(e) => warn!(error = %e, "could not look for dead processes"),
     }
+
+    // Recovery first: the engine is rebuilt from the journal before anything else happens.
+    let mut report = PlayReport::default();
+    let mut resumed: Option<(Engine, Micros)> = None;
+    if opts.resume {
+        let dir = opts.journal.as_ref().ok_or_else(|| {
+            PlayError::Journal("--resume needs the journal (do not pass --no-journal)".into())
+        })?;
+        let read =
+            crate::journal::read_journal(dir).map_err(|e| PlayError::Journal(e.to_string()))?;
+        if let Some(c) = &read.corrupt {
+            return Err(PlayError::Journal(format!(
+                "{} is damaged at record {} (byte {}): {}; refusing to resume from a damaged journal",
+                c.segment.display(),
+                c.record,
+                c.offset,
+                c.what
+            )));
+        }
+        if let Some(t) = &read.torn {
+            warn!(segment = %t.segment.display(), offset = t.offset, what = %t.what, "the last journal record was torn by the crash: dropped");
+        }
+        let digest = crate::journal::project_digest(project);
+        if let Some(Entry::Header { digest: d, .. }) = read.entries.first() {
+            if *d != digest {
+                return Err(PlayError::Journal(
+                    "the journal was recorded with another version of the project".into(),
+                ));
+            }
+        }
+        let (engine, r) = crate::replay::replay(project, &read.entries, None);
+        if let Some(d) = r.divergence {
+            return Err(PlayError::Journal(format!(
+                "the journal does not replay (entry {}, {}): refusing to resume",
+                d.entry, d.what
+            )));
+        }
+        report.resumed_steps = r.steps;
+        let restored = engine.marking();
+        info!(steps = r.steps, time_s = r.last_time as f64 / 1e6, queued = engine.queued(), ?restored, timers = ?engine.deadlines(), "resumed from the journal");
+        resumed = Some((engine, r.last_time));
+    }
+
     let setup = |e: petrel_ipc::SetupError| PlayError::Setup(e.to_string());
     let me = Participant::join(&vehicle, Role::Player).map_err(setup)?;
     let events = me.event_receiver().map_err(setup)?;
@@ -259,57 +384,132 @@ pub fn play(project: &CompiledProject, opts: &PlayOptions) -> Result<PlayReport,
     let call_failed = project.event_id("call_failed");
     let bad_message = project.event_id("bad_message");
 
+    let mut journal = Recorder2 {
+        writer: match &opts.journal {
+            None => None,
+            Some(dir) => {
+                let header = Entry::Header {
+                    version: 1,
+                    project: project.name.clone(),
+                    project_dir: opts.project_dir.clone(),
+                    digest: crate::journal::project_digest(project),
+                    vehicle: opts.vehicle.clone(),
+                    started_unix_ms: unix_ms(),
+                };
+                let w = JournalWriter::open(dir, header, opts.flush, opts.rotate_bytes).map_err(
+                    |e| PlayError::Journal(format!("cannot write {}: {e}", dir.display())),
+                )?;
+                info!(dir = %dir.display(), flush = ?opts.flush, "journal open");
+                Some(w)
+            }
+        },
+        failures: 0,
+    };
+
     let t0 = Instant::now();
-    let mut engine = Engine::new(project);
-    let mut report = PlayReport::default();
     let mut sink = RuntimeSink {
-        project,
+        log: Recorder::new(project),
         calls: &calls,
         failed: Vec::new(),
-        fired: Vec::new(),
         activated: Vec::new(),
         deactivated: Vec::new(),
-        event: None,
         sent: 0,
     };
-    let mut previous = engine.state().to_vec();
+    let (mut engine, base) = match resumed {
+        Some((engine, time)) => {
+            journal.append(&Entry::Resume { time });
+            (engine, time)
+        }
+        None => {
+            let mut engine = Engine::new(project);
+            engine.start(0, &mut sink);
+            // The start's actions are the start's, not the first event's.
+            sink.log.clear();
+            journal.append(&Entry::Start {
+                time: 0,
+                state: engine.state().to_vec(),
+            });
+            (engine, 0)
+        }
+    };
+    // Mission time goes on from where the journal left it.
+    let now = move || base + t0.elapsed().as_micros().min(u64::MAX as u128) as u64;
+    let mut previous = vec![0u64; engine.state().len()];
     let mut step_no = 0u64;
-    engine.start(0, &mut sink);
     info!(project = %project.name, vehicle = %opts.vehicle, wait = ?opts.wait, "player started");
     let _ = watch.check();
 
     let mut next_heartbeat = Instant::now();
     let mut next_liveness = Instant::now() + opts.liveness;
+    // Submits an event raised by the player itself, journaled like any input.
+    let raise = |engine: &mut Engine,
+                 journal: &mut Recorder2,
+                 event: Option<EventId>,
+                 params: Vec<Value>| {
+        let Some(e) = event else { return };
+        let record = Entry::Submit {
+            time: engine.now(),
+            event: project.events[e as usize].name.clone(),
+            params: params.iter().map(value_to_wire).collect(),
+            origin: "player".into(),
+            seq: 0,
+        };
+        match engine.submit(e, params) {
+            Ok(()) => journal.append(&record),
+            Err(r) => debug!(refusal = %r, "built-in event refused"),
+        }
+    };
     loop {
         // Everything queued (by the start, a timer, an event) is processed, then published.
         loop {
-            let stepped = engine.step(&mut sink).is_some();
+            let Some(step) = engine.step(&mut sink) else {
+                if step_no == 0 {
+                    publish_delta(&engine, &mut sink, &mut previous, step_no, &marking_out);
+                    step_no += 1;
+                }
+                break;
+            };
+            let (event, params) = sink.log.taken.take().unwrap_or_default();
+            journal.append(&Entry::Step {
+                time: engine.now(),
+                event: event.clone(),
+                params: params.iter().map(value_to_wire).collect(),
+                outcome: match step.outcome {
+                    petrel_nets::semantics::StepOutcome::Processed => "processed",
+                    petrel_nets::semantics::StepOutcome::Unused => "unused",
+                    petrel_nets::semantics::StepOutcome::RefusedAfterCatastrophic => "refused",
+                }
+                .into(),
+                fired: sink.log.fired_names(),
+                actions: sink.log.actions.clone(),
+                state: engine.state().to_vec(),
+                deadlines: engine.deadlines().to_vec(),
+            });
+            sink.log.taken = Some((event, Vec::new()));
+            publish_delta(&engine, &mut sink, &mut previous, step_no, &marking_out);
+            step_no += 1;
+            sink.log.clear();
             let failed = std::mem::take(&mut sink.failed);
             for (p, f) in failed {
                 report.calls_failed += 1;
-                if let Some(e) = call_failed {
-                    let prog = &project.programs[p as usize];
-                    let params = vec![
-                        Value::Text(prog.name.clone()),
-                        Value::Text(prog.functions[f as usize].name.clone()),
-                    ];
-                    if let Err(r) = engine.submit(e, params) {
-                        warn!(refusal = %r, "call_failed refused");
-                    }
-                }
-            }
-            if stepped || step_no == 0 {
-                publish_delta(&engine, &mut sink, &mut previous, step_no, &marking_out);
-                step_no += 1;
-            }
-            if !stepped {
-                break;
+                let prog = &project.programs[p as usize];
+                let params = vec![
+                    Value::Text(prog.name.clone()),
+                    Value::Text(prog.functions[f as usize].name.clone()),
+                ];
+                raise(&mut engine, &mut journal, call_failed, params);
             }
         }
         report.calls_sent = sink.sent;
 
         let instant = Instant::now();
         if instant >= next_heartbeat {
+            // The heartbeat acknowledges what the player took: it must be on record first.
+            journal.flush();
+            if let Some(w) = &journal.writer {
+                report.journal_records = w.records;
+                report.journal_busy = w.busy;
+            }
             let status = status_json(&engine, &report, &events);
             let hb = petrel_ipc::Heartbeat {
                 uptime_ms: t0.elapsed().as_millis() as u64,
@@ -331,8 +531,7 @@ pub fn play(project: &CompiledProject, opts: &PlayOptions) -> Result<PlayReport,
             .min(next_liveness)
             .saturating_duration_since(Instant::now());
         if let Some(d) = engine.next_deadline() {
-            let until = Duration::from_micros(d.saturating_sub(now(t0)));
-            timeout = timeout.min(until);
+            timeout = timeout.min(Duration::from_micros(d.saturating_sub(now())));
         }
         let ready = match reactor.wait(&[&events], Some(timeout)) {
             Ok(r) => r,
@@ -346,22 +545,40 @@ pub fn play(project: &CompiledProject, opts: &PlayOptions) -> Result<PlayReport,
             info!("termination requested: stopping");
             break;
         }
-        engine.advance_to(now(t0));
+        engine.advance_to(now());
         let mut someone_died = false;
         let drained = events.drain(|r| {
             report.messages += 1;
             match r {
                 Ok(rcv) => {
                     let origin = rcv.origin.to_string();
+                    let time = engine.now();
+                    let record = Entry::Submit {
+                        time,
+                        event: rcv.msg.name.clone(),
+                        params: rcv.msg.params.clone(),
+                        origin: origin.clone(),
+                        seq: rcv.seq,
+                    };
                     let mut params = engine.param_buffer();
                     params.extend(rcv.msg.params.into_iter().map(from_wire));
-                    if let Err(refusal) = engine.submit_named(&rcv.msg.name, params) {
-                        if !matches!(refusal, Refusal::AfterCatastrophic(_)) {
-                            report.bad_messages += 1;
-                            warn!(from = %origin, seq = rcv.seq, reason = %refusal, "event refused");
-                            raise_bad_message(&mut engine, bad_message, &origin, &refusal.to_string());
-                        } else {
-                            info!(from = %origin, reason = %refusal, "event refused");
+                    match engine.submit_named(&rcv.msg.name, params) {
+                        Ok(()) => journal.append(&record),
+                        Err(refusal) => {
+                            journal.append(&Entry::Refused {
+                                time,
+                                what: rcv.msg.name.clone(),
+                                reason: refusal.to_string(),
+                                origin: origin.clone(),
+                            });
+                            if matches!(refusal, Refusal::AfterCatastrophic(_)) {
+                                info!(from = %origin, reason = %refusal, "event refused");
+                            } else {
+                                report.bad_messages += 1;
+                                warn!(from = %origin, seq = rcv.seq, reason = %refusal, "event refused");
+                                let params = vec![Value::Text(origin), Value::Text(refusal.to_string())];
+                                raise(&mut engine, &mut journal, bad_message, params);
+                            }
                         }
                     }
                 }
@@ -370,7 +587,17 @@ pub fn play(project: &CompiledProject, opts: &PlayOptions) -> Result<PlayReport,
                 }) => {
                     report.bad_messages += 1;
                     warn!(from = %origin, seq, error = %error, "undecodable event refused");
-                    raise_bad_message(&mut engine, bad_message, &origin.to_string(), &format!("undecodable: {error}"));
+                    journal.append(&Entry::Refused {
+                        time: engine.now(),
+                        what: "(undecodable)".into(),
+                        reason: error.to_string(),
+                        origin: origin.to_string(),
+                    });
+                    let params = vec![
+                        Value::Text(origin.to_string()),
+                        Value::Text(format!("undecodable: {error}")),
+                    ];
+                    raise(&mut engine, &mut journal, bad_message, params);
                 }
                 Err(e) => {
                     report.bad_messages += 1;
@@ -389,9 +616,8 @@ pub fn play(project: &CompiledProject, opts: &PlayOptions) -> Result<PlayReport,
                     for c in changes {
                         if c.is_lost() {
                             warn!(program = %c.program, "program lost");
-                            if let Some(e) = program_lost {
-                                let _ = engine.submit(e, vec![Value::Text(c.program.clone())]);
-                            }
+                            let params = vec![Value::Text(c.program.clone())];
+                            raise(&mut engine, &mut journal, program_lost, params);
                         } else {
                             info!(program = %c.program, status = ?c.to, "program status");
                         }
@@ -401,30 +627,21 @@ pub fn play(project: &CompiledProject, opts: &PlayOptions) -> Result<PlayReport,
             }
         }
     }
+    journal.flush();
+    if let Some(w) = &journal.writer {
+        report.journal_records = w.records;
+        report.journal_busy = w.busy;
+    }
+    if journal.failures > 0 {
+        error!(failures = journal.failures, "the journal missed entries");
+    }
     report.stats = engine.stats();
     report.calls_sent = sink.sent;
     info!(?report, "player stopped");
     Ok(report)
 }
 
-fn raise_bad_message(
-    engine: &mut Engine,
-    event: Option<petrel_nets::compiled::EventId>,
-    sender: &str,
-    reason: &str,
-) {
-    if let Some(e) = event {
-        let params = vec![
-            Value::Text(sender.to_string()),
-            Value::Text(reason.to_string()),
-        ];
-        if let Err(r) = engine.submit(e, params) {
-            debug!(refusal = %r, "bad_message refused");
-        }
-    }
-}
-
-/// Publishes what the last step changed (the first message is a full snapshot).
+/// Publishes what the last step changed (the first message of a run is a full snapshot).
 fn publish_delta(
     engine: &Engine,
     sink: &mut RuntimeSink,
@@ -440,8 +657,8 @@ fn publish_delta(
     let snapshot = step == 0;
     let msg = MarkingMsg {
         step,
-        event: sink.event.take(),
-        fired: std::mem::take(&mut sink.fired),
+        event: sink.log.taken.take().map(|t| t.0),
+        fired: sink.log.fired_names(),
         marked: if snapshot {
             after.clone()
         } else {

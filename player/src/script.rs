@@ -272,7 +272,7 @@ fn seconds(t: Micros) -> f64 {
     t as f64 / 1e6
 }
 
-fn value_text(v: &Value) -> String {
+pub(crate) fn value_text(v: &Value) -> String {
     match v {
         Value::Int(i) => i.to_string(),
         Value::Float(f) => format_float(*f),
@@ -299,12 +299,43 @@ fn value_json(v: &Value) -> serde_json::Value {
 }
 
 /// Records one step's effects for the JSON line and the expectations.
-struct Recorder<'p> {
-    p: &'p CompiledProject,
-    taken: Option<(String, Vec<Value>)>,
-    fired: Vec<(NetId, u32)>,
-    actions: Vec<String>,
-    calls: Vec<(ProgramId, FunctionId, Vec<Value>)>,
+pub(crate) struct Recorder<'p> {
+    pub(crate) p: &'p CompiledProject,
+    pub(crate) taken: Option<(String, Vec<Value>)>,
+    pub(crate) fired: Vec<(NetId, u32)>,
+    pub(crate) actions: Vec<String>,
+    pub(crate) calls: Vec<(ProgramId, FunctionId, Vec<Value>)>,
+}
+
+impl<'p> Recorder<'p> {
+    pub(crate) fn new(p: &'p CompiledProject) -> Self {
+        Recorder {
+            p,
+            taken: None,
+            fired: Vec::new(),
+            actions: Vec::new(),
+            calls: Vec::new(),
+        }
+    }
+
+    /// The transitions fired since the last clear, as `NET.transition`.
+    pub(crate) fn fired_names(&self) -> Vec<String> {
+        self.fired
+            .iter()
+            .map(|&(n, t)| {
+                let net = &self.p.nets[n as usize];
+                format!("{}.{}", net.name, net.transitions[t as usize].name)
+            })
+            .collect()
+    }
+
+    /// Forgets what was recorded (the step is over).
+    pub(crate) fn clear(&mut self) {
+        self.taken = None;
+        self.fired.clear();
+        self.actions.clear();
+        self.calls.clear();
+    }
 }
 
 impl Sink for Recorder<'_> {

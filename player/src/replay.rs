@@ -1,0 +1,188 @@
+//! Replaying a journal through the engine: every recorded step is reproduced and checked.
+//!
+//! The journal's inputs (the start, each submitted event with its time) are fed to a fresh
+//! engine; at each recorded step the engine takes its next event, and the event, the transitions
+//! fired and the state after must be the recorded ones. The first difference is a divergence,
+//! reported with both markings and the event that caused it. Recovery (`petrel play --resume`)
+//! is the same replay, after which the player carries on live.
+
+use crate::engine::{Engine, Micros};
+use crate::journal::Entry;
+use crate::script::Recorder;
+use petrel_nets::compiled::{CompiledProject, Value};
+use petrel_nets::semantics::{Layout, StepOutcome};
+
+/// The first place where the replay differs from the journal.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Divergence {
+    /// Index of the journal entry.
+    pub entry: usize,
+    /// Its mission time, microseconds.
+    pub time: Micros,
+    /// The event of the step (recorded).
+    pub event: String,
+    /// What differs, in words.
+    pub what: String,
+    /// The recorded marking after the step.
+    pub recorded: Vec<String>,
+    /// The marking the replay reached.
+    pub replayed: Vec<String>,
+}
+
+/// How a replay went.
+#[derive(Clone, Debug, Default)]
+pub struct ReplayReport {
+    /// Entries read.
+    pub entries: usize,
+    /// Steps reproduced.
+    pub steps: u64,
+    /// The first divergence, if any.
+    pub divergence: Option<Divergence>,
+    /// Mission time of the last entry replayed, microseconds.
+    pub last_time: Micros,
+    /// Replay stopped at `--until` before the end of the journal.
+    pub stopped_early: bool,
+}
+
+fn from_wire(v: &petrel_ipc::Value) -> Value {
+    match v {
+        petrel_ipc::Value::Int(i) => Value::Int(*i),
+        petrel_ipc::Value::Float(f) => Value::Float(*f),
+        petrel_ipc::Value::Bool(b) => Value::Bool(*b),
+        petrel_ipc::Value::Text(s) => Value::Text(s.clone()),
+        petrel_ipc::Value::FloatList(l) => Value::FloatList(l.clone()),
+    }
+}
+
+/// A state as `NET.place` / `global.place` names, active nets as `NET+`, running timers.
+pub fn describe(project: &CompiledProject, layout: &Layout, state: &[u64]) -> Vec<String> {
+    if state.len() != layout.words {
+        return vec![format!(
+            "(a state of {} words, expected {})",
+            state.len(),
+            layout.words
+        )];
+    }
+    layout.describe_state(project, state)
+}
+
+/// Replays `entries` on a fresh engine for `project`, up to mission time `until` (included).
+/// Returns the engine in the state the journal reached, and the report.
+pub fn replay<'p>(
+    project: &'p CompiledProject,
+    entries: &[Entry],
+    until: Option<Micros>,
+) -> (Engine<'p>, ReplayReport) {
+    let mut engine = Engine::new(project);
+    let mut log = Recorder::new(project);
+    let mut report = ReplayReport::default();
+    for (i, entry) in entries.iter().enumerate() {
+        if let (Some(limit), Some(t)) = (until, entry.time()) {
+            if t > limit {
+                report.stopped_early = true;
+                break;
+            }
+        }
+        report.entries = i + 1;
+        if let Some(t) = entry.time() {
+            report.last_time = t;
+        }
+        let diverge =
+            |engine: &Engine, what: String, event: &str, time: u64, recorded: &[u64]| Divergence {
+                entry: i,
+                time,
+                event: event.to_string(),
+                what,
+                recorded: describe(project, engine.layout(), recorded),
+                replayed: describe(project, engine.layout(), engine.state()),
+            };
+        match entry {
+            Entry::Header { .. } | Entry::Refused { .. } | Entry::Resume { .. } => {}
+            Entry::Start { time, state } => {
+                engine.start(*time, &mut log);
+                log.clear();
+                if engine.state() != state.as_slice() {
+                    report.divergence = Some(diverge(
+                        &engine,
+                        "the initial state differs".into(),
+                        "(start)",
+                        *time,
+                        state,
+                    ));
+                    break;
+                }
+            }
+            Entry::Submit {
+                time,
+                event,
+                params,
+                ..
+            } => {
+                engine.advance_to(*time);
+                let params = params.iter().map(from_wire).collect();
+                if let Err(r) = engine.submit_named(event, params) {
+                    report.divergence = Some(Divergence {
+                        entry: i,
+                        time: *time,
+                        event: event.clone(),
+                        what: format!("the engine refuses the recorded event: {r}"),
+                        recorded: Vec::new(),
+                        replayed: describe(project, engine.layout(), engine.state()),
+                    });
+                    break;
+                }
+            }
+            Entry::Step {
+                time,
+                event,
+                outcome,
+                fired,
+                state,
+                ..
+            } => {
+                engine.advance_to(*time);
+                log.clear();
+                let Some(step) = engine.step(&mut log) else {
+                    report.divergence = Some(diverge(
+                        &engine,
+                        "the journal has a step here, the replay has no event left to take".into(),
+                        event,
+                        *time,
+                        state,
+                    ));
+                    break;
+                };
+                report.steps += 1;
+                let taken = &project.events[step.event as usize].name;
+                let replayed_outcome = match step.outcome {
+                    StepOutcome::Processed => "processed",
+                    StepOutcome::Unused => "unused",
+                    StepOutcome::RefusedAfterCatastrophic => "refused",
+                };
+                let found_fired = log.fired_names();
+                let what = if taken != event {
+                    Some(format!("the replay took `{taken}`, the journal `{event}`"))
+                } else if replayed_outcome != outcome {
+                    Some(format!(
+                        "the event was {replayed_outcome} in the replay, {outcome} in the journal"
+                    ))
+                } else if &found_fired != fired {
+                    Some(format!(
+                        "fired [{}] in the replay, [{}] in the journal",
+                        found_fired.join(", "),
+                        fired.join(", ")
+                    ))
+                } else if engine.state() != state.as_slice() {
+                    Some("the marking after the step differs".to_string())
+                } else {
+                    None
+                };
+                if let Some(what) = what {
+                    report.divergence = Some(diverge(&engine, what, event, *time, state));
+                    break;
+                }
+            }
+        }
+    }
+    (engine, report)
+}
