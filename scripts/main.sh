@@ -27,7 +27,8 @@ echo "== live flight on vehicle $vehicle: petrel play + uav_gui + uav_dec over i
 pids=()
 cleanup() { for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done; wait 2>/dev/null || true; }
 trap cleanup EXIT
-RUST_LOG=${RUST_LOG:-warn} "$petrel" play "$mission" --vehicle "$vehicle" --run-for 60 &
+RUST_LOG=${RUST_LOG:-warn} "$petrel" play "$mission" --vehicle "$vehicle" --run-for 60 \
+    --journal "target/journal/$vehicle" &
 pids+=($!)
 until "$petrel" status "$mission" --vehicle "$vehicle" >/dev/null 2>&1; do sleep 0.1; done
 target/release/examples/uav_gui --vehicle "$vehicle" >/dev/null 2>&1 & pids+=($!)
@@ -41,3 +42,7 @@ for _ in $(seq 1 300); do
     sleep 0.1
 done
 "$petrel" status "$mission" --vehicle "$vehicle"
+kill "${pids[0]}" 2>/dev/null || true
+wait "${pids[0]}" 2>/dev/null || true
+echo "== the flight recorder: target/journal/$vehicle"
+"$petrel" replay "target/journal/$vehicle"

@@ -50,16 +50,32 @@ pub struct Player {
     pub vehicle: String,
     /// Its project directory.
     pub dir: PathBuf,
+    /// Its journal directory (in the system's temporary directory).
+    pub journal: PathBuf,
+}
+
+/// The journal directory the tests give the player of `vehicle`.
+pub fn journal_dir(vehicle: &str) -> PathBuf {
+    std::env::temp_dir().join(format!("petrel-journal-{vehicle}"))
 }
 
 impl Player {
     /// Starts `petrel play DIR --vehicle VEHICLE` and waits until it answers `petrel status`.
     pub fn start(dir: &Path, vehicle: &str) -> Player {
+        Self::start_with(dir, vehicle, &[])
+    }
+
+    /// The same, with more arguments for `petrel play` (`--resume`, `--shadow`...).
+    pub fn start_with(dir: &Path, vehicle: &str, extra: &[&str]) -> Player {
         let log = std::env::temp_dir().join(format!("petrel-play-{vehicle}.log"));
+        let journal = journal_dir(vehicle);
         let child = Command::new(petrel_bin())
             .arg("play")
             .arg(dir)
             .args(["--vehicle", vehicle])
+            .arg("--journal")
+            .arg(&journal)
+            .args(extra)
             .stderr(std::fs::File::create(&log).expect("log file"))
             .spawn()
             .expect("petrel play starts");
@@ -67,6 +83,7 @@ impl Player {
             child,
             vehicle: vehicle.to_string(),
             dir: dir.to_path_buf(),
+            journal,
         };
         let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
         while std::time::Instant::now() < deadline {
