@@ -19,7 +19,10 @@ fn report(name: &str) -> (String, serde_json::Value, Vec<&'static str>) {
     let (loaded, compiled, d) = load_and_check(&dir).expect("case project reads");
     assert!(compiled.is_none(), "case {name} must not compile");
     let prefix = format!("{}/", dir.display());
-    let text = d.render_human(&loaded.sources).replace(&prefix, "");
+    let text = d
+        .render_human(&loaded.sources)
+        .replace(&prefix, "")
+        .replace(&dir.display().to_string(), "<project dir>");
     let json = d.to_json(&loaded.sources);
     let codes = d.iter().map(|d| d.code).collect();
     (text, json, codes)
