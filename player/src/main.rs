@@ -338,10 +338,17 @@ fn write_output(output: Option<&Path>, text: &str) -> Result<(), Outcome> {
 const QUICK_VERIFY_STATES: u64 = 100_000;
 
 fn check(dir: &Path, format: Format, quick_verify: bool) -> Outcome {
-    let (loaded, compiled, mut d) = match project::load_and_check(dir) {
+    let (mut loaded, compiled, mut d) = match project::load_and_check(dir) {
         Ok(r) => r,
         Err(e) => return e.into(),
     };
+    // The CAN data server's rules (can.toml and its DBC), checked against the events.
+    if let Some(c) = &compiled {
+        if let Err(e) = petrel_can_bridge::load_project_can(dir, c, &mut loaded.sources, &mut d) {
+            return Outcome::Usage(format!("cannot read the project's CAN files: {e}"));
+        }
+        d.sort();
+    }
     if let (Some(c), true) = (&compiled, quick_verify) {
         let opts = verify::VerifyOptions {
             max_states: Some(QUICK_VERIFY_STATES),

@@ -327,3 +327,34 @@ fn run_plays_the_uav_scripts_in_virtual_time_as_json_lines() {
     );
     assert!(stderr(&o).contains("bad.script:2:"), "{}", stderr(&o));
 }
+
+#[test]
+fn check_reports_errors_in_the_can_rules_like_net_errors() {
+    let bench = repo().join("can_bridge/tests/data/auv");
+    let dir = copy_project(&bench);
+    // The DBC sits beside the bench project.
+    std::fs::copy(
+        repo().join("can_bridge/tests/data/auv.dbc"),
+        dir.path().join("auv.dbc"),
+    )
+    .unwrap();
+    let can = std::fs::read_to_string(dir.path().join("can.toml"))
+        .unwrap()
+        .replace("../auv.dbc", "auv.dbc");
+    std::fs::write(dir.path().join("can.toml"), &can).unwrap();
+    let d = dir.path().display().to_string();
+    assert_eq!(
+        petrel(&["check", &d]).status.code(),
+        Some(0),
+        "the bench checks clean"
+    );
+    std::fs::write(
+        dir.path().join("can.toml"),
+        can.replace("Depth.depth", "Depth.dpeth"),
+    )
+    .unwrap();
+    let o = petrel(&["check", &d]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = stderr(&o);
+    assert!(err.contains("E0703") && err.contains("can.toml:"), "{err}");
+}

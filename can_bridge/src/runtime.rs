@@ -1,0 +1,400 @@
+//! The data server's process loop: a [`Bus`], the [`BridgeCore`], and the vehicle's iceoryx2
+//! services.
+//!
+//! One thread waits (with a [`Reactor`], the same kind of WaitSet as the player's) on the bus's
+//! file descriptor, on the commands program's calls if can.toml names one, and on the next
+//! deadline of the core (staleness, hold times, heartbeat). It then:
+//!
+//! 1. reads every frame the bus has, records it (`candump -L`, direction `R`), and feeds it to
+//!    the core; unusual frames (unknown identifier, wrong length, error frames) are counted by
+//!    the core and logged here (the first ones of each kind, then one in 1,000);
+//! 2. turns calls into command frames and sends them (recorded with direction `T`, then fed to
+//!    the core as sent);
+//! 3. advances the core's time, sends the heartbeat when due (skipped, and counted, while frames
+//!    wait for the interface: a late burst of heartbeats would lie), polls the interface state
+//!    every `state_poll` and restarts the interface after a bus-off if can.toml asks;
+//! 4. retries frames waiting for the interface ([`Bus::flush`]);
+//! 5. sends the events to the player as [`Role::CanBridge`]. Events the player cannot take yet
+//!    (no player running) wait in a bounded outbox, in order; beyond its bound the oldest are
+//!    dropped, counted and logged.
+
+use std::collections::VecDeque;
+use std::fmt;
+use std::io::Write;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+use petrel_ipc::{
+    CallReceiver, EventMsg, EventSender, FdSource, Participant, Reactor, ReactorError, Role,
+    SendError, SetupError, Source, Vehicle, WaitStrategy,
+};
+
+use crate::bridge::{BridgeCore, Counters, FrameOutcome};
+use crate::bus::{Bus, BusError, BusStats};
+use crate::clock::Clock;
+use crate::faults::{describe_error_frame, BusState};
+use crate::log::{format_record, Direction, LogRecord};
+use crate::rules::EventOut;
+
+/// How the loop runs.
+pub struct RuntimeOptions {
+    /// How to wait for work.
+    pub wait: WaitStrategy,
+    /// Where to record every frame in and out, as a `candump -L` log (with directions).
+    pub record: Option<Box<dyn Write>>,
+    /// How often to ask the interface for its state, in microseconds.
+    pub state_poll_us: u64,
+    /// Events held while no player receives them.
+    pub outbox: usize,
+    /// Handle SIGINT and SIGTERM (stop in good order); off for tests.
+    pub handle_signals: bool,
+}
+
+impl Default for RuntimeOptions {
+    fn default() -> Self {
+        RuntimeOptions {
+            wait: WaitStrategy::Block,
+            record: None,
+            state_poll_us: 100_000,
+            outbox: 4096,
+            handle_signals: true,
+        }
+    }
+}
+
+impl fmt::Debug for RuntimeOptions {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("RuntimeOptions")
+            .field("wait", &self.wait)
+            .field("record", &self.record.is_some())
+            .field("state_poll_us", &self.state_poll_us)
+            .field("outbox", &self.outbox)
+            .field("handle_signals", &self.handle_signals)
+            .finish()
+    }
+}
+
+/// What a run did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RunReport {
+    /// The core's counters.
+    pub counters: Counters,
+    /// The bus's counters.
+    pub bus: BusStats,
+    /// Events delivered to the player.
+    pub events_sent: u64,
+    /// Events the player's buffer refused (it sees the gap).
+    pub events_refused: u64,
+    /// Events dropped from a full outbox (no player for too long).
+    pub events_dropped: u64,
+    /// Events still in the outbox at the end.
+    pub events_pending: usize,
+    /// Frames refused by a full transmit queue.
+    pub frames_refused: u64,
+    /// Frames recorded to the log.
+    pub frames_recorded: u64,
+    /// Heartbeats not sent because earlier frames still waited for the interface.
+    pub heartbeats_skipped: u64,
+}
+
+/// The loop could not run.
+#[derive(Debug)]
+pub enum RuntimeError {
+    /// Joining the vehicle or opening a port failed.
+    Setup(SetupError),
+    /// The reactor failed.
+    Reactor(ReactorError),
+    /// The bus failed for good (reading it).
+    Bus(BusError),
+    /// The bus gives no file descriptor to wait on.
+    NoFd,
+}
+
+impl fmt::Display for RuntimeError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            RuntimeError::Setup(e) => e.fmt(f),
+            RuntimeError::Reactor(e) => e.fmt(f),
+            RuntimeError::Bus(e) => e.fmt(f),
+            RuntimeError::NoFd => f.write_str("the bus gives no file descriptor to wait on"),
+        }
+    }
+}
+
+impl std::error::Error for RuntimeError {}
+
+impl From<SetupError> for RuntimeError {
+    fn from(e: SetupError) -> Self {
+        RuntimeError::Setup(e)
+    }
+}
+impl From<ReactorError> for RuntimeError {
+    fn from(e: ReactorError) -> Self {
+        RuntimeError::Reactor(e)
+    }
+}
+
+/// Logs the first occurrences of a kind of problem, then one in 1,000.
+fn worth_logging(count: u64) -> bool {
+    count <= 10 || count.is_multiple_of(1000)
+}
+
+struct Loop<B: Bus> {
+    core: BridgeCore,
+    bus: B,
+    clock: Arc<dyn Clock>,
+    events: EventSender,
+    outbox: VecDeque<EventMsg>,
+    opts: RuntimeOptions,
+    report: RunReport,
+}
+
+impl<B: Bus> Loop<B> {
+    fn record(&mut self, time_us: u64, frame: &crate::frame::Frame, dir: Direction) {
+        if let Some(out) = &mut self.opts.record {
+            let line = format_record(&LogRecord {
+                time_us,
+                interface: self.bus.interface().to_owned(),
+                frame: *frame,
+                direction: Some(dir),
+            });
+            match writeln!(out, "{line}") {
+                Ok(()) => self.report.frames_recorded += 1,
+                Err(e) => {
+                    tracing::error!("cannot record the bus: {e}; recording stops");
+                    self.opts.record = None;
+                }
+            }
+        }
+    }
+
+    fn queue_events(&mut self, events: Vec<EventOut>) {
+        for e in events {
+            tracing::info!(
+                time_us = e.time_us,
+                "event {} {:?}",
+                e.msg.name,
+                e.msg.params
+            );
+            if self.outbox.len() >= self.opts.outbox.max(1) {
+                if let Some(old) = self.outbox.pop_front() {
+                    self.report.events_dropped += 1;
+                    tracing::error!(
+                        "no player took events for too long: event `{}` dropped ({} dropped so far)",
+                        old.name,
+                        self.report.events_dropped
+                    );
+                }
+            }
+            self.outbox.push_back(e.msg);
+        }
+    }
+
+    fn send(&mut self, frame: &crate::frame::Frame, what: &str) {
+        let now = self.clock.now_us();
+        match self.bus.send(frame) {
+            Ok(_) => {
+                self.record(now, frame, Direction::Transmitted);
+                let events = self.core.on_sent(now, frame);
+                self.queue_events(events);
+            }
+            Err(BusError::QueueFull { frame, capacity }) => {
+                self.report.frames_refused += 1;
+                tracing::error!(
+                    "{what} {frame} not sent: {capacity} frames already wait for `{}`",
+                    self.bus.interface()
+                );
+            }
+            Err(e) => tracing::error!("{what} {frame} not sent: {e}"),
+        }
+    }
+
+    fn read_bus(&mut self) -> Result<(), RuntimeError> {
+        while let Some(tf) = self.bus.recv().map_err(RuntimeError::Bus)? {
+            self.record(tf.time_us, &tf.frame, Direction::Received);
+            let report = self.core.on_frame(tf.time_us, &tf.frame);
+            let c = self.core.counters();
+            match &report.outcome {
+                FrameOutcome::Decoded(_) => {}
+                FrameOutcome::UnknownId(id) if worth_logging(c.unknown_id) => tracing::warn!(
+                    "frame {} with identifier {id} unknown to the DBC ({} so far)",
+                    tf.frame,
+                    c.unknown_id
+                ),
+                FrameOutcome::WrongLength {
+                    message,
+                    expected,
+                    got,
+                } if worth_logging(c.wrong_length) => tracing::warn!(
+                    "frame {} of message `{}` has {got} bytes, the DBC says {expected} ({} so far)",
+                    tf.frame,
+                    self.core
+                        .dbc()
+                        .message(*message)
+                        .map_or("?", |m| m.name.as_str()),
+                    c.wrong_length
+                ),
+                FrameOutcome::Error(state) if worth_logging(c.error_frames) => tracing::warn!(
+                    "error frame: {}{} ({} so far)",
+                    describe_error_frame(&tf.frame),
+                    state.map_or(String::new(), |s| format!(", bus {s}")),
+                    c.error_frames
+                ),
+                _ => {}
+            }
+            if let FrameOutcome::Error(Some(BusState::BusOff)) = report.outcome {
+                self.restart_if_asked();
+            }
+            self.queue_events(report.events);
+        }
+        Ok(())
+    }
+
+    fn restart_if_asked(&mut self) {
+        if self.core.config().bus.restart_after_bus_off {
+            match self.bus.restart() {
+                Ok(()) => tracing::warn!("bus-off: `{}` restarted", self.bus.interface()),
+                Err(e) => tracing::error!("bus-off: cannot restart: {e}"),
+            }
+        }
+    }
+
+    fn take_calls(&mut self, calls: &CallReceiver) {
+        let mut received = Vec::new();
+        let drained = calls.drain(|r| match r {
+            Ok(r) => received.push(r.msg),
+            Err(e) => tracing::warn!("a command could not be read: {e}"),
+        });
+        if let Err(e) = drained {
+            tracing::warn!("commands could not be read: {e}");
+        }
+        for call in received {
+            match self.core.command_call(&call) {
+                Ok(frame) => self.send(&frame, "command"),
+                Err(e) => tracing::error!("command {}: {e}", call.function),
+            }
+        }
+    }
+
+    fn deliver(&mut self) {
+        while let Some(msg) = self.outbox.front() {
+            match self.events.send(msg) {
+                Ok(_) => {
+                    self.report.events_sent += 1;
+                    self.outbox.pop_front();
+                }
+                Err(SendError::NoReceiver { .. }) => break,
+                Err(e) => {
+                    self.report.events_refused += 1;
+                    tracing::error!("event `{}`: {e}", msg.name);
+                    self.outbox.pop_front();
+                }
+            }
+        }
+    }
+}
+
+/// Runs the data server until `stop` is set (or SIGINT/SIGTERM with signal handling on).
+///
+/// `clock` must be the bus's clock (the system clock for SocketCAN, the hub's for a memory
+/// bus): frame timestamps and deadlines are compared.
+pub fn run<B: Bus>(
+    core: BridgeCore,
+    bus: B,
+    clock: Arc<dyn Clock>,
+    vehicle: &Vehicle,
+    opts: RuntimeOptions,
+    stop: &AtomicBool,
+) -> Result<RunReport, RuntimeError> {
+    let participant = Participant::join(vehicle, Role::CanBridge)?;
+    let events = participant.event_sender()?;
+    let commands = match &core.config().commands.program {
+        Some(p) => {
+            let prog = Participant::join(vehicle, Role::program(p).map_err(SetupError::Name)?)?;
+            let calls = prog.call_receiver()?;
+            Some((prog, calls))
+        }
+        None => None,
+    };
+    let reactor = if opts.handle_signals {
+        Reactor::new(opts.wait)?
+    } else {
+        Reactor::without_signal_handling(opts.wait)?
+    };
+    let fd = FdSource::new(bus.wait_fd().ok_or(RuntimeError::NoFd)?)?;
+    let state_poll = opts.state_poll_us.max(1000);
+    let mut lp = Loop {
+        core,
+        bus,
+        clock,
+        events,
+        outbox: VecDeque::new(),
+        opts,
+        report: RunReport::default(),
+    };
+    let mut next_poll = lp.clock.now_us();
+    while !stop.load(Ordering::Relaxed) {
+        let now = lp.clock.now_us();
+        let mut deadline = lp.core.next_deadline().unwrap_or(u64::MAX).min(next_poll);
+        if !lp.outbox.is_empty() || lp.bus.queued() > 0 {
+            deadline = deadline.min(now.saturating_add(10_000));
+        }
+        // Wake at least every 100 ms to see `stop`.
+        let timeout = Duration::from_micros(deadline.saturating_sub(now).min(100_000));
+        let ready = match &commands {
+            Some((_, calls)) => reactor.wait(&[&fd as &dyn Source, calls], Some(timeout))?,
+            None => reactor.wait(&[&fd as &dyn Source], Some(timeout))?,
+        };
+        if ready.termination_requested() {
+            break;
+        }
+        lp.read_bus()?;
+        if let Some((_, calls)) = &commands {
+            lp.take_calls(calls);
+        }
+        let now = lp.clock.now_us();
+        let events = lp.core.on_time(now);
+        lp.queue_events(events);
+        if let Some(frame) = lp.core.poll_heartbeat(now) {
+            if lp.bus.queued() > 0 {
+                // The interface pushes back (or is off the bus): a heartbeat is a sign of
+                // life now, not later; a burst of old ones after a recovery would lie.
+                lp.report.heartbeats_skipped += 1;
+                tracing::debug!("heartbeat skipped: frames wait for the interface");
+            } else {
+                lp.send(&frame, "heartbeat");
+            }
+        }
+        if now >= next_poll {
+            next_poll = now.saturating_add(state_poll);
+            match lp.bus.state() {
+                Ok(Some(state)) => {
+                    let events = lp.core.on_bus_state(now, state);
+                    if !events.is_empty() && state == BusState::BusOff {
+                        lp.restart_if_asked();
+                    }
+                    lp.queue_events(events);
+                }
+                Ok(None) => {}
+                Err(e) => {
+                    tracing::debug!("bus state unknown: {e}");
+                }
+            }
+        }
+        if let Err(e) = lp.bus.flush() {
+            tracing::error!("frames waiting for `{}`: {e}", lp.bus.interface());
+        }
+        lp.deliver();
+    }
+    // Last chance for waiting events and frames.
+    let _ = lp.bus.flush();
+    lp.deliver();
+    if let Some(out) = &mut lp.opts.record {
+        let _ = out.flush();
+    }
+    lp.report.counters = lp.core.counters();
+    lp.report.bus = lp.bus.stats();
+    lp.report.events_pending = lp.outbox.len();
+    Ok(lp.report)
+}
