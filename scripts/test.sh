@@ -18,12 +18,17 @@ cargo fmt --all -- --check
 echo "== cargo clippy"
 cargo clippy --workspace --all-targets --locked -- -D warnings
 echo "== cargo test"
-cargo test --workspace --locked
+log=$(mktemp)
+trap 'rm -f "$log"' EXIT
+cargo test --workspace --locked 2>&1 | tee "$log"
 
 # Real SocketCAN: this kernel has none, so the CAN bridge's socket tests run on a real vcan0
 # inside a qemu VM (scripts/vcan-vm.sh installs and caches what it needs; on a machine whose
 # kernel has vcan it runs them directly). A failure inside fails the suite.
 echo "== CAN bridge on a real vcan0 (VM bench)"
 for test in socketcan; do
-    PETREL_REQUIRE_VCAN=1 scripts/vcan-vm.sh cargo-test -p petrel-can-bridge --test "$test"
+    PETREL_REQUIRE_VCAN=1 scripts/vcan-vm.sh cargo-test -p petrel-can-bridge --test "$test" 2>&1 | tee -a "$log"
 done
+
+# One closing line for the whole suite (every `test result:` line above, host and VM).
+grep -E '^test result: ' "$log" | awk '{p += $4; f += $6} END {printf "%d passed, %d failed\n", p, f}'
