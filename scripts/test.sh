@@ -26,7 +26,7 @@ cargo test --workspace --locked 2>&1 | tee "$log"
 # inside a qemu VM (scripts/vcan-vm.sh installs and caches what it needs; on a machine whose
 # kernel has vcan it runs them directly). A failure inside fails the suite.
 echo "== CAN bridge on a real vcan0 (VM bench)"
-for test in socketcan; do
+for test in socketcan vcan; do
     PETREL_REQUIRE_VCAN=1 scripts/vcan-vm.sh cargo-test -p petrel-can-bridge --test "$test" 2>&1 | tee -a "$log"
 done
 
