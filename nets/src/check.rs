@@ -38,8 +38,8 @@ struct Checker<'p> {
     timers: HashMap<&'p str, u32>,
 }
 
-/// Edit distance, for "did you mean" hints.
-fn distance(a: &str, b: &str) -> usize {
+/// Edit distance (Levenshtein, over characters), for "did you mean" hints.
+pub fn distance(a: &str, b: &str) -> usize {
     let b: Vec<char> = b.chars().collect();
     let mut row: Vec<usize> = (0..=b.len()).collect();
     for (i, ca) in a.chars().enumerate() {

@@ -943,6 +943,31 @@ fn vehicle_of(
         .map_err(|e| Outcome::Usage(format!("bad vehicle name `{name}`: {e}")))
 }
 
+/// Joins the project's vehicle as an operator tool (`tool/<what><pid>`), with a subscription
+/// to the player's heartbeat (its status and acknowledgements).
+fn join_as_tool(
+    c: &petrel_nets::compiled::CompiledProject,
+    vehicle: Option<String>,
+    what: &str,
+) -> Result<
+    (
+        petrel_ipc::Vehicle,
+        petrel_ipc::Participant,
+        petrel_ipc::HeartbeatSubscriber,
+    ),
+    Outcome,
+> {
+    let v = vehicle_of(c, vehicle)?;
+    let role = petrel_ipc::Role::tool(&format!("{what}{}", std::process::id()))
+        .map_err(|e| Outcome::Usage(e.to_string()))?;
+    let me = petrel_ipc::Participant::join(&v, role)
+        .map_err(|e| Outcome::Usage(format!("cannot join vehicle `{}`: {e}", v.name())))?;
+    let beats = me
+        .heartbeat_subscriber()
+        .map_err(|e| Outcome::Usage(e.to_string()))?;
+    Ok((v, me, beats))
+}
+
 fn send(dir: &Path, event: &str, vehicle: Option<String>, count: u64) -> Outcome {
     let c = match compiled(dir) {
         Ok(c) => c,
@@ -971,17 +996,9 @@ fn send(dir: &Path, event: &str, vehicle: Option<String>, count: u64) -> Outcome
     else {
         return Outcome::Usage(format!("`{event}` is not an event"));
     };
-    let v = match vehicle_of(&c, vehicle) {
-        Ok(v) => v,
+    let (v, me, beats) = match join_as_tool(&c, vehicle, "send") {
+        Ok(x) => x,
         Err(o) => return o,
-    };
-    let role = match petrel_ipc::Role::tool(&format!("send{}", std::process::id())) {
-        Ok(r) => r,
-        Err(e) => return Outcome::Usage(e.to_string()),
-    };
-    let me = match petrel_ipc::Participant::join(&v, role) {
-        Ok(p) => p,
-        Err(e) => return Outcome::Usage(format!("cannot join vehicle `{}`: {e}", v.name())),
     };
     let sender = match me.event_sender() {
         Ok(s) => s,
@@ -992,10 +1009,6 @@ fn send(dir: &Path, event: &str, vehicle: Option<String>, count: u64) -> Outcome
         .map(petrel_player::runtime::value_to_wire)
         .collect();
     let msg = petrel_ipc::EventMsg::new(name.clone(), wire);
-    let beats = match me.heartbeat_subscriber() {
-        Ok(s) => s,
-        Err(e) => return Outcome::Usage(e.to_string()),
-    };
     let (mut delivered, mut refused, mut absent, mut last_seq) = (0u64, 0u64, 0u64, 0u64);
     for _ in 0..count {
         match sender.send(&msg) {
@@ -1054,21 +1067,9 @@ fn status(dir: &Path, vehicle: Option<String>, json: bool) -> Outcome {
         Ok(c) => c,
         Err(o) => return o,
     };
-    let v = match vehicle_of(&c, vehicle) {
-        Ok(v) => v,
+    let (v, _me, beats) = match join_as_tool(&c, vehicle, "status") {
+        Ok(x) => x,
         Err(o) => return o,
-    };
-    let role = match petrel_ipc::Role::tool(&format!("status{}", std::process::id())) {
-        Ok(r) => r,
-        Err(e) => return Outcome::Usage(e.to_string()),
-    };
-    let me = match petrel_ipc::Participant::join(&v, role) {
-        Ok(p) => p,
-        Err(e) => return Outcome::Usage(format!("cannot join vehicle `{}`: {e}", v.name())),
-    };
-    let beats = match me.heartbeat_subscriber() {
-        Ok(s) => s,
-        Err(e) => return Outcome::Usage(e.to_string()),
     };
     // The player's heartbeat carries its status; wait for the next one (about 100 ms).
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(2);

@@ -226,26 +226,15 @@ pub fn parse_duration_us(text: &str) -> Option<u64> {
     (0.0..9.2e18).contains(&us).then_some(us as u64)
 }
 
-/// Edit distance, for "did you mean" hints.
-fn distance(a: &str, b: &str) -> usize {
-    let b: Vec<char> = b.chars().collect();
-    let mut row: Vec<usize> = (0..=b.len()).collect();
-    for (i, ca) in a.chars().enumerate() {
-        let mut prev = row[0];
-        row[0] = i + 1;
-        for (j, cb) in b.iter().enumerate() {
-            let cur = row[j + 1];
-            row[j + 1] = (prev + usize::from(ca != *cb)).min(row[j] + 1).min(cur + 1);
-            prev = cur;
-        }
-    }
-    row[b.len()]
-}
-
 fn suggest(name: &str, candidates: &[String]) -> String {
     let best = candidates
         .iter()
-        .map(|c| (distance(&name.to_lowercase(), &c.to_lowercase()), c))
+        .map(|c| {
+            (
+                petrel_nets::check::distance(&name.to_lowercase(), &c.to_lowercase()),
+                c,
+            )
+        })
         .min();
     match best {
         Some((d, c)) if d <= 2.max(name.len() / 3) => format!("did you mean `{c}`?"),
