@@ -14,17 +14,10 @@
 
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::sync::atomic::AtomicBool;
-use std::sync::Arc;
-use std::time::Duration;
 
 use clap::Parser;
-use petrel_can_bridge::bridge::BridgeCore;
-use petrel_can_bridge::bus::{Bus, MemoryHub, SocketCanBus, SocketCanOptions};
-use petrel_can_bridge::clock::{Clock, ManualClock, SystemClock};
-use petrel_can_bridge::replay::{replay_text, Pacing};
-use petrel_can_bridge::runtime::{run, RuntimeOptions};
-use petrel_can_bridge::{load_project_can, Dbc};
+use petrel_can_bridge::load_project_can;
+use petrel_can_bridge::serve::{replay_log, serve, ServeOptions};
 use petrel_ipc::{Value, Vehicle, WaitStrategy};
 use petrel_nets::diag::Diagnostics;
 
@@ -66,32 +59,6 @@ fn value_json(v: &Value) -> String {
                 .join(",")
         ),
     }
-}
-
-/// A depth sensor diving to 30 m at 0.5 m per 100 ms, and an AHRS, on the memory bus.
-fn simulate(hub: MemoryHub, dbc: Arc<Dbc>) {
-    let Ok(mut node) = hub.endpoint("sim") else {
-        return;
-    };
-    std::thread::spawn(move || {
-        let mut depth: f64 = 0.0;
-        loop {
-            depth = (depth + 0.5).min(30.0);
-            for (msg, values) in [
-                ("Depth", vec![("depth", depth), ("status", 0.0)]),
-                (
-                    "Ahrs",
-                    vec![("heading", 90.0), ("pitch", -5.0), ("roll", 0.0)],
-                ),
-            ] {
-                if let Ok(f) = dbc.encode(msg, &values) {
-                    let _ = node.send(&f);
-                }
-            }
-            while let Ok(Some(_)) = node.recv() {}
-            std::thread::sleep(Duration::from_millis(100));
-        }
-    });
 }
 
 fn main() -> ExitCode {
@@ -140,27 +107,8 @@ fn main() -> ExitCode {
     if diags.has_errors() {
         return ExitCode::from(1);
     }
-    let dbc = Arc::new(dbc);
-
     if let Some(log) = &args.replay {
-        let text = match std::fs::read_to_string(log) {
-            Ok(t) => t,
-            Err(e) => {
-                eprintln!("cannot read {}: {e}", log.display());
-                return ExitCode::from(2);
-            }
-        };
-        let start = text
-            .lines()
-            .find_map(|l| petrel_can_bridge::log::parse_line(l.trim()).ok())
-            .map_or(0, |r| r.time_us);
-        let mut core = BridgeCore::new(dbc, config, start);
-        return match replay_text(
-            &mut core,
-            &text,
-            Pacing::AsFastAsPossible,
-            &ManualClock::new(0),
-        ) {
+        return match replay_log(log, config, dbc) {
             Ok(events) => {
                 for e in events {
                     let params: Vec<String> = e.msg.params.iter().map(value_json).collect();
@@ -171,16 +119,14 @@ fn main() -> ExitCode {
                         params.join(",")
                     );
                 }
-                eprintln!("{:?}", core.counters());
                 ExitCode::SUCCESS
             }
             Err(e) => {
-                eprintln!("{}: {e}", log.display());
+                eprintln!("{e}");
                 ExitCode::from(1)
             }
         };
     }
-
     let vehicle = match Vehicle::new(&args.vehicle) {
         Ok(v) => v,
         Err(e) => {
@@ -188,56 +134,12 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    let clock: Arc<dyn Clock> = Arc::new(SystemClock);
-    let record: Option<Box<dyn std::io::Write>> = match &args.record {
-        None => None,
-        Some(p) => match std::fs::File::create(p) {
-            Ok(f) => Some(Box::new(std::io::BufWriter::new(f))),
-            Err(e) => {
-                eprintln!("cannot create {}: {e}", p.display());
-                return ExitCode::from(2);
-            }
-        },
-    };
-    let opts = RuntimeOptions {
+    let opts = ServeOptions {
+        bus: args.bus,
+        record: args.record,
         wait: args.wait,
-        record,
-        ..RuntimeOptions::default()
     };
-    let stop = AtomicBool::new(false);
-    let core = BridgeCore::new(dbc.clone(), config.clone(), clock.now_us());
-    let bus_name = args
-        .bus
-        .or(config.interface.clone())
-        .unwrap_or_else(|| "memory".to_owned());
-    let result = if bus_name == "memory" {
-        let hub = MemoryHub::new(clock.clone());
-        let bus = match hub.endpoint("mem0") {
-            Ok(b) => b,
-            Err(e) => {
-                eprintln!("cannot make a memory bus: {e}");
-                return ExitCode::from(2);
-            }
-        };
-        simulate(hub, dbc);
-        run(core, bus, clock, &vehicle, opts, &stop)
-    } else {
-        let bus = match SocketCanBus::open(
-            &bus_name,
-            &SocketCanOptions {
-                fd: config.fd,
-                ..SocketCanOptions::default()
-            },
-        ) {
-            Ok(b) => b,
-            Err(e) => {
-                eprintln!("{e}");
-                return ExitCode::from(2);
-            }
-        };
-        run(core, bus, clock, &vehicle, opts, &stop)
-    };
-    match result {
+    match serve(&vehicle, config, dbc, opts) {
         Ok(report) => {
             eprintln!("{report:?}");
             ExitCode::SUCCESS

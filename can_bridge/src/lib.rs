@@ -38,6 +38,7 @@ pub mod log;
 pub mod replay;
 pub mod rules;
 pub mod runtime;
+pub mod serve;
 
 pub use bridge::{BridgeCore, SignalTable};
 pub use bus::{Bus, MemoryBus, MemoryHub, SocketCanBus};

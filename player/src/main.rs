@@ -108,6 +108,29 @@ enum Command {
         #[arg(long, conflicts_with_all = ["resume"])]
         shadow: bool,
     },
+    /// The CAN data server: frames from the vehicle bus become events for the player (by the
+    /// rules of the project's can.toml), calls to the commands program become frames.
+    Bridge {
+        /// The project directory (petrel.toml, can.toml and its DBC).
+        dir: PathBuf,
+        /// The vehicle; default: the project's name.
+        #[arg(long)]
+        vehicle: Option<String>,
+        /// `memory` (an in-process bus with a simulated depth sensor and AHRS), or a SocketCAN
+        /// interface such as vcan0; default: can.toml's [bus] interface.
+        #[arg(long)]
+        bus: Option<String>,
+        /// Record every frame in and out to this candump -L log.
+        #[arg(long)]
+        record: Option<PathBuf>,
+        /// Instead of serving, replay this candump -L log and print the events it gives, one
+        /// JSON document a line.
+        #[arg(long)]
+        replay: Option<PathBuf>,
+        /// How the reactor waits: block, spin, or spin-then-block:<microseconds>.
+        #[arg(long, default_value = "block")]
+        wait: String,
+    },
     /// Replay a journal through the engine and check every recorded marking.
     Replay {
         /// The journal directory (or one segment file).
@@ -272,6 +295,14 @@ fn main() -> ExitCode {
             project,
             until,
         } => replay(&journal, project.as_deref(), until),
+        Command::Bridge {
+            dir,
+            vehicle,
+            bus,
+            record,
+            replay,
+            wait,
+        } => bridge(&dir, vehicle, bus, record, replay, &wait),
         Command::Journal {
             command: JournalCommand::Show { journal, format },
         } => journal_show(&journal, &format),
@@ -669,6 +700,89 @@ fn play(dir: &Path, a: PlayArgs) -> Outcome {
                 r.journal_records, per_record,
                 if r.resumed_steps > 0 { format!("; resumed after {} steps", r.resumed_steps) } else { String::new() }
             );
+            Outcome::Clean
+        }
+        Err(e) => Outcome::Usage(e.to_string()),
+    }
+}
+
+fn bridge(
+    dir: &Path,
+    vehicle: Option<String>,
+    bus: Option<String>,
+    record: Option<PathBuf>,
+    replay_log: Option<PathBuf>,
+    wait: &str,
+) -> Outcome {
+    use petrel_can_bridge::serve::{replay_log as replay_can, serve, ServeOptions};
+    let (mut loaded, compiled, mut d) = match project::load_and_check(dir) {
+        Ok(r) => r,
+        Err(e) => return e.into(),
+    };
+    let Some(c) = compiled else {
+        report(&d, &loaded.sources);
+        return Outcome::Errors;
+    };
+    let can = match petrel_can_bridge::load_project_can(dir, &c, &mut loaded.sources, &mut d) {
+        Ok(x) => x,
+        Err(e) => return Outcome::Usage(format!("cannot read the project's CAN files: {e}")),
+    };
+    d.sort();
+    report(&d, &loaded.sources);
+    if d.has_errors() {
+        return Outcome::Errors;
+    }
+    let Some((config, dbc)) = can else {
+        return Outcome::Usage(format!(
+            "{} has no can.toml: the CAN data server has nothing to serve",
+            dir.display()
+        ));
+    };
+    if let Some(log) = replay_log {
+        return match replay_can(&log, config, dbc) {
+            Ok(events) => {
+                let mut text = String::new();
+                for e in events {
+                    let params: Vec<serde_json::Value> = e
+                        .msg
+                        .params
+                        .iter()
+                        .map(|v| match v {
+                            petrel_ipc::Value::Int(i) => (*i).into(),
+                            petrel_ipc::Value::Float(f) => (*f).into(),
+                            petrel_ipc::Value::Bool(b) => (*b).into(),
+                            petrel_ipc::Value::Text(s) => s.clone().into(),
+                            petrel_ipc::Value::FloatList(l) => l.clone().into(),
+                        })
+                        .collect();
+                    let doc = serde_json::json!({"time_us": e.time_us, "event": e.msg.name, "params": params});
+                    text.push_str(&format!("{doc}\n"));
+                }
+                out(&text);
+                Outcome::Clean
+            }
+            Err(e) => {
+                eprintln!("error: {e}");
+                Outcome::Errors
+            }
+        };
+    }
+    let strategy: petrel_ipc::WaitStrategy = match wait.parse() {
+        Ok(s) => s,
+        Err(e) => return Outcome::Usage(e),
+    };
+    let v = match vehicle_of(&c, vehicle) {
+        Ok(v) => v,
+        Err(o) => return o,
+    };
+    let opts = ServeOptions {
+        bus,
+        record,
+        wait: strategy,
+    };
+    match serve(&v, config, dbc, opts) {
+        Ok(r) => {
+            eprintln!("bridge stopped: {r:?}");
             Outcome::Clean
         }
         Err(e) => Outcome::Usage(e.to_string()),

@@ -358,3 +358,37 @@ fn check_reports_errors_in_the_can_rules_like_net_errors() {
     let err = stderr(&o);
     assert!(err.contains("E0703") && err.contains("can.toml:"), "{err}");
 }
+
+#[test]
+fn bridge_replays_a_recorded_bus_to_its_events() {
+    let bench = repo().join("can_bridge/tests/data/auv");
+    let dir = tempfile::tempdir().unwrap();
+    // The leak detector (id 576 = 0x240) reports a leak for 300 ms: past the 200 ms debounce.
+    let mut log = String::new();
+    for i in 0..7 {
+        log.push_str(&format!("(1000.{:06}) vcan0 240#03 R\n", i * 50_000));
+    }
+    let path = dir.path().join("bus.log");
+    std::fs::write(&path, log).unwrap();
+    let o = petrel(&[
+        "bridge",
+        &bench.display().to_string(),
+        "--replay",
+        &path.display().to_string(),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let events: Vec<serde_json::Value> = stdout(&o)
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("JSON line"))
+        .collect();
+    let leaks: Vec<_> = events.iter().filter(|e| e["event"] == "leak").collect();
+    assert_eq!(leaks.len(), 1, "{events:?}");
+    assert_eq!(
+        leaks[0]["time_us"], 1_000_200_000u64,
+        "at the end of the debounce: {events:?}"
+    );
+    // A project without can.toml has nothing to serve.
+    let o = petrel(&["bridge", &uav(), "--replay", &path.display().to_string()]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("no can.toml"), "{}", stderr(&o));
+}

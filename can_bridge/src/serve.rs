@@ -1,0 +1,157 @@
+//! The data server as a process: what `petrel bridge` and `examples/bridge.rs` run.
+//!
+//! [`serve`] opens the bus (a SocketCAN interface, or `memory`: an in-process bus with a
+//! simulated depth sensor and AHRS, for machines without CAN) and runs the bridge until SIGINT
+//! or SIGTERM; [`replay_log`] feeds a recorded `candump -L` log through the bridge offline and
+//! returns the events it gives.
+
+use crate::bridge::BridgeCore;
+use crate::bus::{Bus, MemoryHub, SocketCanBus, SocketCanOptions};
+use crate::clock::{Clock, ManualClock, SystemClock};
+use crate::replay::{replay_text, Pacing};
+use crate::rules::{CanConfig, EventOut};
+use crate::runtime::{run, RunReport, RuntimeOptions};
+use crate::Dbc;
+use petrel_ipc::{Vehicle, WaitStrategy};
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+use std::time::Duration;
+
+/// How to serve.
+pub struct ServeOptions {
+    /// `memory`, or a SocketCAN interface; `None`: can.toml's `[bus] interface`, else memory.
+    pub bus: Option<String>,
+    /// Record every frame in and out to this `candump -L` log.
+    pub record: Option<std::path::PathBuf>,
+    /// How the reactor waits.
+    pub wait: WaitStrategy,
+}
+
+/// Why the server could not run.
+#[derive(Debug)]
+pub enum ServeError {
+    /// A file could not be created or read.
+    Io(String),
+    /// The bus could not be opened.
+    Bus(String),
+    /// The bridge stopped on an error.
+    Runtime(String),
+    /// A log could not be replayed.
+    Replay(String),
+}
+
+impl std::fmt::Display for ServeError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ServeError::Io(e)
+            | ServeError::Bus(e)
+            | ServeError::Runtime(e)
+            | ServeError::Replay(e) => f.write_str(e),
+        }
+    }
+}
+
+impl std::error::Error for ServeError {}
+
+/// A depth sensor diving to 30 m at 0.5 m per 100 ms, and an AHRS, on the memory bus: the
+/// simulated vehicle `--bus memory` serves.
+pub fn simulate_dive(hub: MemoryHub, dbc: Arc<Dbc>) {
+    let Ok(mut node) = hub.endpoint("sim") else {
+        return;
+    };
+    std::thread::spawn(move || {
+        let mut depth: f64 = 0.0;
+        loop {
+            depth = (depth + 0.5).min(30.0);
+            for (msg, values) in [
+                ("Depth", vec![("depth", depth), ("status", 0.0)]),
+                (
+                    "Ahrs",
+                    vec![("heading", 90.0), ("pitch", -5.0), ("roll", 0.0)],
+                ),
+            ] {
+                if let Ok(f) = dbc.encode(msg, &values) {
+                    // The simulation runs until the process ends; a full memory bus only
+                    // delays the next sample.
+                    let _ = node.send(&f);
+                }
+            }
+            while let Ok(Some(_)) = node.recv() {}
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    });
+}
+
+/// Serves the bus for `vehicle` until SIGINT or SIGTERM.
+pub fn serve(
+    vehicle: &Vehicle,
+    config: CanConfig,
+    dbc: Dbc,
+    opts: ServeOptions,
+) -> Result<RunReport, ServeError> {
+    let dbc = Arc::new(dbc);
+    let clock: Arc<dyn Clock> = Arc::new(SystemClock);
+    let record: Option<Box<dyn std::io::Write>> = match &opts.record {
+        None => None,
+        Some(p) => match std::fs::File::create(p) {
+            Ok(f) => Some(Box::new(std::io::BufWriter::new(f))),
+            Err(e) => {
+                return Err(ServeError::Io(format!(
+                    "cannot create {}: {e}",
+                    p.display()
+                )))
+            }
+        },
+    };
+    let run_opts = RuntimeOptions {
+        wait: opts.wait,
+        record,
+        ..RuntimeOptions::default()
+    };
+    let stop = AtomicBool::new(false);
+    let bus_name = opts
+        .bus
+        .or(config.interface.clone())
+        .unwrap_or_else(|| "memory".to_owned());
+    let fd = config.fd;
+    let core = BridgeCore::new(dbc.clone(), config, clock.now_us());
+    let result = if bus_name == "memory" {
+        let hub = MemoryHub::new(clock.clone());
+        let bus = hub
+            .endpoint("mem0")
+            .map_err(|e| ServeError::Bus(format!("cannot make a memory bus: {e}")))?;
+        simulate_dive(hub, dbc);
+        run(core, bus, clock, vehicle, run_opts, &stop)
+    } else {
+        let bus = SocketCanBus::open(
+            &bus_name,
+            &SocketCanOptions {
+                fd,
+                ..SocketCanOptions::default()
+            },
+        )
+        .map_err(|e| ServeError::Bus(e.to_string()))?;
+        run(core, bus, clock, vehicle, run_opts, &stop)
+    };
+    result.map_err(|e| ServeError::Runtime(e.to_string()))
+}
+
+/// Replays a recorded `candump -L` log through the bridge as fast as possible and returns the
+/// events it gives, in order.
+pub fn replay_log(log: &Path, config: CanConfig, dbc: Dbc) -> Result<Vec<EventOut>, ServeError> {
+    let text = std::fs::read_to_string(log)
+        .map_err(|e| ServeError::Io(format!("cannot read {}: {e}", log.display())))?;
+    let start = text
+        .lines()
+        .find_map(|l| crate::log::parse_line(l.trim()).ok())
+        .map_or(0, |r| r.time_us);
+    let mut core = BridgeCore::new(Arc::new(dbc), config, start);
+    replay_text(
+        &mut core,
+        &text,
+        Pacing::AsFastAsPossible,
+        &ManualClock::new(0),
+    )
+    .map_err(|e| ServeError::Replay(format!("{}: {e}", log.display())))
+}
