@@ -76,6 +76,19 @@ impl SignalTable {
     }
 
     /// The latest value of a signal.
+    /// The latest value of every signal seen, as the `signals` service publishes them.
+    pub fn to_msg(&self, dbc: &Dbc) -> petrel_ipc::SignalsMsg {
+        let values: Vec<(String, f64, u64)> = self
+            .iter()
+            .map(|(r, s)| (dbc.signal_path(r), s.physical, s.time_us))
+            .collect();
+        petrel_ipc::SignalsMsg {
+            time_us: values.iter().map(|v| v.2).max().unwrap_or(0),
+            values,
+        }
+    }
+
+    /// The latest value of a signal.
     pub fn get(&self, s: SignalRef) -> Option<SignalSample> {
         *self.values.get(s.message)?.get(s.signal)?
     }

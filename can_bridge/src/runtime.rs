@@ -309,6 +309,9 @@ pub fn run<B: Bus>(
 ) -> Result<RunReport, RuntimeError> {
     let participant = Participant::join(vehicle, Role::CanBridge)?;
     let events = participant.event_sender()?;
+    // Latest values of the decoded signals, for the programs.
+    let signals = participant.signals_publisher()?;
+    let mut published_updates = 0u64;
     let commands = match &core.config().commands.program {
         Some(p) => {
             let prog = Participant::join(vehicle, Role::program(p).map_err(SetupError::Name)?)?;
@@ -350,6 +353,16 @@ pub fn run<B: Bus>(
             break;
         }
         lp.read_bus()?;
+        let updates = lp.core.signals().updates();
+        if updates != published_updates {
+            published_updates = updates;
+            let msg = lp.core.signals().to_msg(lp.core.dbc());
+            match signals.send(&msg) {
+                // Latest-value service: nobody reading is not an error.
+                Ok(_) | Err(petrel_ipc::SendError::NoReceiver { .. }) => {}
+                Err(e) => tracing::warn!("signals not published: {e}"),
+            }
+        }
         if let Some((_, calls)) = &commands {
             lp.take_calls(calls);
         }

@@ -133,3 +133,59 @@ fn the_bridge_process_loop_over_iceoryx2() {
         .collect();
     assert_eq!(live, off);
 }
+
+#[test]
+fn decoded_signals_are_published_as_latest_values_for_the_programs() {
+    let vehicle = Vehicle::isolated("sig").unwrap();
+    let clock: Arc<dyn Clock> = Arc::new(SystemClock);
+    let hub = MemoryHub::new(clock.clone());
+    let bridge_bus = hub.endpoint("mem0").unwrap();
+    let mut sensor = hub.endpoint("depth").unwrap();
+    // A program reading the signals, as a navigation program would.
+    let reader = Participant::join(&vehicle, Role::program("NAV").unwrap()).unwrap();
+    let signals = reader.signals_subscriber().unwrap();
+    let stop = Arc::new(AtomicBool::new(false));
+    let start = clock.now_us();
+    let bridge = {
+        let (vehicle, stop, clock) = (vehicle.clone(), stop.clone(), clock.clone());
+        std::thread::spawn(move || {
+            let core = BridgeCore::new(dbc(), config(), start);
+            let opts = RuntimeOptions {
+                handle_signals: false,
+                ..RuntimeOptions::default()
+            };
+            run(core, bridge_bus, clock, &vehicle, opts, &stop)
+        })
+    };
+    let dbc = dbc();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let mut latest = None;
+    let mut depth = 10.0;
+    while Instant::now() < deadline {
+        sensor
+            .send(
+                &dbc.encode("Depth", &[("depth", depth), ("status", 0.0)])
+                    .unwrap(),
+            )
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(20));
+        signals
+            .drain(|r| {
+                if let Ok(rcv) = r {
+                    latest = Some(rcv.msg);
+                }
+            })
+            .unwrap();
+        if latest.as_ref().and_then(|m| m.get("Depth.depth")) == Some(depth) && depth >= 12.0 {
+            break;
+        }
+        depth += 0.5;
+    }
+    stop.store(true, Ordering::Relaxed);
+    bridge.join().unwrap().unwrap();
+    let msg = latest.expect("signals were published");
+    // The newest depth, decoded with the DBC's scaling, and its status beside it.
+    assert_eq!(msg.get("Depth.depth"), Some(depth), "{msg:?}");
+    assert_eq!(msg.get("Depth.status"), Some(0.0), "{msg:?}");
+    assert!(msg.time_us >= start);
+}

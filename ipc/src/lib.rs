@@ -7,6 +7,7 @@
 //!  player --CallMsg--> petrel/<vehicle>/calls/<PROGRAM> ------------------------> program
 //!  player --MarkingMsg--> petrel/<vehicle>/marking -----------------------------> monitors
 //!  anyone --Heartbeat--> petrel/<vehicle>/heartbeat ----------------------------> anyone
+//!  CAN bridge --SignalsMsg--> petrel/<vehicle>/signals -------------------------> programs
 //! ```
 //!
 //! Each arrow is an iceoryx2 publish-subscribe service on `[u8]` (a bincode body, see
@@ -72,7 +73,8 @@ pub use participant::{Participant, ServiceFailure, SetupError};
 pub use port::{
     CallReceiver, CallSender, Drained, EventReceiver, EventSender, HeartbeatPublisher,
     HeartbeatSubscriber, MarkingPublisher, MarkingSubscriber, Received, Receiver, ReceiverStats,
-    RecvError, SendError, Sender, SenderAccount, SenderStats, Sent, ServiceSpec, Wakeups,
+    RecvError, SendError, Sender, SenderAccount, SenderStats, Sent, ServiceSpec, SignalsPublisher,
+    SignalsSubscriber, Wakeups,
 };
 pub use reactor::{FdSource, Reactor, ReactorError, Ready, Source, WaitStrategy};
-pub use wire::{CallMsg, EventMsg, Heartbeat, MarkingMsg, Origin, Value, WireError};
+pub use wire::{CallMsg, EventMsg, Heartbeat, MarkingMsg, Origin, SignalsMsg, Value, WireError};

@@ -202,6 +202,11 @@ impl Vehicle {
         format!("petrel/{}/marking", self.name)
     }
 
+    /// CAN signals, `petrel/<vehicle>/signals`, and the paired event service of the same name.
+    pub fn signals_service(&self) -> String {
+        format!("petrel/{}/signals", self.name)
+    }
+
     /// Heartbeats, `petrel/<vehicle>/heartbeat`, and the paired event service of the same name.
     pub fn heartbeat_service(&self) -> String {
         format!("petrel/{}/heartbeat", self.name)

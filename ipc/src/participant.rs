@@ -23,8 +23,9 @@ use iceoryx2::service::port_factory::{event, publish_subscribe};
 use crate::naming::{NameError, Role, Vehicle};
 use crate::port::{
     CallReceiver, CallSender, EventReceiver, EventSender, HeartbeatPublisher, HeartbeatSubscriber,
-    MarkingPublisher, MarkingSubscriber, Receiver, Sender, ServiceSpec, CALLS, EVENTS, HEARTBEAT,
-    MARKING, WAKE_MAX, WAKE_SENDER_DIED, WAKE_SENDER_JOINED, WAKE_SENDER_LEFT,
+    MarkingPublisher, MarkingSubscriber, Receiver, Sender, ServiceSpec, SignalsPublisher,
+    SignalsSubscriber, CALLS, EVENTS, HEARTBEAT, MARKING, SIGNALS, WAKE_MAX, WAKE_SENDER_DIED,
+    WAKE_SENDER_JOINED, WAKE_SENDER_LEFT,
 };
 use crate::wire::{Message, MsgHeader, Origin};
 
@@ -247,6 +248,16 @@ impl Participant {
             Role::Program(name) => self.receiver(self.vehicle.calls_service(name)?, CALLS),
             role => Err(SetupError::NotAProgram { role: role.clone() }),
         }
+    }
+
+    /// A publisher of the latest CAN signal values (the CAN data server).
+    pub fn signals_publisher(&self) -> Result<SignalsPublisher, SetupError> {
+        self.sender(self.vehicle.signals_service(), SIGNALS)
+    }
+
+    /// A subscriber to the latest CAN signal values.
+    pub fn signals_subscriber(&self) -> Result<SignalsSubscriber, SetupError> {
+        self.receiver(self.vehicle.signals_service(), SIGNALS)
     }
 
     /// A publisher of marking deltas.

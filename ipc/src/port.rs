@@ -127,6 +127,20 @@ pub const HEARTBEAT: ServiceSpec = ServiceSpec {
     safe_overflow: true,
 };
 
+/// CAN signals: latest-value semantics, like heartbeats (a program wants the newest depth, not
+/// every one it missed).
+pub const SIGNALS: ServiceSpec = ServiceSpec {
+    kind: MsgKind::Signals,
+    subscriber_buffer: 4,
+    history: 0,
+    max_publishers: 4,
+    max_subscribers: 32,
+    max_nodes: 64,
+    initial_slice_len: 4_096,
+    max_body_len: wire::MAX_BODY_LEN,
+    safe_overflow: true,
+};
+
 /// What a successful [`Sender::send`] did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Sent {
@@ -235,7 +249,9 @@ impl fmt::Display for SendError {
                 let hint = match kind {
                     MsgKind::Event => "is the player running?",
                     MsgKind::Call => "is the program running?",
-                    MsgKind::Marking | MsgKind::Heartbeat => "no monitor is connected",
+                    MsgKind::Marking | MsgKind::Heartbeat | MsgKind::Signals => {
+                        "no monitor is connected"
+                    }
                 };
                 write!(
                     f,
@@ -298,6 +314,8 @@ pub type CallSender = Sender<wire::CallMsg>;
 pub type MarkingPublisher = Sender<wire::MarkingMsg>;
 /// Publishes heartbeats.
 pub type HeartbeatPublisher = Sender<wire::Heartbeat>;
+/// Publishes the latest CAN signal values (the CAN data server).
+pub type SignalsPublisher = Sender<wire::SignalsMsg>;
 
 impl<M: Message> fmt::Debug for Sender<M> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -717,6 +735,8 @@ pub type CallReceiver = Receiver<wire::CallMsg>;
 pub type MarkingSubscriber = Receiver<wire::MarkingMsg>;
 /// Receives heartbeats.
 pub type HeartbeatSubscriber = Receiver<wire::Heartbeat>;
+/// Reads the latest CAN signal values (programs).
+pub type SignalsSubscriber = Receiver<wire::SignalsMsg>;
 
 impl<M: Message> fmt::Debug for Receiver<M> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {

@@ -15,6 +15,7 @@
 //! | calls     | [`CallMsg`]   | player to one program                  |
 //! | marking   | [`MarkingMsg`]| player to monitors                     |
 //! | heartbeat | [`Heartbeat`] | anyone to anyone who listens           |
+//! | signals   | [`SignalsMsg`]| CAN bridge to programs (latest values) |
 //!
 //! Events travel by **name**: programs do not know the player's event indices.
 //!
@@ -187,6 +188,26 @@ pub struct Heartbeat {
     pub status: String,
 }
 
+/// The latest decoded values of the vehicle's CAN signals (`MESSAGE.signal`), published by the
+/// CAN data server after each batch of frames for the programs that read them.
+#[derive(Debug, Clone, PartialEq, Default, Encode, Decode)]
+pub struct SignalsMsg {
+    /// When the newest of these values was received, microseconds on the bridge's clock.
+    pub time_us: u64,
+    /// `(MESSAGE.signal, physical value, microseconds when received)` for every signal seen.
+    pub values: Vec<(String, f64, u64)>,
+}
+
+impl SignalsMsg {
+    /// The latest value of `path` (`MESSAGE.signal`), if it was seen.
+    pub fn get(&self, path: &str) -> Option<f64> {
+        self.values
+            .iter()
+            .find(|(p, _, _)| p == path)
+            .map(|(_, v, _)| *v)
+    }
+}
+
 /// The kinds of message bodies, as written in the header.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[repr(u16)]
@@ -199,6 +220,8 @@ pub enum MsgKind {
     Marking = 3,
     /// [`Heartbeat`].
     Heartbeat = 4,
+    /// [`SignalsMsg`].
+    Signals = 5,
 }
 
 impl MsgKind {
@@ -209,6 +232,7 @@ impl MsgKind {
             2 => Some(MsgKind::Call),
             3 => Some(MsgKind::Marking),
             4 => Some(MsgKind::Heartbeat),
+            5 => Some(MsgKind::Signals),
             _ => None,
         }
     }
@@ -221,6 +245,7 @@ impl fmt::Display for MsgKind {
             MsgKind::Call => "call",
             MsgKind::Marking => "marking",
             MsgKind::Heartbeat => "heartbeat",
+            MsgKind::Signals => "signals",
         })
     }
 }
@@ -231,6 +256,7 @@ mod sealed {
     impl Sealed for super::CallMsg {}
     impl Sealed for super::MarkingMsg {}
     impl Sealed for super::Heartbeat {}
+    impl Sealed for super::SignalsMsg {}
 }
 
 /// A message body of this crate. Sealed: only the four bodies above travel on Petrel's
@@ -251,6 +277,9 @@ impl Message for MarkingMsg {
 }
 impl Message for Heartbeat {
     const KIND: MsgKind = MsgKind::Heartbeat;
+}
+impl Message for SignalsMsg {
+    const KIND: MsgKind = MsgKind::Signals;
 }
 
 /// The fixed header of every sample, in iceoryx2's user-header slot.
@@ -462,6 +491,16 @@ mod tests {
             progress: 3,
             status: "running".into(),
         });
+        let signals = SignalsMsg {
+            time_us: 7,
+            values: vec![
+                ("Depth.depth".into(), 30.25, 7),
+                ("Leak.leak".into(), 0.0, 5),
+            ],
+        };
+        assert_eq!(signals.get("Depth.depth"), Some(30.25));
+        assert_eq!(signals.get("Depth.nope"), None);
+        round_trip(signals);
     }
 
     #[test]
