@@ -212,22 +212,29 @@ impl Reader<'_> {
     }
 }
 
+/// Where a TOML parse error is and what it says, on one line: for the manifest and for every
+/// other TOML file of a project (can.toml).
+pub fn toml_error(file: FileId, e: &toml::de::Error) -> (Span, String) {
+    let span = e
+        .span()
+        .map(|r| Span::new(file, r.start, r.end))
+        .unwrap_or(Span::new(file, 0, 0));
+    let msg = e
+        .message()
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .collect::<Vec<_>>()
+        .join(": ");
+    (span, msg)
+}
+
 /// Reads a manifest. Problems go to `diags`; `None` only when the TOML cannot be read at all.
 pub fn parse_manifest(file: FileId, text: &str, diags: &mut Diagnostics) -> Option<Manifest> {
     let raw: RawManifest = match toml::from_str(text) {
         Ok(r) => r,
         Err(e) => {
-            let span = e
-                .span()
-                .map(|r| Span::new(file, r.start, r.end))
-                .unwrap_or(Span::new(file, 0, 0));
-            let msg = e
-                .message()
-                .lines()
-                .map(str::trim)
-                .filter(|l| !l.is_empty())
-                .collect::<Vec<_>>()
-                .join(": ");
+            let (span, msg) = toml_error(file, &e);
             diags.push(
                 Diagnostic::error("E0101", span, format!("the manifest is not valid: {msg}"))
                     .label(msg)

@@ -78,35 +78,8 @@ enum Command {
     Play {
         /// The project directory.
         dir: PathBuf,
-        /// The vehicle (its services are petrel/<vehicle>/...); default: the project's name.
-        #[arg(long)]
-        vehicle: Option<String>,
-        /// How the reactor waits: block, spin, or spin-then-block:<microseconds>.
-        #[arg(long, default_value = "block")]
-        wait: String,
-        /// Stop after this many seconds (for demos and tests).
-        #[arg(long)]
-        run_for: Option<f64>,
-        /// The flight recorder's directory (default: journal/<vehicle>).
-        #[arg(long)]
-        journal: Option<PathBuf>,
-        /// Run without a flight recorder.
-        #[arg(long, conflicts_with_all = ["journal", "resume"])]
-        no_journal: bool,
-        /// When journal records reach the disk: record (every record, to the OS), sync (every
-        /// record, to the disk), or a period such as 50ms.
-        #[arg(long, default_value = "record")]
-        flush: String,
-        /// Start a new journal segment past this many megabytes.
-        #[arg(long, default_value_t = 64)]
-        rotate_mb: u64,
-        /// Restore the mission from the journal (after a crash) and carry on.
-        #[arg(long)]
-        resume: bool,
-        /// Ground-station shadow: follow the vehicle player's steps, run no action, and raise an
-        /// alarm the moment this copy's marking differs from the vehicle's.
-        #[arg(long, conflicts_with_all = ["resume"])]
-        shadow: bool,
+        #[command(flatten)]
+        args: PlayArgs,
     },
     /// The CAN data server: frames from the vehicle bus become events for the player (by the
     /// rules of the project's can.toml), calls to the commands program become frames.
@@ -265,31 +238,7 @@ fn main() -> ExitCode {
         } => verify(&dir, net, format, max_states),
         Command::Fmt { dir, check } => fmt(&dir, check),
         Command::Run { dir, script, quiet } => run(&dir, &script, quiet),
-        Command::Play {
-            dir,
-            vehicle,
-            wait,
-            run_for,
-            journal,
-            no_journal,
-            flush,
-            rotate_mb,
-            resume,
-            shadow,
-        } => play(
-            &dir,
-            PlayArgs {
-                vehicle,
-                wait,
-                run_for,
-                journal,
-                no_journal,
-                flush,
-                rotate_mb,
-                resume,
-                shadow,
-            },
-        ),
+        Command::Play { dir, args } => play(&dir, args),
         Command::Replay {
             journal,
             project,
@@ -625,15 +574,36 @@ fn compiled(dir: &Path) -> Result<petrel_nets::compiled::CompiledProject, Outcom
 }
 
 /// The options of `petrel play`.
+#[derive(clap::Args)]
 struct PlayArgs {
+    /// The vehicle (its services are petrel/<vehicle>/...); default: the project's name.
+    #[arg(long)]
     vehicle: Option<String>,
+    /// How the reactor waits: block, spin, or spin-then-block:<microseconds>.
+    #[arg(long, default_value = "block")]
     wait: String,
+    /// Stop after this many seconds (for demos and tests).
+    #[arg(long)]
     run_for: Option<f64>,
+    /// The flight recorder's directory (default: journal/<vehicle>).
+    #[arg(long)]
     journal: Option<PathBuf>,
+    /// Run without a flight recorder.
+    #[arg(long, conflicts_with_all = ["journal", "resume"])]
     no_journal: bool,
+    /// When journal records reach the disk: record (every record, to the OS), sync (every
+    /// record, to the disk), or a period such as 50ms.
+    #[arg(long, default_value = "record")]
     flush: String,
+    /// Start a new journal segment past this many megabytes.
+    #[arg(long, default_value_t = 64)]
     rotate_mb: u64,
+    /// Restore the mission from the journal (after a crash) and carry on.
+    #[arg(long)]
     resume: bool,
+    /// Ground-station shadow: follow the vehicle player's steps, run no action, and raise an
+    /// alarm the moment this copy's marking differs from the vehicle's.
+    #[arg(long, conflicts_with_all = ["resume"])]
     shadow: bool,
 }
 

@@ -1281,17 +1281,7 @@ pub fn check_rules(
     let raw: RawCan = match toml::from_str(text) {
         Ok(r) => r,
         Err(e) => {
-            let span = e
-                .span()
-                .map(|r| Span::new(file, r.start, r.end))
-                .unwrap_or(Span::new(file, 0, 0));
-            let msg = e
-                .message()
-                .lines()
-                .map(str::trim)
-                .filter(|l| !l.is_empty())
-                .collect::<Vec<_>>()
-                .join(": ");
+            let (span, msg) = petrel_nets::manifest::toml_error(file, &e);
             diags.push(
                 Diagnostic::error("E0701", span, format!("can.toml is not valid: {msg}"))
                     .label(msg)
