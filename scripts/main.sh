@@ -2,12 +2,14 @@
 # Petrel's main job, on defaults that need nothing installed by hand: check and verify the
 # example UAV mission, fly its scripted scenarios in virtual time, then fly it for real: the
 # player and the vehicle's simulated programs (GUI+PLD, DEC) as separate processes exchanging
-# events over iceoryx2 shared memory, until the aircraft lands.
+# events over iceoryx2 shared memory, until the aircraft lands. Then the AUV mission: the
+# player, the CAN data server on a simulated vehicle bus, and the guidance program, until the
+# vehicle is back at the surface; its recorded bus replays offline to the same events.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 mission=${1:-missions/uav}
 cargo build --release --quiet --bin petrel -p petrel-player
-cargo build --release --quiet -p petrel-programs --example uav_gui --example uav_dec
+cargo build --release --quiet -p petrel-programs --example uav_gui --example uav_dec --example auv_gui
 petrel=target/release/petrel
 echo "== petrel check $mission"
 "$petrel" check "$mission"
@@ -26,6 +28,17 @@ vehicle="demo$$"
 echo "== live flight on vehicle $vehicle: petrel play + uav_gui + uav_dec over iceoryx2"
 pids=()
 cleanup() { for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done; wait 2>/dev/null || true; }
+# Waits until `petrel status` of mission $1 on vehicle $2 mentions $3 (up to 30 s).
+wait_status() {
+    for _ in $(seq 1 300); do
+        if "$petrel" status "$1" --vehicle "$2" --json 2>/dev/null | grep -q "$3"; then
+            return 0
+        fi
+        sleep 0.1
+    done
+    echo "== $1 on $2: no $3 after 30 s" >&2
+    return 1
+}
 trap cleanup EXIT
 RUST_LOG=${RUST_LOG:-warn} "$petrel" play "$mission" --vehicle "$vehicle" --run-for 60 \
     --journal "target/journal/$vehicle" &
@@ -35,14 +48,37 @@ target/release/examples/uav_gui --vehicle "$vehicle" >/dev/null 2>&1 & pids+=($!
 target/release/examples/uav_dec --vehicle "$vehicle" >/dev/null 2>&1 & pids+=($!)
 sleep 0.5
 "$petrel" send "$mission" --vehicle "$vehicle" start_mission
-for _ in $(seq 1 300); do
-    if "$petrel" status "$mission" --vehicle "$vehicle" --json 2>/dev/null | grep -q '"landed"'; then
-        break
-    fi
-    sleep 0.1
-done
+wait_status "$mission" "$vehicle" '"landed"'
 "$petrel" status "$mission" --vehicle "$vehicle"
 kill "${pids[0]}" 2>/dev/null || true
 wait "${pids[0]}" 2>/dev/null || true
 echo "== the flight recorder: target/journal/$vehicle"
 "$petrel" replay "target/journal/$vehicle"
+
+auv=missions/auv
+echo "== petrel check $auv (nets, can.toml and its DBC)"
+"$petrel" check "$auv"
+dive="dive$$"
+echo "== live dive on vehicle $dive: petrel play + petrel bridge (memory bus, simulated AUV) + auv_gui"
+pids=()
+RUST_LOG=${RUST_LOG:-warn} "$petrel" play "$auv" --vehicle "$dive" --run-for 60 \
+    --journal "target/journal/$dive" &
+pids+=($!)
+until "$petrel" status "$auv" --vehicle "$dive" >/dev/null 2>&1; do sleep 0.1; done
+RUST_LOG=${RUST_LOG:-warn} "$petrel" bridge "$auv" --vehicle "$dive" --bus memory \
+    --record "target/$dive-bus.log" 2>/dev/null &
+pids+=($!)
+target/release/examples/auv_gui --vehicle "$dive" &
+pids+=($!)
+sleep 0.5
+"$petrel" send "$auv" --vehicle "$dive" start_mission
+wait_status "$auv" "$dive" '"surfaced"'
+"$petrel" status "$auv" --vehicle "$dive"
+kill "${pids[2]}" "${pids[1]}" 2>/dev/null || true
+wait "${pids[2]}" "${pids[1]}" 2>/dev/null || true
+kill "${pids[0]}" 2>/dev/null || true
+wait "${pids[0]}" 2>/dev/null || true
+echo "== the bus, recorded by the data server: target/$dive-bus.log ($(wc -l <"target/$dive-bus.log") frames); its events, replayed offline:"
+"$petrel" bridge "$auv" --replay "target/$dive-bus.log"
+echo "== the flight recorder: target/journal/$dive"
+"$petrel" replay "target/journal/$dive"

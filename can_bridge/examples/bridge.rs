@@ -138,6 +138,7 @@ fn main() -> ExitCode {
         bus: args.bus,
         record: args.record,
         wait: args.wait,
+        sim_faults: Default::default(),
     };
     match serve(&vehicle, config, dbc, opts) {
         Ok(report) => {

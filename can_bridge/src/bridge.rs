@@ -302,6 +302,17 @@ impl BridgeCore {
         }
     }
 
+    /// The process loop begins reading the bus at `now_us`. Silence is counted from then for
+    /// the messages not seen yet, not from the core's creation: joining the vehicle can take
+    /// seconds, and frames that waited meanwhile must not find their sensor already declared
+    /// lost. The first heartbeat is due then too.
+    pub fn begin(&mut self, now_us: u64) {
+        self.rules.restart_silence(now_us);
+        if let Some(hb) = &mut self.heartbeat {
+            hb.next_due = hb.next_due.max(now_us);
+        }
+    }
+
     /// The DBC.
     pub fn dbc(&self) -> &Arc<Dbc> {
         &self.dbc

@@ -127,6 +127,22 @@ impl fmt::Display for BusError {
 
 impl std::error::Error for BusError {}
 
+impl BusError {
+    /// True when the error says the interface went down or away (`ENETDOWN`, `ENODEV`,
+    /// `ENXIO`) rather than that the bridge failed: the bus may come back, and the bridge
+    /// reports the interface as stopped and waits for it.
+    pub fn is_interface_down(&self) -> bool {
+        matches!(self, BusError::Io { error, .. } if is_down_errno(error))
+    }
+}
+
+fn is_down_errno(error: &io::Error) -> bool {
+    matches!(
+        error.raw_os_error(),
+        Some(libc::ENETDOWN | libc::ENODEV | libc::ENXIO)
+    )
+}
+
 /// A CAN bus endpoint.
 pub trait Bus {
     /// The interface's name (`vcan0`, `mem0`), as written in logs.
@@ -388,6 +404,11 @@ impl MemoryHub {
         Ok((hub.endpoint(a)?, hub.endpoint(b)?))
     }
 
+    /// The clock that stamps this bus's frames.
+    pub fn clock(&self) -> Arc<dyn Clock> {
+        self.lock().clock.clone()
+    }
+
     /// The names of the endpoints still open.
     pub fn endpoint_names(&self) -> Vec<String> {
         self.lock()
@@ -589,12 +610,31 @@ enum Sock {
     Fd(CanFdSocket),
 }
 
+/// Whether the interface is there and up, as the bus last saw it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Link {
+    Up,
+    /// Set down (`ip link set … down`): the socket stays bound and works again once it is up.
+    Down,
+    /// Removed: the socket lost its binding; a new one is opened when the interface is back.
+    Gone,
+}
+
 /// A SocketCAN interface.
+///
+/// The interface may go down, or away, under the bridge: reading then fails once with
+/// [`BusError::is_interface_down`], frames to send wait (as with a full transmit queue), and
+/// [`Bus::state`] says [`BusState::Stopped`] until the interface is up again, then its state
+/// (error-active on a vcan), after opening a new socket if the interface was re-created.
 #[derive(Debug)]
 pub struct SocketCanBus {
     interface: String,
+    opts: SocketCanOptions,
     sock: Sock,
     netlink: Option<CanInterface>,
+    link: Link,
+    /// The newest receive time handed out: times never go back (see [`Bus::recv`]).
+    last_time_us: u64,
     tx: TxQueue,
     stats: BusStats,
 }
@@ -662,7 +702,24 @@ fn configure<S: SocketOptions>(
 
 impl SocketCanBus {
     /// Opens `interface` (non-blocking, with kernel receive timestamps).
+    ///
+    /// Open it just before reading: the kernel stamps frames on arrival only a moment after
+    /// the first socket asks for timestamps, and frames that wait in the socket meanwhile are
+    /// stamped when read.
     pub fn open(interface: &str, opts: &SocketCanOptions) -> Result<Self, BusError> {
+        Ok(SocketCanBus {
+            interface: interface.to_owned(),
+            opts: opts.clone(),
+            sock: Self::open_socket(interface, opts)?,
+            netlink: CanInterface::open(interface).ok(),
+            link: Link::Up,
+            last_time_us: 0,
+            tx: TxQueue::new(opts.tx_queue),
+            stats: BusStats::default(),
+        })
+    }
+
+    fn open_socket(interface: &str, opts: &SocketCanOptions) -> Result<Sock, BusError> {
         let io = |op: &'static str| {
             move |error: io::Error| BusError::Io {
                 op,
@@ -684,13 +741,31 @@ impl SocketCanBus {
             Sock::Fd(s) => s.set_nonblocking(true),
         }
         .map_err(io("making the socket non-blocking"))?;
-        Ok(SocketCanBus {
-            interface: interface.to_owned(),
-            sock,
-            netlink: CanInterface::open(interface).ok(),
-            tx: TxQueue::new(opts.tx_queue),
-            stats: BusStats::default(),
-        })
+        Ok(sock)
+    }
+
+    /// The interface's link as sysfs tells it: gone, down or up.
+    fn read_link(&self) -> Link {
+        let flags = std::fs::read_to_string(format!("/sys/class/net/{}/flags", self.interface));
+        match flags {
+            Err(_) => Link::Gone,
+            Ok(text) => {
+                let flags = u32::from_str_radix(text.trim().trim_start_matches("0x"), 16);
+                match flags {
+                    Ok(f) if f & 1 == 0 => Link::Down, // IFF_UP
+                    _ => Link::Up,
+                }
+            }
+        }
+    }
+
+    /// Notes from an error that the interface went down or away.
+    fn note_link_error(&mut self, error: &io::Error) {
+        match error.raw_os_error() {
+            Some(libc::ENODEV | libc::ENXIO) => self.link = Link::Gone,
+            Some(libc::ENETDOWN) if self.link == Link::Up => self.link = Link::Down,
+            _ => {}
+        }
     }
 
     fn write(sock: &Sock, interface: &str, frame: &Frame) -> Write1 {
@@ -734,9 +809,12 @@ impl SocketCanBus {
         };
         match result {
             Ok(()) => Write1::Done,
+            // A full interface queue, or an interface down or away: the frame waits (see
+            // the module documentation); `state` reports the interface stopped meanwhile.
             Err(e)
                 if e.kind() == io::ErrorKind::WouldBlock
-                    || e.raw_os_error() == Some(libc::ENOBUFS) =>
+                    || e.raw_os_error() == Some(libc::ENOBUFS)
+                    || is_down_errno(&e) =>
             {
                 Write1::Busy
             }
@@ -794,18 +872,25 @@ impl Bus for SocketCanBus {
                     let time_us = at
                         .duration_since(UNIX_EPOCH)
                         .map_or(0, |d| u64::try_from(d.as_micros()).unwrap_or(u64::MAX));
-                    return Ok(Some(TimedFrame { time_us, frame }));
+                    // A frame that arrived before the kernel stamped on arrival is stamped when
+                    // read, later than the frames behind it: hold the time, never go back.
+                    self.last_time_us = self.last_time_us.max(time_us);
+                    return Ok(Some(TimedFrame {
+                        time_us: self.last_time_us,
+                        frame,
+                    }));
                 }
                 // A frame our type cannot hold (never for a well-formed kernel frame): next.
                 Ok((None, _)) => continue,
                 Err(e) if e.kind() == io::ErrorKind::WouldBlock => return Ok(None),
                 Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
                 Err(error) => {
+                    self.note_link_error(&error);
                     return Err(BusError::Io {
                         op: "receiving a frame",
                         interface: self.interface.clone(),
                         error,
-                    })
+                    });
                 }
             }
         }
@@ -819,19 +904,46 @@ impl Bus for SocketCanBus {
     }
 
     fn state(&mut self) -> Result<Option<BusState>, BusError> {
-        let nl = self.netlink()?;
-        let state = nl.state().map_err(|e| BusError::Netlink {
-            interface: self.interface.clone(),
-            error: e.to_string(),
-        })?;
-        Ok(state.map(|s| match s {
-            socketcan::nl::CanState::ErrorActive => BusState::ErrorActive,
-            socketcan::nl::CanState::ErrorWarning => BusState::ErrorWarning,
-            socketcan::nl::CanState::ErrorPassive => BusState::ErrorPassive,
-            socketcan::nl::CanState::BusOff => BusState::BusOff,
-            socketcan::nl::CanState::Stopped => BusState::Stopped,
-            socketcan::nl::CanState::Sleeping => BusState::Sleeping,
-        }))
+        let link = self.read_link();
+        if link != Link::Up {
+            if self.link != Link::Gone {
+                self.link = link;
+            }
+            return Ok(Some(BusState::Stopped));
+        }
+        if self.link == Link::Gone {
+            // Re-created: a new socket (opened before the old one closes, so its descriptor
+            // differs and the reactor waits on the right one) and a new interface index.
+            self.sock = Self::open_socket(&self.interface, &self.opts)?;
+            self.netlink = CanInterface::open(&self.interface).ok();
+            tracing::info!("`{}` is back: socket opened again", self.interface);
+        }
+        let was_down = self.link != Link::Up;
+        self.link = Link::Up;
+        let state = match self.netlink()?.state() {
+            Ok(state) => state,
+            // Back, but not answering yet: its state comes with the next poll.
+            Err(_) if was_down => return Ok(Some(BusState::ErrorActive)),
+            Err(e) => {
+                return Err(BusError::Netlink {
+                    interface: self.interface.clone(),
+                    error: e.to_string(),
+                })
+            }
+        };
+        Ok(match state {
+            Some(s) => Some(match s {
+                socketcan::nl::CanState::ErrorActive => BusState::ErrorActive,
+                socketcan::nl::CanState::ErrorWarning => BusState::ErrorWarning,
+                socketcan::nl::CanState::ErrorPassive => BusState::ErrorPassive,
+                socketcan::nl::CanState::BusOff => BusState::BusOff,
+                socketcan::nl::CanState::Stopped => BusState::Stopped,
+                socketcan::nl::CanState::Sleeping => BusState::Sleeping,
+            }),
+            // A virtual interface has no controller state: up again is active again.
+            None if was_down => Some(BusState::ErrorActive),
+            None => None,
+        })
     }
 
     fn restart(&mut self) -> Result<(), BusError> {

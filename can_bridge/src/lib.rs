@@ -39,6 +39,7 @@ pub mod replay;
 pub mod rules;
 pub mod runtime;
 pub mod serve;
+pub mod sim;
 
 pub use bridge::{BridgeCore, SignalTable};
 pub use bus::{Bus, MemoryBus, MemoryHub, SocketCanBus};

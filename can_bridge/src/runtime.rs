@@ -78,6 +78,9 @@ impl fmt::Debug for RuntimeOptions {
 /// What a run did.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct RunReport {
+    /// When the loop began reading the bus (the clock's microseconds): silence counts from
+    /// then, so a replay of the run's log starts its core then ([`BridgeCore::begin`]).
+    pub started_us: u64,
     /// The core's counters.
     pub counters: Counters,
     /// The bus's counters.
@@ -210,8 +213,32 @@ impl<B: Bus> Loop<B> {
         }
     }
 
+    /// The interface went down or away: the bus is stopped until [`Bus::state`] says
+    /// otherwise (polled every `state_poll`); the player hears it once.
+    fn interface_down(&mut self, error: &BusError) {
+        if self.core.bus_state() == BusState::Stopped {
+            return;
+        }
+        tracing::error!(
+            "{error}: the bus is stopped; waiting for `{}` to come back",
+            self.bus.interface()
+        );
+        let now = self.clock.now_us();
+        let events = self.core.on_bus_state(now, BusState::Stopped);
+        self.queue_events(events);
+    }
+
     fn read_bus(&mut self) -> Result<(), RuntimeError> {
-        while let Some(tf) = self.bus.recv().map_err(RuntimeError::Bus)? {
+        loop {
+            let tf = match self.bus.recv() {
+                Ok(Some(tf)) => tf,
+                Ok(None) => return Ok(()),
+                Err(e) if e.is_interface_down() => {
+                    self.interface_down(&e);
+                    return Ok(());
+                }
+                Err(e) => return Err(RuntimeError::Bus(e)),
+            };
             self.record(tf.time_us, &tf.frame, Direction::Received);
             let report = self.core.on_frame(tf.time_us, &tf.frame);
             let c = self.core.counters();
@@ -248,7 +275,6 @@ impl<B: Bus> Loop<B> {
             }
             self.queue_events(report.events);
         }
-        Ok(())
     }
 
     fn restart_if_asked(&mut self) {
@@ -297,11 +323,18 @@ impl<B: Bus> Loop<B> {
 
 /// Runs the data server until `stop` is set (or SIGINT/SIGTERM with signal handling on).
 ///
+/// `open_bus` is called once the vehicle is joined, just before the loop reads: frames do
+/// not wait in a socket during the set-up (where the kernel may stamp them late), and the
+/// core's silence deadlines count from the first read ([`BridgeCore::begin`]).
+///
 /// `clock` must be the bus's clock (the system clock for SocketCAN, the hub's for a memory
 /// bus): frame timestamps and deadlines are compared.
+///
+/// The bus going down or away is not an error: the player hears `Stopped`, commands wait,
+/// and the loop goes on until the interface is back. Other bus errors end the run.
 pub fn run<B: Bus>(
     core: BridgeCore,
-    bus: B,
+    open_bus: impl FnOnce() -> Result<B, BusError>,
     clock: Arc<dyn Clock>,
     vehicle: &Vehicle,
     opts: RuntimeOptions,
@@ -325,8 +358,13 @@ pub fn run<B: Bus>(
     } else {
         Reactor::without_signal_handling(opts.wait)?
     };
-    let fd = FdSource::new(bus.wait_fd().ok_or(RuntimeError::NoFd)?)?;
+    let bus = open_bus().map_err(RuntimeError::Bus)?;
+    let mut fd_raw = bus.wait_fd().ok_or(RuntimeError::NoFd)?;
+    let mut fd = FdSource::new(fd_raw)?;
     let state_poll = opts.state_poll_us.max(1000);
+    let mut core = core;
+    let started_us = clock.now_us();
+    core.begin(started_us);
     let mut lp = Loop {
         core,
         bus,
@@ -334,7 +372,10 @@ pub fn run<B: Bus>(
         events,
         outbox: VecDeque::new(),
         opts,
-        report: RunReport::default(),
+        report: RunReport {
+            started_us,
+            ..RunReport::default()
+        },
     };
     let mut next_poll = lp.clock.now_us();
     while !stop.load(Ordering::Relaxed) {
@@ -392,6 +433,13 @@ pub fn run<B: Bus>(
                 Ok(None) => {}
                 Err(e) => {
                     tracing::debug!("bus state unknown: {e}");
+                }
+            }
+            // A re-created interface comes with a new socket.
+            if let Some(raw) = lp.bus.wait_fd() {
+                if raw != fd_raw {
+                    fd = FdSource::new(raw)?;
+                    fd_raw = raw;
                 }
             }
         }

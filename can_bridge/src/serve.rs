@@ -1,22 +1,22 @@
 //! The data server as a process: what `petrel bridge` and `examples/bridge.rs` run.
 //!
-//! [`serve`] opens the bus (a SocketCAN interface, or `memory`: an in-process bus with a
-//! simulated depth sensor and AHRS, for machines without CAN) and runs the bridge until SIGINT
+//! [`serve`] opens the bus (a SocketCAN interface, or `memory`: an in-process bus with the
+//! simulated AUV of [`crate::sim`], for machines without CAN) and runs the bridge until SIGINT
 //! or SIGTERM; [`replay_log`] feeds a recorded `candump -L` log through the bridge offline and
 //! returns the events it gives.
 
 use crate::bridge::BridgeCore;
-use crate::bus::{Bus, MemoryHub, SocketCanBus, SocketCanOptions};
+use crate::bus::{MemoryHub, SocketCanBus, SocketCanOptions};
 use crate::clock::{Clock, ManualClock, SystemClock};
 use crate::replay::{replay_text, Pacing};
 use crate::rules::{CanConfig, EventOut};
-use crate::runtime::{run, RunReport, RuntimeOptions};
+use crate::runtime::{run, RunReport, RuntimeError, RuntimeOptions};
+use crate::sim::SimFaults;
 use crate::Dbc;
 use petrel_ipc::{Vehicle, WaitStrategy};
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
-use std::time::Duration;
 
 /// How to serve.
 pub struct ServeOptions {
@@ -26,6 +26,8 @@ pub struct ServeOptions {
     pub record: Option<std::path::PathBuf>,
     /// How the reactor waits.
     pub wait: WaitStrategy,
+    /// Faults the simulated vehicle of the memory bus shows.
+    pub sim_faults: SimFaults,
 }
 
 /// Why the server could not run.
@@ -53,35 +55,6 @@ impl std::fmt::Display for ServeError {
 }
 
 impl std::error::Error for ServeError {}
-
-/// A depth sensor diving to 30 m at 0.5 m per 100 ms, and an AHRS, on the memory bus: the
-/// simulated vehicle `--bus memory` serves.
-pub fn simulate_dive(hub: MemoryHub, dbc: Arc<Dbc>) {
-    let Ok(mut node) = hub.endpoint("sim") else {
-        return;
-    };
-    std::thread::spawn(move || {
-        let mut depth: f64 = 0.0;
-        loop {
-            depth = (depth + 0.5).min(30.0);
-            for (msg, values) in [
-                ("Depth", vec![("depth", depth), ("status", 0.0)]),
-                (
-                    "Ahrs",
-                    vec![("heading", 90.0), ("pitch", -5.0), ("roll", 0.0)],
-                ),
-            ] {
-                if let Ok(f) = dbc.encode(msg, &values) {
-                    // The simulation runs until the process ends; a full memory bus only
-                    // delays the next sample.
-                    let _ = node.send(&f);
-                }
-            }
-            while let Ok(Some(_)) = node.recv() {}
-            std::thread::sleep(Duration::from_millis(100));
-        }
-    });
-}
 
 /// Serves the bus for `vehicle` until SIGINT or SIGTERM.
 pub fn serve(
@@ -121,18 +94,24 @@ pub fn serve(
         let bus = hub
             .endpoint("mem0")
             .map_err(|e| ServeError::Bus(format!("cannot make a memory bus: {e}")))?;
-        simulate_dive(hub, dbc);
-        run(core, bus, clock, vehicle, run_opts, &stop)
+        let sim_stop = Arc::new(AtomicBool::new(false));
+        let sim = crate::sim::spawn(&hub, dbc, opts.sim_faults, sim_stop.clone())
+            .map_err(|e| ServeError::Bus(format!("cannot start the simulated vehicle: {e}")))?;
+        let result = run(core, move || Ok(bus), clock, vehicle, run_opts, &stop);
+        sim_stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        let _ = sim.join();
+        result
     } else {
-        let bus = SocketCanBus::open(
-            &bus_name,
-            &SocketCanOptions {
-                fd,
-                ..SocketCanOptions::default()
-            },
-        )
-        .map_err(|e| ServeError::Bus(e.to_string()))?;
-        run(core, bus, clock, vehicle, run_opts, &stop)
+        let sock_opts = SocketCanOptions {
+            fd,
+            ..SocketCanOptions::default()
+        };
+        // Opened by the loop once the vehicle is joined (see `run`).
+        let open = || SocketCanBus::open(&bus_name, &sock_opts);
+        return match run(core, open, clock, vehicle, run_opts, &stop) {
+            Err(RuntimeError::Bus(e)) => Err(ServeError::Bus(e.to_string())),
+            r => r.map_err(|e| ServeError::Runtime(e.to_string())),
+        };
     };
     result.map_err(|e| ServeError::Runtime(e.to_string()))
 }

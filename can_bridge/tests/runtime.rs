@@ -49,7 +49,7 @@ fn the_bridge_process_loop_over_iceoryx2() {
                 handle_signals: false,
                 ..RuntimeOptions::default()
             };
-            run(core, bridge_bus, clock, &vehicle, opts, &stop)
+            run(core, move || Ok(bridge_bus), clock, &vehicle, opts, &stop)
         })
     };
 
@@ -154,7 +154,7 @@ fn decoded_signals_are_published_as_latest_values_for_the_programs() {
                 handle_signals: false,
                 ..RuntimeOptions::default()
             };
-            run(core, bridge_bus, clock, &vehicle, opts, &stop)
+            run(core, move || Ok(bridge_bus), clock, &vehicle, opts, &stop)
         })
     };
     let dbc = dbc();
@@ -188,4 +188,72 @@ fn decoded_signals_are_published_as_latest_values_for_the_programs() {
     assert_eq!(msg.get("Depth.depth"), Some(depth), "{msg:?}");
     assert_eq!(msg.get("Depth.status"), Some(0.0), "{msg:?}");
     assert!(msg.time_us >= start);
+}
+
+/// The core is made, then the vehicle joined (seconds, on a loaded machine): silence counts
+/// from the loop's first read, not from the core's creation. A depth sensor speaking every
+/// 20 ms since before the bridge started is never reported lost; the AHRS, which never speaks,
+/// is, once its 500 ms have passed.
+#[test]
+fn a_slow_start_does_not_make_a_speaking_sensor_look_lost() {
+    let vehicle = Vehicle::isolated("slow").unwrap();
+    let clock: Arc<dyn Clock> = Arc::new(SystemClock);
+    let hub = MemoryHub::new(clock.clone());
+    let bridge_bus = hub.endpoint("mem0").unwrap();
+    let player = Participant::join(&vehicle, Role::Player).unwrap();
+    let events = player.event_receiver().unwrap();
+    let stop = Arc::new(AtomicBool::new(false));
+    let sensor = {
+        let (hub, stop) = (hub.clone(), stop.clone());
+        std::thread::spawn(move || {
+            let mut node = hub.endpoint("depth").unwrap();
+            let frame = dbc()
+                .encode("Depth", &[("depth", 3.0), ("status", 0.0)])
+                .unwrap();
+            while !stop.load(Ordering::Relaxed) {
+                node.send(&frame).unwrap();
+                std::thread::sleep(Duration::from_millis(20));
+            }
+        })
+    };
+    // As if joining the vehicle had taken five seconds since the core was made.
+    let made_us = clock.now_us() - 5_000_000;
+    let bridge = {
+        let (vehicle, stop, clock) = (vehicle.clone(), stop.clone(), clock.clone());
+        std::thread::spawn(move || {
+            let core = BridgeCore::new(dbc(), config(), made_us);
+            let opts = RuntimeOptions {
+                handle_signals: false,
+                ..RuntimeOptions::default()
+            };
+            run(core, move || Ok(bridge_bus), clock, &vehicle, opts, &stop)
+        })
+    };
+    let mut got: Vec<EventMsg> = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let ahrs = EventMsg::new("sensor_lost", vec![Value::Text("ahrs".into())]);
+    while !got.contains(&ahrs) && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(10));
+        events.drain(|r| got.push(r.unwrap().msg)).unwrap();
+    }
+    let lost_at = clock.now_us();
+    // A few more depth periods: still nothing about the depth sensor.
+    std::thread::sleep(Duration::from_millis(200));
+    stop.store(true, Ordering::Relaxed);
+    let report = bridge.join().unwrap().unwrap();
+    sensor.join().unwrap();
+    events.drain(|r| got.push(r.unwrap().msg)).unwrap();
+    assert!(got.contains(&ahrs), "{got:?}");
+    assert!(
+        lost_at >= report.started_us + 500_000,
+        "the AHRS was reported lost {} us after the loop began",
+        lost_at - report.started_us
+    );
+    assert!(report.started_us >= made_us + 5_000_000);
+    let depth_lost: Vec<_> = got
+        .iter()
+        .filter(|e| e.params == [Value::Text("depth".into())])
+        .collect();
+    assert!(depth_lost.is_empty(), "{got:?}");
+    assert!(report.counters.decoded >= 10, "{report:?}");
 }

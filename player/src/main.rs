@@ -89,10 +89,13 @@ enum Command {
         /// The vehicle; default: the project's name.
         #[arg(long)]
         vehicle: Option<String>,
-        /// `memory` (an in-process bus with a simulated depth sensor and AHRS), or a SocketCAN
-        /// interface such as vcan0; default: can.toml's [bus] interface.
+        /// `memory` (an in-process bus with a simulated AUV that obeys the commands), or a
+        /// SocketCAN interface such as vcan0; default: can.toml's [bus] interface.
         #[arg(long)]
         bus: Option<String>,
+        /// On the memory bus: the simulated vehicle's hull leaks once it is this deep (metres).
+        #[arg(long, value_name = "METRES")]
+        sim_leak_at: Option<f64>,
         /// Record every frame in and out to this candump -L log.
         #[arg(long)]
         record: Option<PathBuf>,
@@ -251,7 +254,8 @@ fn main() -> ExitCode {
             record,
             replay,
             wait,
-        } => bridge(&dir, vehicle, bus, record, replay, &wait),
+            sim_leak_at,
+        } => bridge(&dir, vehicle, bus, record, replay, &wait, sim_leak_at),
         Command::Journal {
             command: JournalCommand::Show { journal, format },
         } => journal_show(&journal, &format),
@@ -683,6 +687,7 @@ fn bridge(
     record: Option<PathBuf>,
     replay_log: Option<PathBuf>,
     wait: &str,
+    sim_leak_at: Option<f64>,
 ) -> Outcome {
     use petrel_can_bridge::serve::{replay_log as replay_can, serve, ServeOptions};
     let (mut loaded, compiled, mut d) = match project::load_and_check(dir) {
@@ -749,6 +754,9 @@ fn bridge(
         bus,
         record,
         wait: strategy,
+        sim_faults: petrel_can_bridge::sim::SimFaults {
+            leak_at_depth: sim_leak_at,
+        },
     };
     match serve(&v, config, dbc, opts) {
         Ok(r) => {

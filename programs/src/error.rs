@@ -85,6 +85,20 @@ pub enum ProgramError {
         /// The outbox's capacity.
         capacity: usize,
     },
+    /// A call to another program ([`Program::call`](crate::Program::call)) did not reach it:
+    /// no process plays that program now, its buffer was full, or the call could not be
+    /// sent. Calls are not queued: a command given late may be worse than none.
+    CallUndelivered {
+        /// The program called.
+        program: String,
+        /// The function called.
+        function: String,
+        /// Why.
+        error: Box<SendError>,
+    },
+    /// The decoded CAN signals could not be read (see
+    /// [`Program::signals`](crate::Program::signals)).
+    BadSignals(Box<RecvError>),
     /// SIGINT or SIGTERM was received: the program should stop. Every later
     /// [`recv`](crate::Program::recv) returns this too.
     Terminated,
@@ -156,6 +170,12 @@ impl fmt::Display for ProgramError {
             ProgramError::Send { event, error } => {
                 write!(f, "event `{event}` could not be sent: {error}")
             }
+            ProgramError::CallUndelivered {
+                program,
+                function,
+                error,
+            } => write!(f, "call {program}.{function} not delivered: {error}"),
+            ProgramError::BadSignals(e) => write!(f, "the CAN signals could not be read: {e}"),
             ProgramError::EventsDropped {
                 events,
                 total,
@@ -185,6 +205,8 @@ impl std::error::Error for ProgramError {
             ProgramError::Arg(e) => Some(e),
             ProgramError::Unsendable { error, .. } => Some(error),
             ProgramError::Send { error, .. } => Some(error.as_ref()),
+            ProgramError::CallUndelivered { error, .. } => Some(error.as_ref()),
+            ProgramError::BadSignals(e) => Some(e.as_ref()),
             _ => None,
         }
     }

@@ -11,8 +11,9 @@ use petrel_ipc::port::EVENTS;
 use petrel_ipc::reactor::Source;
 use petrel_ipc::wire::{self, WireError};
 use petrel_ipc::{
-    CallReceiver, EventMsg, EventSender, FdSource, NodeStatus, Participant, Reactor, RecvError,
-    Role, SendError, Value, Vehicle, WaitStrategy,
+    CallMsg, CallReceiver, CallSender, EventMsg, EventSender, FdSource, NodeStatus, Participant,
+    Reactor, RecvError, Role, SendError, SignalsMsg, SignalsSubscriber, Value, Vehicle,
+    WaitStrategy,
 };
 
 use crate::call::{write_invocation, Call};
@@ -140,6 +141,12 @@ struct Hosted {
 /// Like the ports it holds, a `Program` is single-threaded: create it on the thread that uses it.
 #[derive(Debug)]
 pub struct Program {
+    // Fields drop in order: these ports before the hosts' nodes.
+    /// Senders to the programs this one calls, opened at the first call.
+    callees: Vec<(String, CallSender)>,
+    /// The CAN data server's signals, subscribed at the first read, and the newest seen.
+    signals: Option<SignalsSubscriber>,
+    latest_signals: Option<SignalsMsg>,
     hosts: Vec<Hosted>,
     reactor: Reactor,
     outbox: Outbox,
@@ -237,6 +244,9 @@ impl Program {
             player_seen_alive: None,
             terminated,
             closed: false,
+            callees: Vec::new(),
+            signals: None,
+            latest_signals: None,
         })
     }
 
@@ -370,6 +380,82 @@ impl Program {
             }
         }
         Ok(None)
+    }
+
+    /// Calls `program.function(args)`, as a net's `call` does: the CAN data server's
+    /// commands (`program.call("CAN", "ThrusterCmd", ...)`, encoded with the DBC and sent on
+    /// the bus), or any other program. Sent as the first hosted program.
+    ///
+    /// `Ok(())` once the program's process has it. A call is not queued: when no process plays
+    /// `program` (or its buffer is full) it is refused with
+    /// [`ProgramError::CallUndelivered`], because a command sent late may be worse than none;
+    /// the caller decides whether to try again. Whether the program could carry the call out
+    /// (a command out of the DBC's range, say) is the program's to report.
+    pub fn call(
+        &mut self,
+        program: &str,
+        function: &str,
+        args: Vec<Value>,
+    ) -> Result<(), ProgramError> {
+        let index = match self.callees.iter().position(|(p, _)| p == program) {
+            Some(i) => i,
+            None => {
+                let host = &self.hosts[0];
+                let sender =
+                    host.participant
+                        .call_sender(program)
+                        .map_err(|error| ProgramError::Setup {
+                            program: host.name.clone(),
+                            error: Box::new(error),
+                        })?;
+                self.callees.push((program.to_owned(), sender));
+                self.callees.len() - 1
+            }
+        };
+        let msg = CallMsg::new(function, args);
+        self.callees[index]
+            .1
+            .send(&msg)
+            .map(|_| ())
+            .map_err(|error| ProgramError::CallUndelivered {
+                program: program.to_owned(),
+                function: function.to_owned(),
+                error: Box::new(error),
+            })
+    }
+
+    /// The newest decoded CAN signals the data server published (`MESSAGE.signal` to physical
+    /// value, [`SignalsMsg::get`]), or `None` while none came. Subscribes at the first call:
+    /// the server publishes after every batch of frames it reads, so the first values come with
+    /// its next batch (within a frame period); call it once early to have them when needed.
+    pub fn signals(&mut self) -> Result<Option<&SignalsMsg>, ProgramError> {
+        if self.signals.is_none() {
+            let host = &self.hosts[0];
+            let sub =
+                host.participant
+                    .signals_subscriber()
+                    .map_err(|error| ProgramError::Setup {
+                        program: host.name.clone(),
+                        error: Box::new(error),
+                    })?;
+            self.signals = Some(sub);
+        }
+        if let Some(sub) = &self.signals {
+            let mut newest = None;
+            let mut failed = None;
+            sub.drain(|r| match r {
+                Ok(r) => newest = Some(r.msg),
+                Err(e) => failed = Some(e),
+            })
+            .map_err(|e| ProgramError::BadSignals(Box::new(e)))?;
+            if let Some(msg) = newest {
+                self.latest_signals = Some(msg);
+            }
+            if let Some(e) = failed {
+                return Err(ProgramError::BadSignals(Box::new(e)));
+            }
+        }
+        Ok(self.latest_signals.as_ref())
     }
 
     /// Emits event `name(params)` to the player, as the first hosted program.

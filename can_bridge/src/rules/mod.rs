@@ -329,6 +329,24 @@ impl RuleEngine {
         }
     }
 
+    /// Counts the silence of every message not seen yet from `start_us` rather than from the
+    /// engine's creation (see [`BridgeCore::begin`](crate::bridge::BridgeCore::begin)). A
+    /// deadline already later stays.
+    pub fn restart_silence(&mut self, start_us: u64) {
+        for (rule, state) in self.rules.iter().zip(&mut self.states) {
+            if let (
+                RuleKind::Stale { timeout_us, .. },
+                State::Stale {
+                    deadline,
+                    fired: false,
+                },
+            ) = (&rule.kind, state)
+            {
+                *deadline = (*deadline).max(start_us.saturating_add(*timeout_us));
+            }
+        }
+    }
+
     /// The rules.
     pub fn rules(&self) -> &[Rule] {
         &self.rules

@@ -1,0 +1,175 @@
+//! The AUV mission (`missions/auv`) flown by real processes over real iceoryx2: `petrel play`,
+//! `petrel bridge --bus memory` (the CAN data server on an in-process bus with the simulated
+//! AUV, which obeys the commands only while the heartbeat comes) and the guidance program
+//! `auv_gui`, which commands the thrusters through the data server and reads its signals.
+
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use petrel_tests::{example_bin, petrel_bin, repo, unique_vehicle, Player};
+
+/// Processes stopped with SIGTERM (then SIGKILL) when dropped.
+struct Processes(Vec<Child>);
+
+impl Processes {
+    /// SIGTERM to each, and their exit codes (None: killed).
+    fn stop(mut self) -> Vec<Option<i32>> {
+        let codes = stop_all(&mut self.0);
+        self.0.clear();
+        codes
+    }
+}
+
+fn stop_all(children: &mut [Child]) -> Vec<Option<i32>> {
+    for c in children.iter() {
+        let _ = Command::new("kill")
+            .args(["-TERM", &c.id().to_string()])
+            .status();
+    }
+    children
+        .iter_mut()
+        .map(|c| {
+            let deadline = Instant::now() + Duration::from_secs(5);
+            while matches!(c.try_wait(), Ok(None)) && Instant::now() < deadline {
+                std::thread::sleep(Duration::from_millis(10));
+            }
+            match c.try_wait() {
+                Ok(Some(s)) => s.code(),
+                _ => {
+                    let _ = c.kill();
+                    let _ = c.wait();
+                    None
+                }
+            }
+        })
+        .collect()
+}
+
+impl Drop for Processes {
+    fn drop(&mut self) {
+        stop_all(&mut self.0);
+    }
+}
+
+fn marked(s: &serde_json::Value, net: &str, place: &str) -> bool {
+    s["marking"][net]
+        .as_array()
+        .is_some_and(|m| m.iter().any(|p| p == place))
+}
+
+/// The data server (recording the bus to `log`) and the guidance program; returns once both
+/// are on the vehicle.
+fn start_vehicle(vehicle: &str, log: &Path, bridge_flags: &[&str]) -> Processes {
+    let bridge = Command::new(petrel_bin())
+        .arg("bridge")
+        .arg(repo().join("missions/auv"))
+        .args(["--vehicle", vehicle, "--bus", "memory", "--record"])
+        .arg(log)
+        .args(bridge_flags)
+        .env("RUST_LOG", "warn")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("petrel bridge starts");
+    let gui = Command::new(example_bin("auv_gui"))
+        .args(["--vehicle", vehicle])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("auv_gui starts");
+    let processes = Processes(vec![gui, bridge]);
+    let v = petrel_ipc::Vehicle::new(vehicle).unwrap();
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while Instant::now() < deadline {
+        let can = petrel_ipc::is_program_alive(&v, "CAN").unwrap_or(false);
+        let gui = petrel_ipc::is_program_alive(&v, "GUI").unwrap_or(false);
+        if can && gui {
+            return processes;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    panic!("the data server and the guidance program did not join {vehicle}");
+}
+
+/// The events the recorded bus gives offline (`petrel bridge --replay`), as (name, params).
+fn replayed(log: &Path) -> Vec<(String, Vec<serde_json::Value>)> {
+    let out = Command::new(petrel_bin())
+        .arg("bridge")
+        .arg(repo().join("missions/auv"))
+        .arg("--replay")
+        .arg(log)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8(out.stdout)
+        .unwrap()
+        .lines()
+        .map(|l| {
+            let v: serde_json::Value = serde_json::from_str(l).unwrap();
+            (
+                v["event"].as_str().unwrap().to_owned(),
+                v["params"].as_array().unwrap().clone(),
+            )
+        })
+        .collect()
+}
+
+/// Flies the mission; returns the player's last status and the recorded bus's events.
+fn dive(
+    bridge_flags: &[&str],
+    done: impl Fn(&serde_json::Value) -> bool,
+) -> (serde_json::Value, Vec<(String, Vec<serde_json::Value>)>) {
+    let vehicle = unique_vehicle("auv");
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("bus.log");
+    let player = Player::start(&repo().join("missions/auv"), &vehicle);
+    let vehicle_processes = start_vehicle(&vehicle, &log, bridge_flags);
+    let o = player.send("start_mission", 1);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s = player.wait_for(60.0, &done);
+    // SIGTERM: the data server stops in good order (exit 0) and flushes its recording.
+    let codes = vehicle_processes.stop();
+    assert_eq!(codes, [Some(0), Some(0)], "auv_gui, petrel bridge");
+    assert!(player.stop().success());
+    (s, replayed(&log))
+}
+
+fn depth(params: &[serde_json::Value]) -> f64 {
+    params[0].as_f64().unwrap()
+}
+
+#[test]
+fn the_survey_dives_surveys_and_surfaces_through_the_can_bus() {
+    let (s, bus_events) = dive(&[], |s| marked(s, "PHASES", "surfaced"));
+    assert!(marked(&s, "PHASES", "surfaced"), "{s}");
+    assert!(marked(&s, "SAFETY", "watching"), "{s}");
+    let st = &s["stats"];
+    assert_eq!(st["calls_failed"], 0, "{s}");
+    assert_eq!(st["bad_messages"], 0, "{s}");
+    assert_eq!(st["refused"], 0, "{s}");
+    // start_mission, depth_reached, area_reached, survey_done, area_reached, depth_reached.
+    assert!(st["processed"].as_u64().unwrap() >= 6, "{s}");
+    // The bus, recorded by the data server: the commanded 10 m reached going down (by the
+    // nets' DepthCmd), the surface reached coming up (by GUI's own DepthCmd through CAN).
+    let names: Vec<&str> = bus_events.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(names, ["depth_reached", "depth_reached"], "{bus_events:?}");
+    let (down, up) = (depth(&bus_events[0].1), depth(&bus_events[1].1));
+    assert!((9.5..=10.0).contains(&down), "{bus_events:?}");
+    assert!((0.0..=0.5).contains(&up), "{bus_events:?}");
+}
+
+#[test]
+fn a_leak_at_depth_aborts_the_mission_and_the_vehicle_surfaces() {
+    let (s, bus_events) = dive(&["--sim-leak-at", "5"], |s| marked(s, "SAFETY", "surfaced"));
+    assert!(marked(&s, "SAFETY", "surfaced"), "{s}");
+    assert!(
+        s["marking"].get("PHASES").is_none(),
+        "PHASES is inactive: {s}"
+    );
+    assert_eq!(s["stats"]["calls_failed"], 0, "{s}");
+    // The leak held 200 ms on the bus, then the surface reached by SAFETY's DepthCmd(0).
+    let names: Vec<&str> = bus_events.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(names, ["leak", "depth_reached"], "{bus_events:?}");
+    assert!(depth(&bus_events[1].1) <= 0.5, "{bus_events:?}");
+}
