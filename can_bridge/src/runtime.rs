@@ -9,7 +9,8 @@
 //!    the core; unusual frames (unknown identifier, wrong length, error frames) are counted by
 //!    the core and logged here (the first ones of each kind, then one in 1,000);
 //! 2. turns calls into command frames and sends them (recorded with direction `T`, then fed to
-//!    the core as sent);
+//!    the core as sent); a command refused (by the DBC's ranges, or a full transmit queue)
+//!    becomes `call_failed(program, function)` for the player;
 //! 3. advances the core's time, sends the heartbeat when due (skipped, and counted, while frames
 //!    wait for the interface: a late burst of heartbeats would lie), polls the interface state
 //!    every `state_poll` and restarts the interface after a bus-off if can.toml asks;
@@ -27,7 +28,7 @@ use std::time::Duration;
 
 use petrel_ipc::{
     CallReceiver, EventMsg, EventSender, FdSource, Participant, Reactor, ReactorError, Role,
-    SendError, SetupError, Source, Vehicle, WaitStrategy,
+    SendError, SetupError, Source, Value, Vehicle, WaitStrategy,
 };
 
 use crate::bridge::{BridgeCore, Counters, FrameOutcome};
@@ -35,7 +36,7 @@ use crate::bus::{Bus, BusError, BusStats};
 use crate::clock::Clock;
 use crate::faults::{describe_error_frame, BusState};
 use crate::log::{format_record, Direction, LogRecord};
-use crate::rules::EventOut;
+use crate::rules::{EventCause, EventOut};
 
 /// How the loop runs.
 pub struct RuntimeOptions {
@@ -99,6 +100,9 @@ pub struct RunReport {
     pub frames_recorded: u64,
     /// Heartbeats not sent because earlier frames still waited for the interface.
     pub heartbeats_skipped: u64,
+    /// Commands not carried out (refused by the DBC or the transmit queue), each reported to
+    /// the player as `call_failed`.
+    pub commands_failed: u64,
 }
 
 /// The loop could not run.
@@ -194,13 +198,15 @@ impl<B: Bus> Loop<B> {
         }
     }
 
-    fn send(&mut self, frame: &crate::frame::Frame, what: &str) {
+    /// Sends a frame; false when it was not sent and will not be.
+    fn send(&mut self, frame: &crate::frame::Frame, what: &str) -> bool {
         let now = self.clock.now_us();
         match self.bus.send(frame) {
             Ok(_) => {
                 self.record(now, frame, Direction::Transmitted);
                 let events = self.core.on_sent(now, frame);
                 self.queue_events(events);
+                true
             }
             Err(BusError::QueueFull { frame, capacity }) => {
                 self.report.frames_refused += 1;
@@ -208,9 +214,32 @@ impl<B: Bus> Loop<B> {
                     "{what} {frame} not sent: {capacity} frames already wait for `{}`",
                     self.bus.interface()
                 );
+                false
             }
-            Err(e) => tracing::error!("{what} {frame} not sent: {e}"),
+            Err(e) => {
+                tracing::error!("{what} {frame} not sent: {e}");
+                false
+            }
         }
+    }
+
+    /// A command that was not carried out: the player hears `call_failed(program, function)`,
+    /// as for a call no program received, so that a net can react to it.
+    fn command_failed(&mut self, function: &str) {
+        let Some(program) = self.core.config().commands.program.clone() else {
+            return;
+        };
+        self.report.commands_failed += 1;
+        let msg = EventMsg::new(
+            "call_failed",
+            vec![Value::Text(program), Value::Text(function.to_owned())],
+        );
+        let time_us = self.clock.now_us();
+        self.queue_events(vec![EventOut {
+            time_us,
+            cause: EventCause::Command,
+            msg,
+        }]);
     }
 
     /// The interface went down or away: the bus is stopped until [`Bus::state`] says
@@ -297,8 +326,15 @@ impl<B: Bus> Loop<B> {
         }
         for call in received {
             match self.core.command_call(&call) {
-                Ok(frame) => self.send(&frame, "command"),
-                Err(e) => tracing::error!("command {}: {e}", call.function),
+                Ok(frame) => {
+                    if !self.send(&frame, "command") {
+                        self.command_failed(&call.function);
+                    }
+                }
+                Err(e) => {
+                    tracing::error!("command {}: {e}", call.function);
+                    self.command_failed(&call.function);
+                }
             }
         }
     }

@@ -79,6 +79,10 @@ fn the_bridge_process_loop_over_iceoryx2() {
         std::thread::sleep(Duration::from_millis(2));
     }
     assert!(saw_command, "no DepthCmd frame on the bus");
+    // 400 m is beyond the DBC's [0|300]: refused, and the player hears it.
+    to_can
+        .send(&CallMsg::new("DepthCmd", vec![Value::Float(400.0)]))
+        .unwrap();
 
     // The depth sensor descends to the target; the player receives depth_reached.
     let mut got: Vec<EventMsg> = Vec::new();
@@ -102,6 +106,15 @@ fn the_bridge_process_loop_over_iceoryx2() {
         matches!(reached.params[..], [Value::Float(d)] if (d - 29.5).abs() < 1e-6),
         "{reached:?}"
     );
+    let failed = EventMsg::new(
+        "call_failed",
+        vec![Value::Text("CAN".into()), Value::Text("DepthCmd".into())],
+    );
+    while !got.contains(&failed) && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(10));
+        events.drain(|r| got.push(r.unwrap().msg)).unwrap();
+    }
+    assert!(got.contains(&failed), "{got:?}");
     let received = events.senders();
     assert!(
         received.iter().any(|s| s.origin.as_str() == "can_bridge"),
@@ -111,6 +124,7 @@ fn the_bridge_process_loop_over_iceoryx2() {
     stop.store(true, Ordering::Relaxed);
     let report = bridge.join().unwrap().unwrap();
     assert_eq!(report.events_refused + report.events_dropped, 0);
+    assert_eq!(report.commands_failed, 1, "{report:?}");
     assert!(report.counters.decoded >= 5, "{report:?}");
     assert!(report.counters.heartbeats >= 1, "{report:?}");
 

@@ -758,7 +758,8 @@ fn the_recorded_log_replays_to_the_same_events() {
 // Test 2: commands and the heartbeat.
 
 /// Test 2: the player's calls to the bridge's program become the DBC's frames, byte for byte,
-/// on the thrusters' socket, in order; a call out of range sends nothing; the supervisor
+/// on the thrusters' socket, in order; a call out of range sends nothing and comes back to the
+/// player as `call_failed("CAN", "ThrusterCmd")`; the supervisor
 /// heartbeat arrives every 100 ms, its counter going up by one from 0, mode `mission`.
 #[test]
 fn player_calls_become_frames_and_the_heartbeat_runs() {
@@ -823,6 +824,23 @@ fn player_calls_become_frames_and_the_heartbeat_runs() {
         take(f, at, &mut commands, &mut heartbeats);
     }
     assert_eq!(commands, expected);
+    // The refused command is reported to the player, as a call that failed.
+    player.drain();
+    let failed: Vec<&EventMsg> = player
+        .got
+        .iter()
+        .filter(|e| e.name == "call_failed")
+        .collect();
+    assert_eq!(
+        failed,
+        [&EventMsg::new(
+            "call_failed",
+            vec![Value::Text("CAN".into()), Value::Text("ThrusterCmd".into())]
+        )],
+        "{:?}",
+        player.got
+    );
+    assert_eq!(report.commands_failed, 1, "{report:?}");
 
     let c = report.counters;
     assert_eq!((c.commands, c.commands_refused), (4, 1), "{report:?}");

@@ -101,7 +101,11 @@ fn replayed(log: &Path) -> Vec<(String, Vec<serde_json::Value>)> {
         .arg(log)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     String::from_utf8(out.stdout)
         .unwrap()
         .lines()

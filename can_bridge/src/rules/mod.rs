@@ -229,6 +229,8 @@ pub enum EventCause {
     Rule(usize),
     /// A change of the bus state.
     Bus(BusState),
+    /// A command the bridge could not carry out (`call_failed`).
+    Command,
 }
 
 /// An event for the player, with the time it happened.
