@@ -17,7 +17,8 @@
 //! 4. retries frames waiting for the interface ([`Bus::flush`]);
 //! 5. sends the events to the player as [`Role::CanBridge`]. Events the player cannot take yet
 //!    (no player running) wait in a bounded outbox, in order; beyond its bound the oldest are
-//!    dropped, counted and logged.
+//!    dropped, counted and logged. Before leaving, the loop waits (up to `ack_grace`) for the
+//!    player's heartbeat to acknowledge the last event sent.
 
 use std::collections::VecDeque;
 use std::fmt;
@@ -27,8 +28,8 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use petrel_ipc::{
-    CallReceiver, EventMsg, EventSender, FdSource, Participant, Reactor, ReactorError, Role,
-    SendError, SetupError, Source, Value, Vehicle, WaitStrategy,
+    CallReceiver, EventMsg, EventSender, FdSource, HeartbeatSubscriber, Participant, Reactor,
+    ReactorError, Role, SendError, SetupError, Source, Value, Vehicle, WaitStrategy,
 };
 
 use crate::bridge::{BridgeCore, Counters, FrameOutcome};
@@ -50,6 +51,8 @@ pub struct RuntimeOptions {
     pub outbox: usize,
     /// Handle SIGINT and SIGTERM (stop in good order); off for tests.
     pub handle_signals: bool,
+    /// How long to wait, when stopping, for the player to acknowledge the last events sent.
+    pub ack_grace: Duration,
 }
 
 impl Default for RuntimeOptions {
@@ -60,6 +63,7 @@ impl Default for RuntimeOptions {
             state_poll_us: 100_000,
             outbox: 4096,
             handle_signals: true,
+            ack_grace: Duration::from_secs(2),
         }
     }
 }
@@ -72,6 +76,7 @@ impl fmt::Debug for RuntimeOptions {
             .field("state_poll_us", &self.state_poll_us)
             .field("outbox", &self.outbox)
             .field("handle_signals", &self.handle_signals)
+            .field("ack_grace", &self.ack_grace)
             .finish()
     }
 }
@@ -103,6 +108,9 @@ pub struct RunReport {
     /// Commands not carried out (refused by the DBC or the transmit queue), each reported to
     /// the player as `call_failed`.
     pub commands_failed: u64,
+    /// At the end, the player had not acknowledged the last events sent within the grace
+    /// period: they may be lost (a sender's shared memory goes with its process).
+    pub unacknowledged: bool,
 }
 
 /// The loop could not run.
@@ -155,6 +163,8 @@ struct Loop<B: Bus> {
     outbox: VecDeque<EventMsg>,
     opts: RuntimeOptions,
     report: RunReport,
+    /// The sequence number of the last event the player received.
+    last_seq: u64,
 }
 
 impl<B: Bus> Loop<B> {
@@ -342,7 +352,8 @@ impl<B: Bus> Loop<B> {
     fn deliver(&mut self) {
         while let Some(msg) = self.outbox.front() {
             match self.events.send(msg) {
-                Ok(_) => {
+                Ok(sent) => {
+                    self.last_seq = sent.seq;
                     self.report.events_sent += 1;
                     self.outbox.pop_front();
                 }
@@ -354,6 +365,32 @@ impl<B: Bus> Loop<B> {
                 }
             }
         }
+    }
+}
+
+/// Waits up to `grace` until the player's heartbeat says it took event `seq` of `origin`:
+/// shared memory dies with its process, so the bridge leaves only then.
+fn acknowledged(beats: &HeartbeatSubscriber, origin: &str, seq: u64, grace: Duration) -> bool {
+    let deadline = std::time::Instant::now() + grace;
+    loop {
+        let mut taken = 0u64;
+        let _ = beats.drain(|r| {
+            if let Ok(rcv) = r {
+                if rcv.origin.as_str() == "player" {
+                    let doc: serde_json::Value =
+                        serde_json::from_str(&rcv.msg.status).unwrap_or_default();
+                    let last = doc["senders"][origin]["last_seq"].as_u64().unwrap_or(0);
+                    taken = taken.max(last);
+                }
+            }
+        });
+        if taken >= seq {
+            return true;
+        }
+        if std::time::Instant::now() >= deadline {
+            return false;
+        }
+        std::thread::sleep(Duration::from_millis(5));
     }
 }
 
@@ -378,6 +415,7 @@ pub fn run<B: Bus>(
 ) -> Result<RunReport, RuntimeError> {
     let participant = Participant::join(vehicle, Role::CanBridge)?;
     let events = participant.event_sender()?;
+    let beats = participant.heartbeat_subscriber()?;
     // Latest values of the decoded signals, for the programs.
     let signals = participant.signals_publisher()?;
     let mut published_updates = 0u64;
@@ -412,6 +450,7 @@ pub fn run<B: Bus>(
             started_us,
             ..RunReport::default()
         },
+        last_seq: 0,
     };
     let mut next_poll = lp.clock.now_us();
     while !stop.load(Ordering::Relaxed) {
@@ -487,6 +526,16 @@ pub fn run<B: Bus>(
     // Last chance for waiting events and frames.
     let _ = lp.bus.flush();
     lp.deliver();
+    if lp.last_seq > 0 {
+        let origin = lp.events.origin().to_string();
+        lp.report.unacknowledged = !acknowledged(&beats, &origin, lp.last_seq, lp.opts.ack_grace);
+        if lp.report.unacknowledged {
+            tracing::warn!(
+                "the player did not acknowledge the last events within {:?}: they may be lost",
+                lp.opts.ack_grace
+            );
+        }
+    }
     if let Some(out) = &mut lp.opts.record {
         let _ = out.flush();
     }

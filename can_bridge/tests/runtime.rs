@@ -47,6 +47,8 @@ fn the_bridge_process_loop_over_iceoryx2() {
                     std::fs::File::create(&log_path).unwrap(),
                 ))),
                 handle_signals: false,
+                // The fake player sends no heartbeat to acknowledge with.
+                ack_grace: Duration::ZERO,
                 ..RuntimeOptions::default()
             };
             run(core, move || Ok(bridge_bus), clock, &vehicle, opts, &stop)
@@ -166,6 +168,8 @@ fn decoded_signals_are_published_as_latest_values_for_the_programs() {
             let core = BridgeCore::new(dbc(), config(), start);
             let opts = RuntimeOptions {
                 handle_signals: false,
+                // The fake player sends no heartbeat to acknowledge with.
+                ack_grace: Duration::ZERO,
                 ..RuntimeOptions::default()
             };
             run(core, move || Ok(bridge_bus), clock, &vehicle, opts, &stop)
@@ -238,6 +242,8 @@ fn a_slow_start_does_not_make_a_speaking_sensor_look_lost() {
             let core = BridgeCore::new(dbc(), config(), made_us);
             let opts = RuntimeOptions {
                 handle_signals: false,
+                // The fake player sends no heartbeat to acknowledge with.
+                ack_grace: Duration::ZERO,
                 ..RuntimeOptions::default()
             };
             run(core, move || Ok(bridge_bus), clock, &vehicle, opts, &stop)

@@ -314,6 +314,8 @@ impl Bridge {
                             as Box<dyn io::Write>
                     }),
                     handle_signals: false,
+                    // The fake player sends no heartbeat to acknowledge with.
+                    ack_grace: Duration::ZERO,
                     ..RuntimeOptions::default()
                 };
                 let open = || SocketCanBus::open(&iface, &SocketCanOptions::default());
@@ -769,7 +771,7 @@ fn player_calls_become_frames_and_the_heartbeat_runs() {
     let iface = bench.iface.as_str();
     let t0 = Instant::now();
     let vehicle = Vehicle::isolated("auv").unwrap();
-    let player = Player::join(&vehicle);
+    let mut player = Player::join(&vehicle);
     let thrusters = node_socket(iface, &[0x100, 0x110, 0x120]);
     thrusters.set_recv_timestamp(true).unwrap();
     let bridge = Bridge::start(&vehicle, iface, None);
@@ -818,14 +820,15 @@ fn player_calls_become_frames_and_the_heartbeat_runs() {
             break;
         }
     }
+    // The refused command is reported to the player, as a call that failed (received before
+    // the bridge stops: a sender's samples go with it).
+    player.wait_until(|got| got.iter().any(|e| e.name == "call_failed"));
     let report = bridge.stop();
     // The heartbeats sent before the bridge stopped.
     while let Some((f, at)) = node_recv(&thrusters, Duration::from_millis(200)) {
         take(f, at, &mut commands, &mut heartbeats);
     }
     assert_eq!(commands, expected);
-    // The refused command is reported to the player, as a call that failed.
-    player.drain();
     let failed: Vec<&EventMsg> = player
         .got
         .iter()
@@ -837,7 +840,7 @@ fn player_calls_become_frames_and_the_heartbeat_runs() {
             "call_failed",
             vec![Value::Text("CAN".into()), Value::Text("ThrusterCmd".into())]
         )],
-        "{:?}",
+        "{:?} {report:?}",
         player.got
     );
     assert_eq!(report.commands_failed, 1, "{report:?}");

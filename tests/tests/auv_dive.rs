@@ -58,9 +58,9 @@ fn marked(s: &serde_json::Value, net: &str, place: &str) -> bool {
         .is_some_and(|m| m.iter().any(|p| p == place))
 }
 
-/// The data server (recording the bus to `log`) and the guidance program; returns once both
-/// are on the vehicle.
-fn start_vehicle(vehicle: &str, log: &Path, bridge_flags: &[&str]) -> Processes {
+/// The data server (recording the bus to `log`, its standard error to `stderr`) and the
+/// guidance program; returns once both are on the vehicle.
+fn start_vehicle(vehicle: &str, log: &Path, stderr: &Path, bridge_flags: &[&str]) -> Processes {
     let bridge = Command::new(petrel_bin())
         .arg("bridge")
         .arg(repo().join("missions/auv"))
@@ -69,7 +69,7 @@ fn start_vehicle(vehicle: &str, log: &Path, bridge_flags: &[&str]) -> Processes 
         .args(bridge_flags)
         .env("RUST_LOG", "warn")
         .stdout(Stdio::null())
-        .stderr(Stdio::null())
+        .stderr(std::fs::File::create(stderr).unwrap())
         .spawn()
         .expect("petrel bridge starts");
     let gui = Command::new(example_bin("auv_gui"))
@@ -127,14 +127,21 @@ fn dive(
     let vehicle = unique_vehicle("auv");
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("bus.log");
+    let bridge_err = dir.path().join("bridge.err");
     let player = Player::start(&repo().join("missions/auv"), &vehicle);
-    let vehicle_processes = start_vehicle(&vehicle, &log, bridge_flags);
+    let vehicle_processes = start_vehicle(&vehicle, &log, &bridge_err, bridge_flags);
     let o = player.send("start_mission", 1);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let s = player.wait_for(60.0, &done);
     // SIGTERM: the data server stops in good order (exit 0) and flushes its recording.
     let codes = vehicle_processes.stop();
     assert_eq!(codes, [Some(0), Some(0)], "auv_gui, petrel bridge");
+    // Before leaving, the data server saw the player acknowledge every event it sent.
+    let report = std::fs::read_to_string(&bridge_err).unwrap();
+    assert!(
+        report.contains("unacknowledged: false") && report.contains("events_dropped: 0"),
+        "{report}"
+    );
     assert!(player.stop().success());
     (s, replayed(&log))
 }
