@@ -58,6 +58,11 @@ echo "== the flight recorder: target/journal/$vehicle"
 auv=missions/auv
 echo "== petrel check $auv (nets, can.toml and its DBC)"
 "$petrel" check "$auv"
+for script in "$auv"/scripts/*.script; do
+    out="target/auv-$(basename "$script" .script).jsonl"
+    echo "== petrel run $auv --script $script  (steps in $out)"
+    "$petrel" run "$auv" --script "$script" > "$out"
+done
 dive="dive$$"
 echo "== live dive on vehicle $dive: petrel play + petrel bridge (memory bus, simulated AUV) + auv_gui"
 pids=()
@@ -74,6 +79,7 @@ sleep 0.5
 "$petrel" send "$auv" --vehicle "$dive" start_mission
 wait_status "$auv" "$dive" '"surfaced"'
 "$petrel" status "$auv" --vehicle "$dive"
+# The programs first (the data server waits for the player to acknowledge its last events).
 kill "${pids[2]}" "${pids[1]}" 2>/dev/null || true
 wait "${pids[2]}" "${pids[1]}" 2>/dev/null || true
 kill "${pids[0]}" 2>/dev/null || true

@@ -289,10 +289,23 @@ fn verify_and_check_report_each_flaw_with_its_trace() {
 }
 
 #[test]
-fn run_plays_the_uav_scripts_in_virtual_time_as_json_lines() {
-    for name in ["nominal", "payload_failure", "engine_failure"] {
-        let script = repo().join(format!("missions/uav/scripts/{name}.script"));
-        let o = petrel(&["run", &uav(), "--script", &script.display().to_string()]);
+fn run_plays_the_mission_scripts_in_virtual_time_as_json_lines() {
+    for (mission, name) in [
+        ("uav", "nominal"),
+        ("uav", "payload_failure"),
+        ("uav", "engine_failure"),
+        ("auv", "nominal"),
+        ("auv", "leak"),
+        ("auv", "bus_lost"),
+    ] {
+        let dir = repo().join("missions").join(mission);
+        let script = dir.join(format!("scripts/{name}.script"));
+        let o = petrel(&[
+            "run",
+            &dir.display().to_string(),
+            "--script",
+            &script.display().to_string(),
+        ]);
         assert_eq!(o.status.code(), Some(0), "{name}: {}", stderr(&o));
         let out = stdout(&o);
         for line in out.lines() {
