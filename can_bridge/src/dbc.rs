@@ -8,7 +8,8 @@
 //!   bit, bit `i` of the frame being bit `i % 8` of byte `i / 8`. A big-endian (Motorola, `@0`)
 //!   signal's start bit is its **most** significant bit in that same numbering; its following
 //!   bits run down to bit 0 of the byte, then on from bit 7 of the next byte.
-//! - **Values.** `physical = raw * factor + offset`, `raw` read as unsigned, or as two's
+//! - **Values.** `physical = raw * factor + offset` (for integer signals rounded to the decimal
+//!   places of the factor and offset, so that 549 * 0.01 - 5 reads 0.49), `raw` read as unsigned, or as two's
 //!   complement when the signal is signed (`-`), or as an IEEE float (`SIG_VALTYPE_`).
 //! - **Ranges.** Encoding refuses a physical value outside `[min, max]` and a raw value that
 //!   does not fit in the signal's bits: an error naming the signal, never a clamp. A range of
@@ -106,6 +107,17 @@ pub struct Signal {
     pub start_value: Option<f64>,
     /// Bit positions in the frame, in the linear numbering of the layout (see [`Self::bits`]).
     first_bit: u32,
+    /// Decimal places of the physical values of an integer signal (those of its factor and
+    /// offset), to which they are rounded: 549 * 0.01 - 5 is 0.49, not 0.4900000000000002.
+    decimals: Option<i32>,
+}
+
+/// The decimal places of `x` when it has at most nine.
+fn decimal_places(x: f64) -> Option<i32> {
+    (0..=9).find(|&d| {
+        let scaled = x * 10f64.powi(d);
+        (scaled - scaled.round()).abs() <= 1e-9 * scaled.abs().max(1.0)
+    })
 }
 
 impl Signal {
@@ -232,7 +244,20 @@ impl Signal {
             ValueKind::Float32 => f64::from(f32::from_bits(bits as u32)),
             ValueKind::Float64 => f64::from_bits(bits),
         };
-        base * self.factor + self.offset
+        let value = base * self.factor + self.offset;
+        match self.decimals {
+            Some(d) if d > 0 => {
+                let scale = 10f64.powi(d);
+                let rounded = (value * scale).round() / scale;
+                // Beyond 2^53 / scale the rounding would lose more than it fixes.
+                if rounded.is_finite() && (value * scale).abs() < 9.0e15 {
+                    rounded
+                } else {
+                    value
+                }
+            }
+            _ => value,
+        }
     }
 
     /// The raw bits of a physical value, or why it cannot be encoded (range, representation).
@@ -733,6 +758,15 @@ impl Dbc {
                     choices,
                     start_value,
                     first_bit,
+                    decimals: match kind {
+                        ValueKind::Signed | ValueKind::Unsigned => {
+                            match (decimal_places(s.factor), decimal_places(s.offset)) {
+                                (Some(a), Some(b)) => Some(a.max(b)),
+                                _ => None,
+                            }
+                        }
+                        ValueKind::Float32 | ValueKind::Float64 => None,
+                    },
                 };
                 // In both numberings the signal occupies positions first_bit..first_bit+size.
                 let end_bit = u64::from(first_bit) + u64::from(size);

@@ -402,3 +402,29 @@ proptest! {
         let _ = Dbc::parse(&text);
     }
 }
+
+/// Physical values of integer signals read with the decimals of their factor and offset, not
+/// with the noise of binary floating point: raw 549 at 0.01 m per bit, offset -5 m, is 0.49 m.
+#[test]
+fn physical_values_have_the_decimals_of_their_scaling() {
+    let dbc = auv();
+    // Depth: 16 bits big-endian from bit 7, 0.01 m, offset -5 m; raw 549 = 0x0225.
+    let frame = Frame::data(CanId::Standard(0x200), &[0x02, 0x25, 0x00]).unwrap();
+    let petrel_can_bridge::dbc::DecodeOutcome::Message(m) = dbc.decode(&frame) else {
+        panic!("Depth decodes");
+    };
+    assert_eq!(m.signals[0].raw, 549);
+    assert_eq!(m.signals[0].physical, 0.49);
+    assert_eq!(format!("{}", m.signals[0].physical), "0.49");
+    // Battery voltage, 0.01 V: raw 2190 is 21.9 V exactly as written.
+    let v = dbc
+        .encode(
+            "Battery",
+            &[("voltage", 21.9), ("current", 0.0), ("state", 1.0)],
+        )
+        .unwrap();
+    let petrel_can_bridge::dbc::DecodeOutcome::Message(m) = dbc.decode(&v) else {
+        panic!("Battery decodes");
+    };
+    assert_eq!(m.signals[0].physical, 21.9);
+}

@@ -245,18 +245,12 @@ fn threshold_with_hysteresis() {
             (
                 MS,
                 "low_battery".to_owned(),
-                vec![
-                    Value::Float(21.900000000000002),
-                    Value::Text("discharging".into())
-                ]
+                vec![Value::Float(21.9), Value::Text("discharging".into())]
             ),
             (
                 7 * MS,
                 "low_battery".to_owned(),
-                vec![
-                    Value::Float(21.900000000000002),
-                    Value::Text("discharging".into())
-                ]
+                vec![Value::Float(21.9), Value::Text("discharging".into())]
             ),
         ],
         "{got:?}"
