@@ -1052,6 +1052,19 @@ impl Dbc {
         DecodeOutcome::Message(DecodedMessage { message, signals })
     }
 
+    /// SocketCAN identifier filters `(id, mask)` that pass exactly this DBC's messages
+    /// (standard and extended identifiers kept apart by the EFF flag).
+    pub fn socket_filters(&self) -> Vec<(u32, u32)> {
+        const EFF: u32 = 0x8000_0000;
+        self.messages()
+            .iter()
+            .map(|m| match m.id {
+                CanId::Standard(id) => (u32::from(id), 0x7FF | EFF),
+                CanId::Extended(id) => (id | EFF, 0x1FFF_FFFF | EFF),
+            })
+            .collect()
+    }
+
     /// Encodes a frame of the message named `message` from physical values by signal name.
     ///
     /// Every signal in the frame must be given: the plain ones, the switch and the signals it

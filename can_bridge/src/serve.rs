@@ -88,6 +88,11 @@ pub fn serve(
         .or(config.interface.clone())
         .unwrap_or_else(|| "memory".to_owned());
     let fd = config.fd;
+    let filters = if config.receive_only_dbc {
+        dbc.socket_filters()
+    } else {
+        Vec::new()
+    };
     let core = BridgeCore::new(dbc.clone(), config, clock.now_us());
     let result = if bus_name == "memory" {
         let hub = MemoryHub::new(clock.clone());
@@ -104,6 +109,7 @@ pub fn serve(
     } else {
         let sock_opts = SocketCanOptions {
             fd,
+            filters,
             ..SocketCanOptions::default()
         };
         // Opened by the loop once the vehicle is joined (see `run`).

@@ -169,6 +169,13 @@ fn bus_heartbeat_and_commands_are_checked_too() {
     assert!(r.contains("did you mean `bus_off`?"), "{r}");
     let (code, r) = only_error("[bus.on_state]\nbus_off = \"bus_fault\"\n");
     assert_eq!(code, "E0705", "{r}");
+    let (code, r) = only_error("[bus]\nreceive = \"known\"\n");
+    assert_eq!(code, "E0708", "{r}");
+    assert!(
+        r.contains("`receive = \"known\"` in [bus]: not a choice"),
+        "{r}"
+    );
+    assert!(r.contains("receive = \"dbc\""), "{r}");
     let (code, r) =
         only_error("[heartbeat]\nmessage = \"SupervisorHeartbeat\"\ncounter = \"alive\"\n");
     assert_eq!(code, "E0708", "{r}");
@@ -414,4 +421,19 @@ fn the_same_input_gives_the_same_events() {
     let a = run();
     assert!(!a.is_empty());
     assert_eq!(a, run());
+}
+
+#[test]
+fn receive_dbc_asks_for_the_dbc_s_identifier_filters() {
+    let (c, _) = check("[bus]\nreceive = \"dbc\"\n").unwrap();
+    assert!(c.receive_only_dbc);
+    let (c, _) = check("[bus]\nreceive = \"all\"\n").unwrap();
+    assert!(!c.receive_only_dbc);
+    let (c, _) = check("").unwrap();
+    assert!(!c.receive_only_dbc);
+    // One exact filter a message: standard 0x200 (Depth) and extended NavTime kept apart.
+    let filters = dbc().socket_filters();
+    assert_eq!(filters.len(), dbc().messages().len());
+    assert!(filters.contains(&(0x200, 0x7FF | 0x8000_0000)));
+    assert!(filters.contains(&(0x18FF_0100 | 0x8000_0000, 0x1FFF_FFFF | 0x8000_0000)));
 }

@@ -14,6 +14,8 @@
 //!    meanwhile waits and goes out once it is up again (`bus_fault("error_active")`).
 //! 6. The interface removed and re-created (`vcan1`): the bridge says so, opens a new socket,
 //!    and frames flow again.
+//! 7. With the DBC's identifier filters (`[bus] receive = "dbc"`) unknown frames stay in the
+//!    kernel; error frames still come.
 //!
 //! Where the kernel has no vcan0 (this project's machines), each test says why it is skipped
 //! and passes; with `PETREL_REQUIRE_VCAN=1` (the qemu bench) that is a failure instead:
@@ -1253,5 +1255,50 @@ fn an_interface_removed_and_created_again_is_opened_again() {
         player.got.len(),
         report.counters.decoded,
         t0.elapsed().as_secs_f64()
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// Test 7: `[bus] receive = "dbc"`.
+
+/// With the DBC's identifier filters (`receive = "dbc"` in can.toml), the kernel passes only
+/// the DBC's messages (a standard and an extended one here) and error frames; a frame the DBC
+/// does not know never reaches the socket, where without filters it is counted.
+#[test]
+fn dbc_filters_keep_unknown_frames_in_the_kernel() {
+    let Some(bench) = bench("dbc filters") else {
+        return;
+    };
+    let iface = bench.iface.as_str();
+    let dbc = dbc();
+    let node = node_socket(iface, &[]);
+    let mut filtered = SocketCanBus::open(
+        iface,
+        &SocketCanOptions {
+            filters: dbc.socket_filters(),
+            ..SocketCanOptions::default()
+        },
+    )
+    .unwrap();
+    let mut all = SocketCanBus::open(iface, &SocketCanOptions::default()).unwrap();
+    let unknown = Frame::data(CanId::Standard(0x7AB), &[1, 2, 3]).unwrap();
+    let unknown_ext = Frame::data(CanId::Extended(0x0200), &[4]).unwrap();
+    let nav = dbc.encode("NavTime", &[("time_us", 42.0)]).unwrap();
+    let bus_off = Frame::error(err::BUSOFF, [0; 8]).unwrap();
+    let depth = dbc
+        .encode("Depth", &[("depth", 3.0), ("status", 0.0)])
+        .unwrap();
+    for f in [&unknown, &nav, &unknown_ext, &bus_off, &depth] {
+        node_send(&node, f);
+    }
+    assert_eq!(
+        until_marker(&mut filtered, &depth),
+        [nav, bus_off, depth],
+        "with the DBC's filters"
+    );
+    assert_eq!(
+        until_marker(&mut all, &depth),
+        [unknown, nav, unknown_ext, bus_off, depth],
+        "without filters"
     );
 }

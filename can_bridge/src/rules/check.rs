@@ -134,6 +134,7 @@ struct RawBus {
     on_state: Ordered<Spanned<String>>,
     #[serde(default)]
     restart_after_bus_off: bool,
+    receive: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize)]
@@ -1299,6 +1300,21 @@ pub fn check_rules(
     };
     let commands = c.commands(&raw.commands);
     let bus = c.bus(&raw.bus);
+    let receive_only_dbc = match raw.bus.receive.as_ref() {
+        None => false,
+        Some(r) => match r.get_ref().as_str() {
+            "all" => false,
+            "dbc" => true,
+            other => {
+                c.bad_field(
+                    r.span(),
+                    format!("`receive = \"{other}\"` in [bus]: not a choice"),
+                    "write `receive = \"all\"` (every frame; those the DBC does not know are counted) or `receive = \"dbc\"` (the kernel passes only the DBC's messages, and error frames)",
+                );
+                false
+            }
+        },
+    };
     let heartbeat = raw.heartbeat.as_ref().and_then(|h| c.heartbeat(h));
     let rules: Vec<Option<Rule>> = raw.rules.iter().map(|r| c.rule(r)).collect();
     if c.errors > 0 {
@@ -1308,6 +1324,7 @@ pub fn check_rules(
         dbc_path: raw.dbc.as_ref().map(|d| d.get_ref().clone()),
         interface: raw.bus.interface.as_ref().map(|i| i.get_ref().clone()),
         fd: raw.bus.fd,
+        receive_only_dbc,
         rules: rules.into_iter().flatten().collect(),
         bus,
         heartbeat,

@@ -212,6 +212,9 @@ pub struct CanConfig {
     pub interface: Option<String>,
     /// Open the interface for CAN FD frames.
     pub fd: bool,
+    /// `[bus] receive = "dbc"`: the socket's identifier filters pass only the DBC's messages
+    /// (and error frames), so that a busy bus costs the bridge only what it decodes.
+    pub receive_only_dbc: bool,
     /// The rules, in written order (the order their simultaneous events come out).
     pub rules: Vec<Rule>,
     /// Bus fault events.
