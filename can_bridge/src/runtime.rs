@@ -18,7 +18,9 @@
 //! 5. sends the events to the player as [`Role::CanBridge`]. Events the player cannot take yet
 //!    (no player running) wait in a bounded outbox, in order; beyond its bound the oldest are
 //!    dropped, counted and logged. Before leaving, the loop waits (up to `ack_grace`) for the
-//!    player's heartbeat to acknowledge the last event sent.
+//!    player's heartbeat to acknowledge the last event sent;
+//! 6. publishes its own heartbeat every 100 ms, its status (bus state, counters) as JSON, which
+//!    `petrel status` shows.
 
 use std::collections::VecDeque;
 use std::fmt;
@@ -150,6 +152,9 @@ impl From<ReactorError> for RuntimeError {
     }
 }
 
+/// How often the bridge publishes its own heartbeat (its status), in microseconds.
+const HEARTBEAT_PERIOD_US: u64 = 100_000;
+
 /// Logs the first occurrences of a kind of problem, then one in 1,000.
 fn worth_logging(count: u64) -> bool {
     count <= 10 || count.is_multiple_of(1000)
@@ -231,6 +236,29 @@ impl<B: Bus> Loop<B> {
                 false
             }
         }
+    }
+
+    /// The bridge's status, as its heartbeat carries it (a JSON object).
+    fn status_json(&self) -> String {
+        let c = self.core.counters();
+        serde_json::json!({
+            "interface": self.bus.interface(),
+            "bus_state": self.core.bus_state().name(),
+            "frames": c.frames,
+            "decoded": c.decoded,
+            "unknown_id": c.unknown_id,
+            "wrong_length": c.wrong_length,
+            "error_frames": c.error_frames,
+            "events": c.events,
+            "events_sent": self.report.events_sent,
+            "events_pending": self.outbox.len(),
+            "events_dropped": self.report.events_dropped,
+            "commands": c.commands,
+            "commands_failed": self.report.commands_failed,
+            "heartbeats": c.heartbeats,
+            "tx_queued": self.bus.queued(),
+        })
+        .to_string()
     }
 
     /// A command that was not carried out: the player hears `call_failed(program, function)`,
@@ -416,6 +444,10 @@ pub fn run<B: Bus>(
     let participant = Participant::join(vehicle, Role::CanBridge)?;
     let events = participant.event_sender()?;
     let beats = participant.heartbeat_subscriber()?;
+    // The bridge's own heartbeat: its status for `petrel status` and the operators.
+    let own_beat = participant.heartbeat_publisher()?;
+    let t0 = std::time::Instant::now();
+    let mut next_beat = clock.now_us();
     // Latest values of the decoded signals, for the programs.
     let signals = participant.signals_publisher()?;
     let mut published_updates = 0u64;
@@ -455,7 +487,12 @@ pub fn run<B: Bus>(
     let mut next_poll = lp.clock.now_us();
     while !stop.load(Ordering::Relaxed) {
         let now = lp.clock.now_us();
-        let mut deadline = lp.core.next_deadline().unwrap_or(u64::MAX).min(next_poll);
+        let mut deadline = lp
+            .core
+            .next_deadline()
+            .unwrap_or(u64::MAX)
+            .min(next_poll)
+            .min(next_beat);
         if !lp.outbox.is_empty() || lp.bus.queued() > 0 {
             deadline = deadline.min(now.saturating_add(10_000));
         }
@@ -522,6 +559,18 @@ pub fn run<B: Bus>(
             tracing::error!("frames waiting for `{}`: {e}", lp.bus.interface());
         }
         lp.deliver();
+        let now = lp.clock.now_us();
+        if now >= next_beat {
+            next_beat = now.saturating_add(HEARTBEAT_PERIOD_US);
+            let hb = petrel_ipc::Heartbeat {
+                uptime_ms: t0.elapsed().as_millis() as u64,
+                period_ms: (HEARTBEAT_PERIOD_US / 1000) as u32,
+                progress: lp.core.counters().frames,
+                status: lp.status_json(),
+            };
+            // Latest-value service: a heartbeat nobody reads is not an error.
+            let _ = own_beat.send(&hb);
+        }
     }
     // Last chance for waiting events and frames.
     let _ = lp.bus.flush();

@@ -1164,19 +1164,31 @@ fn status(dir: &Path, vehicle: Option<String>, json: bool) -> Outcome {
         Err(o) => return o,
     };
     // The player's heartbeat carries its status; wait for the next one (about 100 ms).
+    // The CAN data server's, if one runs, comes at the same pace: take it when it is there by
+    // then, or wait a little more (one of its periods) once the player's came.
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(2);
     let mut latest = None;
-    while latest.is_none() && std::time::Instant::now() < deadline {
+    let mut bridge: Option<petrel_ipc::Heartbeat> = None;
+    let mut bridge_deadline = None;
+    loop {
         let _ = beats.drain(|r| {
             if let Ok(rcv) = r {
-                if rcv.origin.as_str() == "player" {
-                    latest = Some(rcv.msg);
+                match rcv.origin.as_str() {
+                    "player" => latest = Some(rcv.msg),
+                    "can_bridge" => bridge = Some(rcv.msg),
+                    _ => {}
                 }
             }
         });
-        if latest.is_none() {
-            std::thread::sleep(std::time::Duration::from_millis(10));
+        let now = std::time::Instant::now();
+        if latest.is_some() && bridge_deadline.is_none() {
+            bridge_deadline = Some(now + std::time::Duration::from_millis(150));
         }
+        let bridge_done = bridge.is_some() || bridge_deadline.is_some_and(|d| now >= d);
+        if (latest.is_some() && bridge_done) || now >= deadline {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
     }
     let Some(beat) = latest else {
         eprintln!(
@@ -1185,11 +1197,17 @@ fn status(dir: &Path, vehicle: Option<String>, json: bool) -> Outcome {
         );
         return Outcome::Errors;
     };
+    let mut doc: serde_json::Value = serde_json::from_str(&beat.status).unwrap_or_default();
+    let bridge_doc: Option<serde_json::Value> = bridge
+        .as_ref()
+        .and_then(|b| serde_json::from_str(&b.status).ok());
     if json {
-        out(&format!("{}\n", beat.status));
+        if let (Some(b), Some(obj)) = (&bridge_doc, doc.as_object_mut()) {
+            obj.insert("can_bridge".into(), b.clone());
+        }
+        out(&format!("{doc}\n"));
         return Outcome::Clean;
     }
-    let doc: serde_json::Value = serde_json::from_str(&beat.status).unwrap_or_default();
     let mut text = format!(
         "vehicle `{}`, project `{}`, mission time {:.3} s{}\n",
         v.name(),
@@ -1211,6 +1229,21 @@ fn status(dir: &Path, vehicle: Option<String>, json: bool) -> Outcome {
         }
     }
     text.push_str(&format!("  counters: {}\n", doc["stats"]));
+    if let Some(b) = &bridge_doc {
+        text.push_str(&format!(
+            "  CAN data server on `{}`: bus {}, {} frames ({} unknown, {} of a wrong length, {} error frames), {} events sent ({} waiting), {} commands ({} failed)\n",
+            b["interface"].as_str().unwrap_or("?"),
+            b["bus_state"].as_str().unwrap_or("?"),
+            b["frames"],
+            b["unknown_id"],
+            b["wrong_length"],
+            b["error_frames"],
+            b["events_sent"],
+            b["events_pending"],
+            b["commands"],
+            b["commands_failed"],
+        ));
+    }
     out(&text);
     Outcome::Clean
 }

@@ -161,6 +161,16 @@ fn the_survey_dives_surveys_and_surfaces_through_the_can_bus() {
     assert_eq!(st["refused"], 0, "{s}");
     // start_mission, depth_reached, area_reached, survey_done, area_reached, depth_reached.
     assert!(st["processed"].as_u64().unwrap() >= 6, "{s}");
+    // `petrel status` shows the data server too (its own heartbeat): a healthy bus, frames
+    // from the simulated sensors, the commands of the nets and of GUI.
+    let b = &s["can_bridge"];
+    assert_eq!(b["interface"], "mem0", "{s}");
+    assert_eq!(b["bus_state"], "error_active", "{s}");
+    assert!(b["frames"].as_u64().unwrap() > 50, "{s}");
+    assert_eq!(b["unknown_id"], 0, "{s}");
+    // DepthCmd and ThrusterCmd to dive, GUI's three ThrusterCmd and its DepthCmd to surface.
+    assert!(b["commands"].as_u64().unwrap() >= 6, "{s}");
+    assert_eq!(b["commands_failed"], 0, "{s}");
     // The bus, recorded by the data server: the commanded 10 m reached going down (by the
     // nets' DepthCmd), the surface reached coming up (by GUI's own DepthCmd through CAN).
     let names: Vec<&str> = bus_events.iter().map(|(n, _)| n.as_str()).collect();
