@@ -177,3 +177,47 @@ pub fn example_bin(name: &str) -> PathBuf {
     }
     bin
 }
+
+/// Child processes stopped with SIGTERM (so that they leave the vehicle cleanly), then SIGKILL
+/// after 5 s, when dropped or by [`stop`](Self::stop).
+pub struct Processes(pub Vec<std::process::Child>);
+
+impl Processes {
+    /// Stops them all; their exit codes, in order (`None`: killed, or ended by a signal).
+    pub fn stop(mut self) -> Vec<Option<i32>> {
+        let codes = stop_all(&mut self.0);
+        self.0.clear();
+        codes
+    }
+}
+
+fn stop_all(children: &mut [std::process::Child]) -> Vec<Option<i32>> {
+    for c in children.iter() {
+        let _ = Command::new("kill")
+            .args(["-TERM", &c.id().to_string()])
+            .status();
+    }
+    children
+        .iter_mut()
+        .map(|c| {
+            let deadline = std::time::Instant::now() + std::time::Duration::from_secs(5);
+            while matches!(c.try_wait(), Ok(None)) && std::time::Instant::now() < deadline {
+                std::thread::sleep(std::time::Duration::from_millis(10));
+            }
+            match c.try_wait() {
+                Ok(Some(s)) => s.code(),
+                _ => {
+                    let _ = c.kill();
+                    let _ = c.wait();
+                    None
+                }
+            }
+        })
+        .collect()
+}
+
+impl Drop for Processes {
+    fn drop(&mut self) {
+        stop_all(&mut self.0);
+    }
+}

@@ -4,53 +4,10 @@
 //! `auv_gui`, which commands the thrusters through the data server and reads its signals.
 
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use petrel_tests::{example_bin, petrel_bin, repo, unique_vehicle, Player};
-
-/// Processes stopped with SIGTERM (then SIGKILL) when dropped.
-struct Processes(Vec<Child>);
-
-impl Processes {
-    /// SIGTERM to each, and their exit codes (None: killed).
-    fn stop(mut self) -> Vec<Option<i32>> {
-        let codes = stop_all(&mut self.0);
-        self.0.clear();
-        codes
-    }
-}
-
-fn stop_all(children: &mut [Child]) -> Vec<Option<i32>> {
-    for c in children.iter() {
-        let _ = Command::new("kill")
-            .args(["-TERM", &c.id().to_string()])
-            .status();
-    }
-    children
-        .iter_mut()
-        .map(|c| {
-            let deadline = Instant::now() + Duration::from_secs(5);
-            while matches!(c.try_wait(), Ok(None)) && Instant::now() < deadline {
-                std::thread::sleep(Duration::from_millis(10));
-            }
-            match c.try_wait() {
-                Ok(Some(s)) => s.code(),
-                _ => {
-                    let _ = c.kill();
-                    let _ = c.wait();
-                    None
-                }
-            }
-        })
-        .collect()
-}
-
-impl Drop for Processes {
-    fn drop(&mut self) {
-        stop_all(&mut self.0);
-    }
-}
+use petrel_tests::{example_bin, petrel_bin, repo, unique_vehicle, Player, Processes};
 
 fn marked(s: &serde_json::Value, net: &str, place: &str) -> bool {
     s["marking"][net]

@@ -1,31 +1,10 @@
 //! The UAV mission flown by real processes over real iceoryx2: `petrel play`, and the GUI/PLD
 //! and DEC programs of `petrel-programs`, each its own process.
 
-use petrel_tests::{example_bin, repo, unique_vehicle, Player};
-use std::process::{Child, Command, Stdio};
+use petrel_tests::{example_bin, repo, unique_vehicle, Player, Processes};
+use std::process::{Command, Stdio};
 
-struct Programs(Vec<Child>);
-
-impl Drop for Programs {
-    fn drop(&mut self) {
-        // SIGTERM: the programs leave the vehicle cleanly; SIGKILL only if they do not.
-        for c in &mut self.0 {
-            let _ = Command::new("kill")
-                .args(["-TERM", &c.id().to_string()])
-                .status();
-        }
-        for c in &mut self.0 {
-            let deadline = std::time::Instant::now() + std::time::Duration::from_secs(5);
-            while matches!(c.try_wait(), Ok(None)) && std::time::Instant::now() < deadline {
-                std::thread::sleep(std::time::Duration::from_millis(10));
-            }
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-    }
-}
-
-fn programs(vehicle: &str, gui_flags: &[&str]) -> Programs {
+fn programs(vehicle: &str, gui_flags: &[&str]) -> Processes {
     let gui = Command::new(example_bin("uav_gui"))
         .args(["--vehicle", vehicle])
         .args(gui_flags)
@@ -39,7 +18,7 @@ fn programs(vehicle: &str, gui_flags: &[&str]) -> Programs {
         .stderr(Stdio::null())
         .spawn()
         .expect("uav_dec starts");
-    Programs(vec![gui, dec])
+    Processes(vec![gui, dec])
 }
 
 fn marked(s: &serde_json::Value, net: &str, place: &str) -> bool {
