@@ -146,6 +146,9 @@ pub struct Counters {
     pub commands_refused: u64,
     /// Heartbeat frames produced.
     pub heartbeats: u64,
+    /// Heartbeats due that could not be encoded (not sent; the checker encodes the heartbeat
+    /// once, so this stays 0 unless a start value is out of its signal's range).
+    pub heartbeats_failed: u64,
 }
 
 /// What a received frame turned out to be.
@@ -444,10 +447,16 @@ impl BridgeCore {
         } else {
             st.next_due.saturating_add(spec.period_us)
         };
-        // The checker encoded this heartbeat once; only a counter could fail, and it wraps.
-        let frame = self.dbc.encode_message(spec.message, &values).ok()?;
-        self.counters.heartbeats += 1;
-        Some(frame)
+        match self.dbc.encode_message(spec.message, &values) {
+            Ok(frame) => {
+                self.counters.heartbeats += 1;
+                Some(frame)
+            }
+            Err(_) => {
+                self.counters.heartbeats_failed += 1;
+                None
+            }
+        }
     }
 
     /// Encodes a command from a program: physical values by signal name (numbers, bools,

@@ -64,6 +64,9 @@ pub struct BusStats {
     /// Frames lost because this endpoint's receive queue was full (memory bus; SocketCAN
     /// counts its own drops in the kernel).
     pub rx_overflow: u64,
+    /// Frames read from the socket that no [`Frame`] can hold (a kernel frame out of the CAN
+    /// specification): skipped, counted and logged.
+    pub unreadable: u64,
 }
 
 /// A bus operation failed.
@@ -744,18 +747,18 @@ impl SocketCanBus {
         Ok(sock)
     }
 
-    /// The interface's link as sysfs tells it: gone, down or up.
+    /// The interface's link: gone (no such interface), down, or up. Where sysfs cannot tell
+    /// (not mounted), the link is taken as up and the controller state decides.
     fn read_link(&self) -> Link {
-        let flags = std::fs::read_to_string(format!("/sys/class/net/{}/flags", self.interface));
+        if CanInterface::open(&self.interface).is_err() {
+            return Link::Gone;
+        }
+        let flags = std::fs::read_to_string(format!("/sys/class/net/{}/flags", self.interface))
+            .ok()
+            .and_then(|t| u32::from_str_radix(t.trim().trim_start_matches("0x"), 16).ok());
         match flags {
-            Err(_) => Link::Gone,
-            Ok(text) => {
-                let flags = u32::from_str_radix(text.trim().trim_start_matches("0x"), 16);
-                match flags {
-                    Ok(f) if f & 1 == 0 => Link::Down, // IFF_UP
-                    _ => Link::Up,
-                }
-            }
+            Some(f) if f & 1 == 0 => Link::Down, // IFF_UP
+            _ => Link::Up,
         }
     }
 
@@ -881,7 +884,15 @@ impl Bus for SocketCanBus {
                     }));
                 }
                 // A frame our type cannot hold (never for a well-formed kernel frame): next.
-                Ok((None, _)) => continue,
+                Ok((None, _)) => {
+                    self.stats.unreadable += 1;
+                    tracing::warn!(
+                        "a frame on `{}` is not a valid CAN frame: skipped ({} so far)",
+                        self.interface,
+                        self.stats.unreadable
+                    );
+                    continue;
+                }
                 Err(e) if e.kind() == io::ErrorKind::WouldBlock => return Ok(None),
                 Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
                 Err(error) => {

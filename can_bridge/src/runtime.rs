@@ -110,6 +110,8 @@ pub struct RunReport {
     /// Commands not carried out (refused by the DBC or the transmit queue), each reported to
     /// the player as `call_failed`.
     pub commands_failed: u64,
+    /// Frames still waiting for the interface when the bridge stopped: never sent.
+    pub frames_unsent: usize,
     /// At the end, the player had not acknowledged the last events sent within the grace
     /// period: they may be lost (a sender's shared memory goes with its process).
     pub unacknowledged: bool,
@@ -256,6 +258,7 @@ impl<B: Bus> Loop<B> {
             "commands": c.commands,
             "commands_failed": self.report.commands_failed,
             "heartbeats": c.heartbeats,
+            "heartbeats_failed": c.heartbeats_failed,
             "tx_queued": self.bus.queued(),
         })
         .to_string()
@@ -573,7 +576,20 @@ pub fn run<B: Bus>(
         }
     }
     // Last chance for waiting events and frames.
-    let _ = lp.bus.flush();
+    match lp.bus.flush() {
+        Ok(0) => {}
+        Ok(n) => {
+            lp.report.frames_unsent = n;
+            tracing::error!(
+                "{n} frames still waited for `{}` when the bridge stopped: never sent",
+                lp.bus.interface()
+            );
+        }
+        Err(e) => {
+            lp.report.frames_unsent = lp.bus.queued();
+            tracing::error!("the last frames could not be sent: {e}");
+        }
+    }
     lp.deliver();
     if lp.last_seq > 0 {
         let origin = lp.events.origin().to_string();
@@ -586,7 +602,9 @@ pub fn run<B: Bus>(
         }
     }
     if let Some(out) = &mut lp.opts.record {
-        let _ = out.flush();
+        if let Err(e) = out.flush() {
+            tracing::error!("the end of the bus recording could not be written: {e}");
+        }
     }
     lp.report.counters = lp.core.counters();
     lp.report.bus = lp.bus.stats();

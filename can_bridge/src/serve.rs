@@ -104,7 +104,9 @@ pub fn serve(
             .map_err(|e| ServeError::Bus(format!("cannot start the simulated vehicle: {e}")))?;
         let result = run(core, move || Ok(bus), clock, vehicle, run_opts, &stop);
         sim_stop.store(true, std::sync::atomic::Ordering::Relaxed);
-        let _ = sim.join();
+        if sim.join().is_err() {
+            tracing::error!("the simulated vehicle's thread panicked");
+        }
         result
     } else {
         let sock_opts = SocketCanOptions {

@@ -136,7 +136,18 @@ fn lex(file: FileId, text: &str, diags: &mut Diagnostics) -> Vec<Token> {
                 match TimeUnit::ALL.into_iter().find(|u| u.suffix() == suffix) {
                     Some(unit) => match number.parse::<f64>() {
                         Ok(v) => Tok::Duration(v, unit),
-                        Err(_) => Tok::Int(0),
+                        Err(_) => {
+                            diags.push(
+                                Diagnostic::error(
+                                    "E0001",
+                                    sp(i),
+                                    format!("`{number}{suffix}` is not a duration"),
+                                )
+                                .label("not a number")
+                                .help("durations are written `200ms`, `30s`, `1.5min` or `2h`"),
+                            );
+                            Tok::Duration(0.0, unit)
+                        }
                     },
                     None => {
                         diags.push(

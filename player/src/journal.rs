@@ -167,8 +167,10 @@ fn segment_path(dir: &Path, n: u32) -> PathBuf {
 
 /// The segment files of a journal directory, in order.
 pub fn segments(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)?
-        .filter_map(|e| e.ok())
+    // An entry that cannot be read is an error, not a segment silently left out of a replay.
+    let entries = std::fs::read_dir(dir)?.collect::<std::io::Result<Vec<_>>>()?;
+    let mut files: Vec<PathBuf> = entries
+        .into_iter()
         .map(|e| e.path())
         .filter(|p| {
             p.file_name()

@@ -437,7 +437,11 @@ pub fn play(project: &CompiledProject, opts: &PlayOptions) -> Result<PlayReport,
     let mut previous = vec![0u64; engine.state().len()];
     let mut step_no = 0u64;
     info!(project = %project.name, vehicle = %opts.vehicle, wait = ?opts.wait, "player started");
-    let _ = watch.check();
+    // The programs already there are known from now on; one that dies later is lost. An error
+    // here shows again at the next check, which reports it.
+    if let Err(e) = watch.check() {
+        warn!(error = %e, "liveness check failed");
+    }
 
     let mut next_heartbeat = Instant::now();
     let mut next_liveness = Instant::now() + opts.liveness;

@@ -96,7 +96,7 @@ pub fn shadow(project: &CompiledProject, opts: &PlayOptions) -> Result<ShadowRep
         }
         // A vehicle already flying: take its marking from its heartbeat status.
         if !synced {
-            let _ = beats.drain(|r| {
+            let drained = beats.drain(|r| {
                 let Ok(rcv) = r else { return };
                 if rcv.origin.as_str() != "player" || synced {
                     return;
@@ -120,6 +120,9 @@ pub fn shadow(project: &CompiledProject, opts: &PlayOptions) -> Result<ShadowRep
                     info!("shadow synchronised on the vehicle's status");
                 }
             });
+            if let Err(e) = drained {
+                warn!(error = %e, "the vehicle's heartbeats could not be read");
+            }
         }
         let ready = reactor
             .wait(&[&deltas], Some(Duration::from_millis(50)))
@@ -127,7 +130,7 @@ pub fn shadow(project: &CompiledProject, opts: &PlayOptions) -> Result<ShadowRep
         if ready.termination_requested() {
             break;
         }
-        let _ = deltas.drain(|r| {
+        let drained = deltas.drain(|r| {
             let msg = match r {
                 Ok(rcv) if rcv.origin.as_str() == "player" => rcv.msg,
                 Ok(_) => return,
@@ -203,6 +206,9 @@ pub fn shadow(project: &CompiledProject, opts: &PlayOptions) -> Result<ShadowRep
                 engine.set_state(&s);
             }
         });
+        if let Err(e) = drained {
+            warn!(error = %e, "marking deltas could not be read");
+        }
     }
     Ok(report)
 }

@@ -41,6 +41,11 @@ fn main() -> ExitCode {
             Err(e) => eprintln!("echo: {e}"),
         }
     }
-    let _ = program.close(Duration::from_millis(500));
-    ExitCode::SUCCESS
+    match program.close(Duration::from_millis(500)) {
+        Ok(_) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("echo: {e}");
+            ExitCode::FAILURE
+        }
+    }
 }
