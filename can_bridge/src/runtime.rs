@@ -30,8 +30,8 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use petrel_ipc::{
-    CallReceiver, EventMsg, EventSender, FdSource, HeartbeatSubscriber, Participant, Reactor,
-    ReactorError, Role, SendError, SetupError, Source, Value, Vehicle, WaitStrategy,
+    CallReceiver, EventMsg, EventSender, FdSource, Participant, Reactor, ReactorError, Role,
+    SendError, SetupError, Source, Value, Vehicle, WaitStrategy,
 };
 
 use crate::bridge::{BridgeCore, Counters, FrameOutcome};
@@ -399,32 +399,6 @@ impl<B: Bus> Loop<B> {
     }
 }
 
-/// Waits up to `grace` until the player's heartbeat says it took event `seq` of `origin`:
-/// shared memory dies with its process, so the bridge leaves only then.
-fn acknowledged(beats: &HeartbeatSubscriber, origin: &str, seq: u64, grace: Duration) -> bool {
-    let deadline = std::time::Instant::now() + grace;
-    loop {
-        let mut taken = 0u64;
-        let _ = beats.drain(|r| {
-            if let Ok(rcv) = r {
-                if rcv.origin.as_str() == "player" {
-                    let doc: serde_json::Value =
-                        serde_json::from_str(&rcv.msg.status).unwrap_or_default();
-                    let last = doc["senders"][origin]["last_seq"].as_u64().unwrap_or(0);
-                    taken = taken.max(last);
-                }
-            }
-        });
-        if taken >= seq {
-            return true;
-        }
-        if std::time::Instant::now() >= deadline {
-            return false;
-        }
-        std::thread::sleep(Duration::from_millis(5));
-    }
-}
-
 /// Runs the data server until `stop` is set (or SIGINT/SIGTERM with signal handling on).
 ///
 /// `open_bus` is called once the vehicle is joined, just before the loop reads: frames do
@@ -593,7 +567,8 @@ pub fn run<B: Bus>(
     lp.deliver();
     if lp.last_seq > 0 {
         let origin = lp.events.origin().to_string();
-        lp.report.unacknowledged = !acknowledged(&beats, &origin, lp.last_seq, lp.opts.ack_grace);
+        lp.report.unacknowledged =
+            !petrel_ipc::wait_acknowledged(&beats, &origin, lp.last_seq, lp.opts.ack_grace);
         if lp.report.unacknowledged {
             tracing::warn!(
                 "the player did not acknowledge the last events within {:?}: they may be lost",

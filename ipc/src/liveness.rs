@@ -358,3 +358,42 @@ fn remove_prefixed(dir: &std::path::Path, prefix: &str) -> Result<usize, Livenes
     }
     Ok(removed)
 }
+
+/// Waits up to `grace` until the player's heartbeat says it has taken message `seq` of the
+/// sender `origin` (the sender's [`Origin`](crate::Origin) as text). True when it has.
+///
+/// A sender's shared memory goes with its process: a message the player has not taken yet is
+/// lost if its sender exits. Every sender that leaves (`petrel send`, a program's
+/// `Program::close`, the CAN data server) waits here first. The
+/// player's heartbeat status is a JSON object whose `senders.<origin>.last_seq` is the newest
+/// sequence number taken from that sender.
+pub fn wait_acknowledged(
+    beats: &crate::HeartbeatSubscriber,
+    origin: &str,
+    seq: u64,
+    grace: Duration,
+) -> bool {
+    let deadline = std::time::Instant::now() + grace;
+    let mut taken = 0u64;
+    loop {
+        // A heartbeat that cannot be read is one acknowledgement fewer: the next one comes
+        // 100 ms later.
+        let _ = beats.drain(|r| {
+            if let Ok(rcv) = r {
+                if rcv.origin.as_str() == "player" {
+                    let doc: serde_json::Value =
+                        serde_json::from_str(&rcv.msg.status).unwrap_or_default();
+                    let last = doc["senders"][origin]["last_seq"].as_u64().unwrap_or(0);
+                    taken = taken.max(last);
+                }
+            }
+        });
+        if taken >= seq {
+            return true;
+        }
+        if std::time::Instant::now() >= deadline {
+            return false;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}

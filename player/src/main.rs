@@ -1126,24 +1126,17 @@ fn send(dir: &Path, event: &str, vehicle: Option<String>, count: u64) -> Outcome
     // Shared memory dies with its process: stay until the player says (in its heartbeat) that
     // it has taken our last event, so nothing delivered is lost when we exit.
     let origin = sender.origin().to_string();
-    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
-    let mut taken = 0u64;
-    while delivered > 0 && taken < last_seq && std::time::Instant::now() < deadline {
-        let _ = beats.drain(|r| {
-            if let Ok(rcv) = r {
-                if rcv.origin.as_str() == "player" {
-                    let doc: serde_json::Value =
-                        serde_json::from_str(&rcv.msg.status).unwrap_or_default();
-                    taken = taken.max(doc["senders"][&origin]["last_seq"].as_u64().unwrap_or(0));
-                }
-            }
-        });
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
+    let acknowledged = delivered == 0
+        || petrel_ipc::wait_acknowledged(
+            &beats,
+            &origin,
+            last_seq,
+            std::time::Duration::from_secs(10),
+        );
     out(&format!(
         "sent {count}: {delivered} delivered, {refused} refused (player's buffer full), {absent} with no player\n"
     ));
-    if delivered > 0 && taken < last_seq {
+    if !acknowledged {
         eprintln!("the player did not acknowledge the events within 10 s: they may be lost");
         return Outcome::Errors;
     }

@@ -97,6 +97,9 @@ pub struct ProgramStats {
     /// Times a player that had received events from this process was found gone (stopped,
     /// killed or not yet replaced).
     pub player_losses: u64,
+    /// At [`Program::close`]: the player had not acknowledged the last events delivered (they
+    /// may be lost).
+    pub unacknowledged: bool,
 }
 
 /// One program name hosted by the process. Fields drop in order: the ports before the node.
@@ -105,6 +108,8 @@ struct Hosted {
     calls: CallReceiver,
     /// Recreated for each player: a new player sees its sequence numbers start at 1.
     events: Option<EventSender>,
+    /// The sequence number of the last event `events` delivered (0: none yet).
+    last_seq: u64,
     name: String,
     participant: Participant,
 }
@@ -218,6 +223,7 @@ impl Program {
             hosts.push(Hosted {
                 calls,
                 events: Some(events),
+                last_seq: 0,
                 name: (*name).to_owned(),
                 participant,
             });
@@ -580,17 +586,54 @@ impl Program {
         }
     }
 
-    /// Ends the program: tries for up to `grace` to deliver the queued events, then leaves the
-    /// vehicle. The returned statistics tell what happened to every event; `queued` counts
-    /// those that were never delivered (their names are written to standard error).
+    /// Ends the program: tries for up to `grace` to deliver the queued events, waits (within
+    /// `grace`, and at least the 250 ms of the player's next heartbeat) for the player to
+    /// acknowledge the last one delivered, since shared memory goes with its process, then
+    /// leaves the vehicle. The returned statistics tell what happened to every event; `queued`
+    /// counts those that were never delivered (their names are written to standard error),
+    /// `unacknowledged` whether the last delivered ones may be lost.
     pub fn close(mut self, grace: Duration) -> Result<ProgramStats, ProgramError> {
+        let deadline = Instant::now() + grace;
         let flushed = self.flush_for(grace);
+        self.stats.unacknowledged = !self.wait_acknowledged(deadline);
         let stats = self.stats();
         if !self.outbox.is_empty() {
             self.report_undelivered();
         }
+        if stats.unacknowledged {
+            eprintln!(
+                "petrel-programs: the player did not acknowledge the last events of {} before it left: they may be lost",
+                self.names().collect::<Vec<_>>().join(", ")
+            );
+        }
         self.closed = true;
         flushed.map(|_| stats)
+    }
+
+    /// Whether the player acknowledged every host's last delivered event by `deadline` (250 ms
+    /// at least from now).
+    fn wait_acknowledged(&self, deadline: Instant) -> bool {
+        let pending: Vec<(String, u64)> = self
+            .hosts
+            .iter()
+            .filter_map(|h| {
+                let sender = h.events.as_ref()?;
+                (h.last_seq > 0).then(|| (sender.origin().to_string(), h.last_seq))
+            })
+            .collect();
+        if pending.is_empty() {
+            return true;
+        }
+        let Ok(beats) = self.hosts[0].participant.heartbeat_subscriber() else {
+            return false;
+        };
+        let floor = Instant::now() + Duration::from_millis(250);
+        pending.iter().all(|(origin, seq)| {
+            let left = deadline
+                .max(floor)
+                .saturating_duration_since(Instant::now());
+            petrel_ipc::wait_acknowledged(&beats, origin, *seq, left)
+        })
     }
 
     fn report_undelivered(&self) {
@@ -638,7 +681,10 @@ impl Program {
             return Ok(false);
         };
         match sender.send(msg) {
-            Ok(_) => Ok(true),
+            Ok(sent) => {
+                self.hosts[host].last_seq = sent.seq;
+                Ok(true)
+            }
             Err(SendError::NoReceiver { .. }) => {
                 self.player_gone();
                 Ok(false)
@@ -671,6 +717,7 @@ impl Program {
                             error: Box::new(error),
                         })?;
                 host.events = Some(sender);
+                host.last_seq = 0;
             }
         }
         let receivers = self.hosts[0].events.as_ref().map_or(0, |s| s.receivers());

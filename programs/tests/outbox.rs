@@ -127,6 +127,8 @@ fn a_player_leaving_and_coming_back_gets_the_events_in_between_in_order() {
     }
     let stats = program.close(Duration::from_millis(10)).unwrap();
     assert_eq!((stats.emitted, stats.delivered, stats.queued), (5, 5, 0));
+    // The fake player sends no heartbeat: nothing says it took the last event.
+    assert!(stats.unacknowledged);
 }
 
 #[test]

@@ -196,3 +196,37 @@ fn send_without_a_player_says_so() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("no player is running"));
     let _ = petrel_ipc::remove_vehicle_files(&Vehicle::new(&vehicle).unwrap());
 }
+
+#[test]
+fn a_program_leaves_only_once_the_player_acknowledged_its_last_event() {
+    let vehicle = unique_vehicle("ack");
+    let player = Player::start(&liveness_dir(), &vehicle);
+    let v = Vehicle::new(&vehicle).unwrap();
+    let config = petrel_programs::ProgramConfig {
+        handle_signals: false,
+        ..petrel_programs::ProgramConfig::default()
+    };
+    let mut program = petrel_programs::Program::connect_with(&v, &["WORKER"], config).unwrap();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while !program.player_present().unwrap() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    for n in 0..50 {
+        program.emit("tick", vec![Value::Int(n)]).unwrap();
+    }
+    // Leaves at once: the player may not have taken the last ticks yet; close waits for its
+    // heartbeat to say so, as shared memory goes with the program's process.
+    let stats = program.close(Duration::from_secs(5)).unwrap();
+    assert_eq!((stats.emitted, stats.delivered, stats.queued), (50, 50, 0));
+    assert!(!stats.unacknowledged, "{stats:?}");
+    // Every tick reached the player (the program's leaving is a program_lost besides).
+    let s = player.wait_for(5.0, |s| s["stats"]["messages"].as_u64() >= Some(50));
+    assert_eq!(s["stats"]["messages"], 50, "{s}");
+    let w = &s["senders"]["program/WORKER"];
+    assert_eq!(
+        (&w["last_seq"], &w["missing"]),
+        (&50.into(), &0.into()),
+        "{s}"
+    );
+    assert!(player.stop().success());
+}
