@@ -107,9 +107,10 @@ pub struct Signal {
     pub start_value: Option<f64>,
     /// Bit positions in the frame, in the linear numbering of the layout (see [`Self::bits`]).
     first_bit: u32,
-    /// Decimal places of the physical values of an integer signal (those of its factor and
-    /// offset), to which they are rounded: 549 * 0.01 - 5 is 0.49, not 0.4900000000000002.
-    decimals: Option<i32>,
+    /// `10^d` for the `d` decimal places of the physical values of an integer signal (those
+    /// of its factor and offset, when they have some), to which they are rounded: 549 * 0.01
+    /// - 5 is 0.49, not 0.4900000000000002. Computed once, at load.
+    round_scale: Option<f64>,
 }
 
 /// The decimal places of `x` when it has at most nine.
@@ -245,17 +246,9 @@ impl Signal {
             ValueKind::Float64 => f64::from_bits(bits),
         };
         let value = base * self.factor + self.offset;
-        match self.decimals {
-            Some(d) if d > 0 => {
-                let scale = 10f64.powi(d);
-                let rounded = (value * scale).round() / scale;
-                // Beyond 2^53 / scale the rounding would lose more than it fixes.
-                if rounded.is_finite() && (value * scale).abs() < 9.0e15 {
-                    rounded
-                } else {
-                    value
-                }
-            }
+        match self.round_scale {
+            // Beyond 2^53 / scale the rounding would lose more than it fixes.
+            Some(scale) if (value * scale).abs() < 9.0e15 => (value * scale).round() / scale,
             _ => value,
         }
     }
@@ -758,10 +751,10 @@ impl Dbc {
                     choices,
                     start_value,
                     first_bit,
-                    decimals: match kind {
+                    round_scale: match kind {
                         ValueKind::Signed | ValueKind::Unsigned => {
                             match (decimal_places(s.factor), decimal_places(s.offset)) {
-                                (Some(a), Some(b)) => Some(a.max(b)),
+                                (Some(a), Some(b)) if a.max(b) > 0 => Some(10f64.powi(a.max(b))),
                                 _ => None,
                             }
                         }

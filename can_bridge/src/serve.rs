@@ -1,4 +1,4 @@
-//! The data server as a process: what `petrel bridge` and `examples/bridge.rs` run.
+//! The data server as a process: what `petrel bridge` runs.
 //!
 //! [`serve`] opens the bus (a SocketCAN interface, or `memory`: an in-process bus with the
 //! simulated AUV of [`crate::sim`], for machines without CAN) and runs the bridge until SIGINT

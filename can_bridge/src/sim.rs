@@ -131,11 +131,10 @@ impl AuvPlant {
         }
         let shown = |rpm: f64| if thrusting { rpm } else { 0.0 };
         let mut frames = Vec::new();
+        // A message the DBC lacks does not encode: the vehicle just says less.
         let mut send = |message: &str, values: &[(&str, f64)]| {
-            if self.dbc.message_by_name(message).is_some() {
-                if let Ok(f) = self.dbc.encode(message, values) {
-                    frames.push(f);
-                }
+            if let Ok(f) = self.dbc.encode(message, values) {
+                frames.push(f);
             }
         };
         send(
