@@ -50,6 +50,9 @@ sleep 0.5
 "$petrel" send "$mission" --vehicle "$vehicle" start_mission
 wait_status "$mission" "$vehicle" '"landed"'
 "$petrel" status "$mission" --vehicle "$vehicle"
+# The programs first, then the player: every process of the flight ends here.
+kill "${pids[2]}" "${pids[1]}" 2>/dev/null || true
+wait "${pids[2]}" "${pids[1]}" 2>/dev/null || true
 kill "${pids[0]}" 2>/dev/null || true
 wait "${pids[0]}" 2>/dev/null || true
 echo "== the flight recorder: target/journal/$vehicle"
