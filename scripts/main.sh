@@ -8,7 +8,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 mission=${1:-missions/uav}
-cargo build --release --quiet --bin petrel -p petrel-player
+cargo build --release --quiet --bin petrel -p petrel-cli
 cargo build --release --quiet -p petrel-programs --example uav_gui --example uav_dec --example auv_gui
 petrel=target/release/petrel
 echo "== petrel check $mission"

@@ -51,64 +51,9 @@ const CONFIG: WireConfig = bincode::config::standard()
     .with_variable_int_encoding()
     .with_limit::<MAX_BODY_LEN>();
 
-/// A parameter of an event or an argument of a call.
-#[derive(Debug, Clone, PartialEq, Encode, Decode)]
-pub enum Value {
-    /// A signed integer.
-    Int(i64),
-    /// A float.
-    Float(f64),
-    /// A boolean.
-    Bool(bool),
-    /// A text.
-    Text(String),
-    /// A list of floats (a position, a waypoint list...).
-    FloatList(Vec<f64>),
-}
-
-impl Value {
-    /// The name of the value's type, as the net language writes it.
-    pub fn type_name(&self) -> &'static str {
-        match self {
-            Value::Int(_) => "int",
-            Value::Float(_) => "float",
-            Value::Bool(_) => "bool",
-            Value::Text(_) => "text",
-            Value::FloatList(_) => "[float]",
-        }
-    }
-}
-
-impl From<i64> for Value {
-    fn from(v: i64) -> Self {
-        Value::Int(v)
-    }
-}
-impl From<f64> for Value {
-    fn from(v: f64) -> Self {
-        Value::Float(v)
-    }
-}
-impl From<bool> for Value {
-    fn from(v: bool) -> Self {
-        Value::Bool(v)
-    }
-}
-impl From<String> for Value {
-    fn from(v: String) -> Self {
-        Value::Text(v)
-    }
-}
-impl From<&str> for Value {
-    fn from(v: &str) -> Self {
-        Value::Text(v.to_owned())
-    }
-}
-impl From<Vec<f64>> for Value {
-    fn from(v: Vec<f64>) -> Self {
-        Value::FloatList(v)
-    }
-}
+/// A parameter of an event or an argument of a call: the one value type of Petrel, encoded
+/// with bincode on the wire.
+pub use petrel_value::Value;
 
 /// An event for the player, by name, with its parameters in declaration order.
 #[derive(Debug, Clone, PartialEq, Encode, Decode)]

@@ -27,33 +27,8 @@ pub enum PlaceRef {
     Global(u32),
 }
 
-/// A typed value: an event parameter, a call argument.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Value {
-    /// An `int`.
-    Int(i64),
-    /// A `float`.
-    Float(f64),
-    /// A `bool`.
-    Bool(bool),
-    /// A `text`.
-    Text(String),
-    /// A `[float]`.
-    FloatList(Vec<f64>),
-}
-
-impl Value {
-    /// The value's type.
-    pub fn ty(&self) -> Type {
-        match self {
-            Value::Int(_) => Type::Int,
-            Value::Float(_) => Type::Float,
-            Value::Bool(_) => Type::Bool,
-            Value::Text(_) => Type::Text,
-            Value::FloatList(_) => Type::FloatList,
-        }
-    }
-}
+/// A typed value: an event parameter, a call argument (one type for the whole of Petrel).
+pub use petrel_value::Value;
 
 /// Where an argument's value comes from when the transition fires.
 #[derive(Clone, Debug, PartialEq)]

@@ -190,11 +190,7 @@ fn format_number(v: f64) -> String {
     }
 }
 
-/// A float that reads back as a float: always with a `.` or an exponent.
-pub fn format_float(v: f64) -> String {
-    // Debug prints the shortest text that reads back to the same bits, and keeps `.0`.
-    format!("{v:?}")
-}
+pub use petrel_value::format_float;
 
 fn format_args(args: &[Expr]) -> String {
     args.iter().map(format_expr).collect::<Vec<_>>().join(", ")
@@ -212,19 +208,4 @@ pub fn format_expr(e: &Expr) -> String {
     }
 }
 
-/// A text literal with its escapes.
-pub fn quote(s: &str) -> String {
-    let mut out = String::with_capacity(s.len() + 2);
-    out.push('"');
-    for c in s.chars() {
-        match c {
-            '"' => out.push_str("\\\""),
-            '\\' => out.push_str("\\\\"),
-            '\n' => out.push_str("\\n"),
-            '\t' => out.push_str("\\t"),
-            c => out.push(c),
-        }
-    }
-    out.push('"');
-    out
-}
+pub use petrel_value::quote;

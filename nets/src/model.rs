@@ -49,54 +49,8 @@ pub fn is_identifier(s: &str) -> bool {
     chars.all(|c| c.is_ascii_alphanumeric() || c == '_') && !crate::syntax::is_keyword(s)
 }
 
-/// The type of an event or function parameter.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Type {
-    /// A 64-bit signed integer.
-    Int,
-    /// A 64-bit float.
-    Float,
-    /// `true` or `false`.
-    Bool,
-    /// UTF-8 text.
-    Text,
-    /// A list of floats (waypoints, for instance).
-    FloatList,
-}
-
-impl Type {
-    /// Every type, in documentation order.
-    pub const ALL: [Type; 5] = [
-        Type::Int,
-        Type::Float,
-        Type::Bool,
-        Type::Text,
-        Type::FloatList,
-    ];
-
-    /// The spelling used in manifests and nets.
-    pub fn keyword(self) -> &'static str {
-        match self {
-            Type::Int => "int",
-            Type::Float => "float",
-            Type::Bool => "bool",
-            Type::Text => "text",
-            Type::FloatList => "[float]",
-        }
-    }
-
-    /// Parses a type spelling (`int`, `float`, `bool`, `text`, `[float]`).
-    pub fn from_keyword(s: &str) -> Option<Type> {
-        let compact: String = s.chars().filter(|c| !c.is_whitespace()).collect();
-        Type::ALL.into_iter().find(|t| t.keyword() == compact)
-    }
-}
-
-impl fmt::Display for Type {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.keyword())
-    }
-}
+/// The type of an event or function parameter (one type for the whole of Petrel).
+pub use petrel_value::Type;
 
 /// An event's category (section 3.2.3 of the ProCoSA paper); it sets dispatch priority.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]

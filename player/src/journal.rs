@@ -13,7 +13,7 @@
 //! anywhere else is *corruption*: an error that names the segment, the offset and the record.
 
 use bincode::{Decode, Encode};
-use petrel_ipc::Value;
+use petrel_nets::compiled::Value;
 use std::fs::{File, OpenOptions};
 use std::io::{BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
@@ -295,6 +295,49 @@ impl JournalWriter {
     /// The directory.
     pub fn dir(&self) -> &Path {
         &self.dir
+    }
+}
+
+/// The journal of a running player: a writer, or none (`--no-journal`). A failure to write is
+/// logged loudly and counted but never stops the player: a vehicle must keep flying.
+pub struct Journal {
+    writer: Option<JournalWriter>,
+    /// Entries that could not be written or flushed.
+    pub failures: u64,
+}
+
+impl Journal {
+    /// A journal writing through `writer`, if any.
+    pub fn new(writer: Option<JournalWriter>) -> Self {
+        Journal {
+            writer,
+            failures: 0,
+        }
+    }
+
+    /// Appends one entry (if there is a journal).
+    pub fn append(&mut self, entry: &Entry) {
+        if let Some(w) = self.writer.as_mut() {
+            if let Err(e) = w.append(entry) {
+                self.failures += 1;
+                tracing::error!(error = %e, "journal write failed: the flight recorder is missing this entry");
+            }
+        }
+    }
+
+    /// Hands everything written to the operating system.
+    pub fn flush(&mut self) {
+        if let Some(w) = self.writer.as_mut() {
+            if let Err(e) = w.flush() {
+                self.failures += 1;
+                tracing::error!(error = %e, "journal flush failed");
+            }
+        }
+    }
+
+    /// Records written and time spent writing them, if there is a journal.
+    pub fn written(&self) -> Option<(u64, Duration)> {
+        self.writer.as_ref().map(|w| (w.records, w.busy))
     }
 }
 

@@ -1,11 +1,18 @@
 //! The Petrel player: the deterministic engine and the tools around it.
 //!
 //! - [`engine`]: sans-I/O; events in, actions out, time injected.
+//! - [`record`]: the record of one step (event, firings, actions), which every reader of the
+//!   player's steps goes through.
 //! - [`script`]: missions as unit tests, in virtual time (`petrel run --script`).
 //! - [`runtime`]: the player process on iceoryx2 (`petrel play`).
+//! - [`journal`], [`replay`]: the flight recorder and its replay (`--resume` too).
+//! - [`shadow`]: the ground-station copy that follows a vehicle's steps.
+//!
+//! The command line is the `petrel-cli` crate (binary `petrel`).
 
 pub mod engine;
 pub mod journal;
+pub mod record;
 pub mod replay;
 pub mod runtime;
 pub mod script;

@@ -8,9 +8,9 @@
 
 use crate::engine::{Engine, Micros};
 use crate::journal::Entry;
-use crate::script::Recorder;
-use petrel_nets::compiled::{CompiledProject, Value};
-use petrel_nets::semantics::{Layout, StepOutcome};
+use crate::record::{outcome_name, StepRecord};
+use petrel_nets::compiled::CompiledProject;
+use petrel_nets::semantics::Layout;
 
 /// The first place where the replay differs from the journal.
 #[derive(Clone, Debug, PartialEq)]
@@ -44,16 +44,6 @@ pub struct ReplayReport {
     pub stopped_early: bool,
 }
 
-fn from_wire(v: &petrel_ipc::Value) -> Value {
-    match v {
-        petrel_ipc::Value::Int(i) => Value::Int(*i),
-        petrel_ipc::Value::Float(f) => Value::Float(*f),
-        petrel_ipc::Value::Bool(b) => Value::Bool(*b),
-        petrel_ipc::Value::Text(s) => Value::Text(s.clone()),
-        petrel_ipc::Value::FloatList(l) => Value::FloatList(l.clone()),
-    }
-}
-
 /// A state as `NET.place` / `global.place` names, active nets as `NET+`, running timers.
 pub fn describe(project: &CompiledProject, layout: &Layout, state: &[u64]) -> Vec<String> {
     if state.len() != layout.words {
@@ -74,7 +64,7 @@ pub fn replay<'p>(
     until: Option<Micros>,
 ) -> (Engine<'p>, ReplayReport) {
     let mut engine = Engine::new(project);
-    let mut log = Recorder::new(project);
+    let mut log = StepRecord::new(project);
     let mut report = ReplayReport::default();
     for (i, entry) in entries.iter().enumerate() {
         if let (Some(limit), Some(t)) = (until, entry.time()) {
@@ -119,7 +109,7 @@ pub fn replay<'p>(
                 ..
             } => {
                 engine.advance_to(*time);
-                let params = params.iter().map(from_wire).collect();
+                let params = params.clone();
                 if let Err(r) = engine.submit_named(event, params) {
                     report.divergence = Some(Divergence {
                         entry: i,
@@ -154,11 +144,7 @@ pub fn replay<'p>(
                 };
                 report.steps += 1;
                 let taken = &project.events[step.event as usize].name;
-                let replayed_outcome = match step.outcome {
-                    StepOutcome::Processed => "processed",
-                    StepOutcome::Unused => "unused",
-                    StepOutcome::RefusedAfterCatastrophic => "refused",
-                };
+                let replayed_outcome = outcome_name(step.outcome);
                 let found_fired = log.fired_names();
                 let what = if taken != event {
                     Some(format!("the replay took `{taken}`, the journal `{event}`"))

@@ -17,14 +17,12 @@
 //! Each step prints as one JSON line (time, event, parameters, outcome, fired transitions,
 //! actions, the marking of every active net). Timers fire in virtual time, in deadline order.
 
-use crate::engine::{ArgValue, Args, Engine, Micros, Sink};
-use petrel_nets::compiled::{
-    CompiledProject, EventId, FunctionId, NetId, PlaceRef, ProgramId, TimerId, Value,
-};
+use crate::engine::{Engine, Micros};
+use crate::record::{call_text, transition_name, StepRecord};
+use petrel_nets::compiled::{CompiledProject, FunctionId, NetId, PlaceRef, ProgramId, Value};
 use petrel_nets::diag::Diagnostics;
-use petrel_nets::fmt::{format_float, quote};
 use petrel_nets::model::{Action, Expr};
-use petrel_nets::semantics::{Notice, StepOutcome};
+use petrel_nets::semantics::StepOutcome;
 use petrel_nets::source::FileId;
 
 /// A line of a script.
@@ -268,149 +266,6 @@ fn known_net(p: &CompiledProject, net: &str) -> Result<String, String> {
         .ok_or_else(|| format!("unknown net `{net}`"))
 }
 
-fn seconds(t: Micros) -> f64 {
-    t as f64 / 1e6
-}
-
-pub(crate) fn value_text(v: &Value) -> String {
-    match v {
-        Value::Int(i) => i.to_string(),
-        Value::Float(f) => format_float(*f),
-        Value::Bool(b) => b.to_string(),
-        Value::Text(s) => quote(s),
-        Value::FloatList(l) => format!(
-            "[{}]",
-            l.iter()
-                .map(|f| format_float(*f))
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
-    }
-}
-
-fn value_json(v: &Value) -> serde_json::Value {
-    match v {
-        Value::Int(i) => (*i).into(),
-        Value::Float(f) => (*f).into(),
-        Value::Bool(b) => (*b).into(),
-        Value::Text(s) => s.clone().into(),
-        Value::FloatList(l) => l.clone().into(),
-    }
-}
-
-/// Records one step's effects for the JSON line and the expectations.
-pub(crate) struct Recorder<'p> {
-    pub(crate) p: &'p CompiledProject,
-    pub(crate) taken: Option<(String, Vec<Value>)>,
-    pub(crate) fired: Vec<(NetId, u32)>,
-    pub(crate) actions: Vec<String>,
-    pub(crate) calls: Vec<(ProgramId, FunctionId, Vec<Value>)>,
-}
-
-impl<'p> Recorder<'p> {
-    pub(crate) fn new(p: &'p CompiledProject) -> Self {
-        Recorder {
-            p,
-            taken: None,
-            fired: Vec::new(),
-            actions: Vec::new(),
-            calls: Vec::new(),
-        }
-    }
-
-    /// The transitions fired since the last clear, as `NET.transition`.
-    pub(crate) fn fired_names(&self) -> Vec<String> {
-        self.fired
-            .iter()
-            .map(|&(n, t)| {
-                let net = &self.p.nets[n as usize];
-                format!("{}.{}", net.name, net.transitions[t as usize].name)
-            })
-            .collect()
-    }
-
-    /// Forgets what was recorded (the step is over).
-    pub(crate) fn clear(&mut self) {
-        self.taken = None;
-        self.fired.clear();
-        self.actions.clear();
-        self.calls.clear();
-    }
-}
-
-impl Sink for Recorder<'_> {
-    fn taken(&mut self, event: EventId, params: &[Value]) {
-        self.taken = Some((self.p.events[event as usize].name.clone(), params.to_vec()));
-    }
-    fn fired(&mut self, net: NetId, transition: u32) {
-        self.fired.push((net, transition));
-    }
-    fn call(&mut self, program: ProgramId, function: FunctionId, args: Args<'_>) {
-        let values: Vec<Value> = args.iter().map(ArgValue::to_value).collect();
-        let prog = &self.p.programs[program as usize];
-        self.actions.push(format!(
-            "call {}.{}({})",
-            prog.name,
-            prog.functions[function as usize].name,
-            values.iter().map(value_text).collect::<Vec<_>>().join(", ")
-        ));
-        self.calls.push((program, function, values));
-    }
-    fn emitted(&mut self, event: EventId) {
-        self.actions
-            .push(format!("emit {}", self.p.events[event as usize].name));
-    }
-    fn timer_started(&mut self, timer: TimerId, deadline: Micros) {
-        self.actions.push(format!(
-            "start {} (expires at {})",
-            self.p.timers[timer as usize].name,
-            seconds(deadline)
-        ));
-    }
-    fn timer_cancelled(&mut self, timer: TimerId) {
-        self.actions
-            .push(format!("cancel {}", self.p.timers[timer as usize].name));
-    }
-    fn safety_violation(&mut self, net: NetId, transition: u32, place: &str) {
-        let n = &self.p.nets[net as usize];
-        self.actions.push(format!(
-            "refused {}.{}: a second token in {place}",
-            n.name, n.transitions[transition as usize].name
-        ));
-    }
-    fn conflict(&mut self, net: NetId, transition: u32) {
-        let n = &self.p.nets[net as usize];
-        self.actions.push(format!(
-            "conflict: {}.{} does not fire",
-            n.name, n.transitions[transition as usize].name
-        ));
-    }
-    fn notice(&mut self, notice: Notice) {
-        let text = match notice {
-            Notice::AlreadyActive(n) => {
-                format!("activate {}: already active", self.p.nets[n as usize].name)
-            }
-            Notice::AlreadyInactive(n) => format!(
-                "deactivate {}: already inactive",
-                self.p.nets[n as usize].name
-            ),
-        };
-        self.actions.push(text);
-    }
-    fn activated(&mut self, net: NetId) {
-        self.actions
-            .push(format!("activate {}", self.p.nets[net as usize].name));
-    }
-    fn deactivated(&mut self, net: NetId) {
-        self.actions
-            .push(format!("deactivate {}", self.p.nets[net as usize].name));
-    }
-    fn livelock(&mut self) {
-        self.actions
-            .push("livelock: immediate transitions did not settle".into());
-    }
-}
-
 /// What a run produced: JSON lines, and the first failed expectation.
 pub struct RunOutcome {
     /// One JSON document per step.
@@ -426,15 +281,8 @@ pub fn run_script(
     emit_step: impl FnMut(&serde_json::Value),
 ) -> RunOutcome {
     let mut r = Runner {
-        p: project,
         engine: Engine::new(project),
-        rec: Recorder {
-            p: project,
-            taken: None,
-            fired: Vec::new(),
-            actions: Vec::new(),
-            calls: Vec::new(),
-        },
+        rec: StepRecord::new(project),
         steps: Vec::new(),
         emit_step,
         since_fired: Vec::new(),
@@ -492,9 +340,8 @@ pub fn run_script(
 }
 
 struct Runner<'p, F: FnMut(&serde_json::Value)> {
-    p: &'p CompiledProject,
     engine: Engine<'p>,
-    rec: Recorder<'p>,
+    rec: StepRecord<'p>,
     steps: Vec<serde_json::Value>,
     emit_step: F,
     /// What happened since the last timed line, for the expectations.
@@ -525,28 +372,19 @@ impl<F: FnMut(&serde_json::Value)> Runner<'_, F> {
     }
 
     fn record(&mut self, event: Option<(String, Vec<Value>)>, outcome: &str) {
-        let p = self.p;
         let marking: serde_json::Map<String, serde_json::Value> = self
             .engine
             .marking()
             .into_iter()
             .map(|(n, places)| (n, places.into()))
             .collect();
-        let fired: Vec<String> = self
-            .rec
-            .fired
-            .iter()
-            .map(|&(n, t)| {
-                let net = &p.nets[n as usize];
-                format!("{}.{}", net.name, net.transitions[t as usize].name)
-            })
-            .collect();
+        let fired = self.rec.fired_names();
         let (name, params) = match &event {
-            Some((n, ps)) => (Some(n.as_str()), ps.iter().map(value_json).collect()),
+            Some((n, ps)) => (Some(n.as_str()), ps.iter().map(Value::to_json).collect()),
             None => (None, Vec::new()),
         };
         let doc = serde_json::json!({
-            "time": seconds(self.engine.now()),
+            "time": self.engine.now() as f64 / 1e6,
             "event": name,
             "params": params,
             "outcome": outcome,
@@ -604,10 +442,7 @@ fn check(
                     .unwrap_or(0) as u32;
                 let names: Vec<String> = fired
                     .iter()
-                    .map(|&(fn_, ft)| {
-                        let x = &p.nets[fn_ as usize];
-                        format!("{}.{}", x.name, x.transitions[ft as usize].name)
-                    })
+                    .map(|&(fn_, ft)| transition_name(p, fn_, ft))
                     .collect();
                 (
                     fired.contains(&(n, t)),
@@ -639,15 +474,7 @@ fn check(
         } => {
             let shown: Vec<String> = calls
                 .iter()
-                .map(|(pr, f, a)| {
-                    let x = &p.programs[*pr as usize];
-                    format!(
-                        "{}.{}({})",
-                        x.name,
-                        x.functions[*f as usize].name,
-                        a.iter().map(value_text).collect::<Vec<_>>().join(", ")
-                    )
-                })
+                .map(|(pr, f, a)| call_text(p, *pr, *f, a))
                 .collect();
             let holds = calls.iter().any(|(pr, f, a)| {
                 let x = &p.programs[*pr as usize];
@@ -660,7 +487,7 @@ fn check(
             });
             let want: Vec<String> = args
                 .iter()
-                .map(|a| a.as_ref().map(value_text).unwrap_or_else(|| "_".into()))
+                .map(|a| a.as_ref().map(Value::literal).unwrap_or_else(|| "_".into()))
                 .collect();
             (
                 holds,

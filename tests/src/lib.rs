@@ -8,27 +8,30 @@ pub fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// The `petrel` binary of this build, built first if a test run did not build it
-/// (`cargo test -p petrel-tests` alone builds no binary of another package).
-pub fn petrel_bin() -> PathBuf {
+/// The build's own artifacts: `target/<profile>/` for the test executable running now.
+fn profile_dir() -> PathBuf {
     let exe = std::env::current_exe().expect("test executable path");
-    // target/<profile>/deps/<test> -> target/<profile>/petrel
-    let profile_dir = exe
-        .parent()
+    // target/<profile>/deps/<test> -> target/<profile>
+    exe.parent()
         .and_then(Path::parent)
-        .expect("test binary lives in target/<profile>/deps");
-    let bin = profile_dir.join("petrel");
-    if !bin.exists() {
-        let release = profile_dir.file_name().is_some_and(|n| n == "release");
-        let mut cmd = Command::new(env!("CARGO"));
-        cmd.args(["build", "-p", "petrel-player", "--bin", "petrel"]);
-        if release {
-            cmd.arg("--release");
-        }
-        let status = cmd.current_dir(repo()).status().expect("cargo runs");
-        assert!(status.success(), "building petrel failed");
-    }
-    bin
+        .expect("test binary lives in target/<profile>/deps")
+        .to_path_buf()
+}
+
+/// An artifact that the test command builds (`cargo test --workspace` builds every package's
+/// binaries and examples before running a test); a clear failure if this run did not.
+fn artifact(path: PathBuf, what: &str) -> PathBuf {
+    assert!(
+        path.exists(),
+        "{what} is not built ({}): run the tests with `cargo test --workspace` (as scripts/test.sh does), or build it first with `cargo build --workspace --bins --examples`",
+        path.display()
+    );
+    path
+}
+
+/// The `petrel` binary of this build.
+pub fn petrel_bin() -> PathBuf {
+    artifact(profile_dir().join("petrel"), "the `petrel` binary")
 }
 
 /// A vehicle name no other test run uses (iceoryx2 resources are per vehicle).
@@ -42,6 +45,34 @@ pub fn unique_vehicle(tag: &str) -> String {
     )
 }
 
+/// A directory for one test's files (journals, logs), removed, pass or fail, when its last
+/// holder is dropped.
+#[derive(Clone)]
+pub struct Workdir(std::sync::Arc<tempfile::TempDir>);
+
+impl Workdir {
+    /// A new, empty directory.
+    pub fn new() -> Self {
+        Workdir(std::sync::Arc::new(
+            tempfile::Builder::new()
+                .prefix("petrel-test-")
+                .tempdir()
+                .expect("a temporary directory"),
+        ))
+    }
+
+    /// Its path.
+    pub fn path(&self) -> &Path {
+        self.0.path()
+    }
+}
+
+impl Default for Workdir {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 /// A `petrel play` process, stopped (SIGTERM, then SIGKILL) when dropped.
 pub struct Player {
     /// The process.
@@ -50,13 +81,12 @@ pub struct Player {
     pub vehicle: String,
     /// Its project directory.
     pub dir: PathBuf,
-    /// Its journal directory (in the system's temporary directory).
+    /// Its journal directory (in its work directory).
     pub journal: PathBuf,
-}
-
-/// The journal directory the tests give the player of `vehicle`.
-pub fn journal_dir(vehicle: &str) -> PathBuf {
-    std::env::temp_dir().join(format!("petrel-journal-{vehicle}"))
+    /// Its log (standard error).
+    pub log: PathBuf,
+    /// The directory holding its journal and logs.
+    pub work: Workdir,
 }
 
 impl Player {
@@ -65,10 +95,19 @@ impl Player {
         Self::start_with(dir, vehicle, &[])
     }
 
-    /// The same, with more arguments for `petrel play` (`--resume`, `--shadow`...).
+    /// The same, with more arguments for `petrel play` (`--shadow`...).
     pub fn start_with(dir: &Path, vehicle: &str, extra: &[&str]) -> Player {
-        let log = std::env::temp_dir().join(format!("petrel-play-{vehicle}.log"));
-        let journal = journal_dir(vehicle);
+        Self::start_in(&Workdir::new(), dir, vehicle, extra)
+    }
+
+    /// The same, with its journal and log in `work` (another player's, for `--resume`).
+    pub fn start_in(work: &Workdir, dir: &Path, vehicle: &str, extra: &[&str]) -> Player {
+        use std::sync::atomic::{AtomicU32, Ordering};
+        static N: AtomicU32 = AtomicU32::new(0);
+        let log = work
+            .path()
+            .join(format!("play-{}.log", N.fetch_add(1, Ordering::Relaxed)));
+        let journal = work.path().join("journal");
         let child = Command::new(petrel_bin())
             .arg("play")
             .arg(dir)
@@ -84,6 +123,8 @@ impl Player {
             vehicle: vehicle.to_string(),
             dir: dir.to_path_buf(),
             journal,
+            log: log.clone(),
+            work: work.clone(),
         };
         let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
         while std::time::Instant::now() < deadline {
@@ -135,6 +176,11 @@ impl Player {
             .expect("petrel send runs")
     }
 
+    /// What the player has written to its log so far.
+    pub fn log_text(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
     /// Stops the player with SIGTERM and returns its exit status.
     pub fn stop(mut self) -> std::process::ExitStatus {
         let _ = Command::new("kill")
@@ -156,26 +202,12 @@ impl Drop for Player {
     }
 }
 
-/// An example program of `petrel-programs` (`uav_gui`, `uav_dec`, `echo`), built first if this
-/// test run did not build it.
+/// An example program of `petrel-programs` (`uav_gui`, `uav_dec`, `auv_gui`, `echo`).
 pub fn example_bin(name: &str) -> PathBuf {
-    let exe = std::env::current_exe().expect("test executable path");
-    let profile_dir = exe
-        .parent()
-        .and_then(Path::parent)
-        .expect("test binary lives in target/<profile>/deps");
-    let bin = profile_dir.join("examples").join(name);
-    if !bin.exists() {
-        let release = profile_dir.file_name().is_some_and(|n| n == "release");
-        let mut cmd = Command::new(env!("CARGO"));
-        cmd.args(["build", "-p", "petrel-programs", "--example", name]);
-        if release {
-            cmd.arg("--release");
-        }
-        let status = cmd.current_dir(repo()).status().expect("cargo runs");
-        assert!(status.success(), "building example {name} failed");
-    }
-    bin
+    artifact(
+        profile_dir().join("examples").join(name),
+        &format!("the example program `{name}`"),
+    )
 }
 
 /// Child processes stopped with SIGTERM (so that they leave the vehicle cleanly), then SIGKILL

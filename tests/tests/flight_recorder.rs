@@ -53,6 +53,8 @@ fn a_journaled_mission_replays_to_the_same_markings() {
     send_all(&player, &EVENTS);
     let live = player.wait_for(5.0, |s| s["stats"]["processed"] == 8);
     let journal = player.journal.clone();
+    // The journal lives in the player's work directory: keep it past the player.
+    let _work = player.work.clone();
     assert!(player.stop().success());
     let o = replay(&journal);
     assert_eq!(
@@ -89,7 +91,6 @@ fn a_journaled_mission_replays_to_the_same_markings() {
     for line in String::from_utf8_lossy(&o.stdout).lines() {
         let _: serde_json::Value = serde_json::from_str(line).expect("one JSON document a line");
     }
-    let _ = std::fs::remove_dir_all(journal);
 }
 
 #[test]
@@ -99,6 +100,8 @@ fn a_journal_edited_by_one_byte_is_detected() {
     send_all(&player, &EVENTS[..4]);
     player.wait_for(5.0, |s| s["stats"]["processed"] == 4);
     let journal = player.journal.clone();
+    // The journal lives in the player's work directory: keep it past the player.
+    let _work = player.work.clone();
     assert!(player.stop().success());
     let seg = journal.join("journal-000001.pj");
     let mut bytes = std::fs::read(&seg).unwrap();
@@ -112,7 +115,6 @@ fn a_journal_edited_by_one_byte_is_detected() {
         err.contains("is damaged at record") && err.contains("checksum"),
         "{err}"
     );
-    let _ = std::fs::remove_dir_all(journal);
 }
 
 #[test]
@@ -122,6 +124,7 @@ fn a_journal_cut_mid_record_drops_the_torn_record_and_resumes() {
     send_all(&player, &EVENTS[..3]);
     player.wait_for(5.0, |s| s["stats"]["processed"] == 3);
     let journal = player.journal.clone();
+    let work = player.work.clone();
     assert!(player.stop().success());
     let seg = journal.join("journal-000001.pj");
     let len = std::fs::metadata(&seg).unwrap().len();
@@ -140,15 +143,13 @@ fn a_journal_cut_mid_record_drops_the_torn_record_and_resumes() {
     );
     assert!(String::from_utf8_lossy(&o.stderr).contains("torn"));
     // The player resumes from what precedes the torn record, with a warning.
-    let player = Player::start_with(&uav(), &vehicle, &["--resume"]);
+    let player = Player::start_in(&work, &uav(), &vehicle, &["--resume"]);
     let s = player.wait_for(5.0, |s| s["stats"]["resumed_steps"].as_u64() > Some(0));
     assert!(s["stats"]["resumed_steps"].as_u64() > Some(0), "{s}");
+    let log_path = player.log.clone();
     assert!(player.stop().success());
-    let log =
-        std::fs::read_to_string(std::env::temp_dir().join(format!("petrel-play-{vehicle}.log")))
-            .unwrap();
+    let log = std::fs::read_to_string(log_path).unwrap();
     assert!(log.contains("torn"), "{log}");
-    let _ = std::fs::remove_dir_all(journal);
 }
 
 #[test]
@@ -158,9 +159,7 @@ fn sigkill_then_resume_ends_in_the_marking_of_an_uninterrupted_run() {
     let player = Player::start(&uav(), &straight);
     send_all(&player, &EVENTS);
     let reference = player.wait_for(5.0, |s| s["stats"]["processed"] == 8);
-    let journal = player.journal.clone();
     assert!(player.stop().success());
-    let _ = std::fs::remove_dir_all(journal);
 
     // The same events, with a SIGKILL in the middle.
     let vehicle = unique_vehicle("crash");
@@ -170,8 +169,9 @@ fn sigkill_then_resume_ends_in_the_marking_of_an_uninterrupted_run() {
     player.child.kill().unwrap(); // SIGKILL
     player.child.wait().unwrap();
     let journal = player.journal.clone();
+    let work = player.work.clone();
     drop(player);
-    let player = Player::start_with(&uav(), &vehicle, &["--resume"]);
+    let player = Player::start_in(&work, &uav(), &vehicle, &["--resume"]);
     let s = player.status().unwrap();
     assert_eq!(
         s["stats"]["resumed_steps"], 8,
@@ -198,7 +198,6 @@ fn sigkill_then_resume_ends_in_the_marking_of_an_uninterrupted_run() {
         "{}",
         String::from_utf8_lossy(&o.stderr)
     );
-    let _ = std::fs::remove_dir_all(journal);
 }
 
 #[test]
@@ -241,7 +240,5 @@ fn a_shadow_follows_the_vehicle_and_raises_an_alarm_on_divergence() {
             && diff_err.contains("only in the vehicle: [MISSION.climbing]"),
         "{diff_err}"
     );
-    let journal = player.journal.clone();
     assert!(player.stop().success());
-    let _ = std::fs::remove_dir_all(journal);
 }

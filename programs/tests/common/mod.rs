@@ -8,7 +8,7 @@ use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::atomic::{AtomicU32, Ordering};
-use std::sync::{mpsc, OnceLock};
+use std::sync::mpsc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use petrel_ipc::{
@@ -55,31 +55,24 @@ impl Drop for TestVehicle {
     }
 }
 
-/// The path of example `name`. The examples are built (or found up to date) once per test
-/// binary: `cargo test` builds them, but `cargo test --test NAME` does not, and a stale example
-/// would test old code.
+/// The path of example `name`, as the test command built it: `cargo test` builds a package's
+/// examples before running its tests (`cargo test --test NAME` alone does not: then build them
+/// with `cargo build -p petrel-programs --examples`).
 pub fn example(name: &str) -> PathBuf {
-    static BUILT: OnceLock<PathBuf> = OnceLock::new();
-    let dir = BUILT.get_or_init(|| {
-        let exe = std::env::current_exe().expect("test executable path");
-        // target/<profile>/deps/<test> -> target/<profile>/examples/
-        let profile_dir = exe
-            .parent()
-            .and_then(Path::parent)
-            .expect("test binary lives in target/<profile>/deps");
-        let mut cmd = Command::new(env!("CARGO"));
-        cmd.args(["build", "-q", "-p", "petrel-programs", "--examples"]);
-        if profile_dir.file_name().is_some_and(|n| n == "release") {
-            cmd.arg("--release");
-        }
-        let status = cmd
-            .current_dir(env!("CARGO_MANIFEST_DIR"))
-            .status()
-            .expect("cargo runs");
-        assert!(status.success(), "building the examples failed");
-        profile_dir.join("examples")
-    });
-    dir.join(name)
+    let exe = std::env::current_exe().expect("test executable path");
+    // target/<profile>/deps/<test> -> target/<profile>/examples/
+    let path = exe
+        .parent()
+        .and_then(Path::parent)
+        .expect("test binary lives in target/<profile>/deps")
+        .join("examples")
+        .join(name);
+    assert!(
+        path.exists(),
+        "the example `{name}` is not built ({}): run `cargo test -p petrel-programs`, or `cargo build -p petrel-programs --examples` first",
+        path.display()
+    );
+    path
 }
 
 /// Which output of a child a line came from.

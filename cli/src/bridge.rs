@@ -1,0 +1,98 @@
+//! `petrel bridge`: the CAN data server, serving a bus or replaying a recorded one.
+
+use crate::common::{out, require_clean, vehicle_of, wait_strategy, Outcome, Scope};
+use std::path::PathBuf;
+
+/// `petrel bridge`.
+#[derive(clap::Args)]
+pub struct BridgeArgs {
+    /// The project directory (petrel.toml, can.toml and its DBC).
+    dir: PathBuf,
+    /// The vehicle; default: the project's name.
+    #[arg(long)]
+    vehicle: Option<String>,
+    /// `memory` (an in-process bus with a simulated AUV that obeys the commands), or a
+    /// SocketCAN interface such as vcan0; default: can.toml's [bus] interface.
+    #[arg(long)]
+    bus: Option<String>,
+    /// On the memory bus: the simulated vehicle's hull leaks once it is this deep (metres).
+    #[arg(long, value_name = "METRES")]
+    sim_leak_at: Option<f64>,
+    /// Record every frame in and out to this candump -L log.
+    #[arg(long)]
+    record: Option<PathBuf>,
+    /// Instead of serving, replay this candump -L log and print the events it gives, one
+    /// JSON document a line.
+    #[arg(long)]
+    replay: Option<PathBuf>,
+    /// How the reactor waits: block, spin, or spin-then-block:<microseconds>.
+    #[arg(long, default_value = "block")]
+    wait: String,
+}
+
+/// Serves the vehicle's CAN bus (or replays a log of it).
+pub fn bridge(a: BridgeArgs) -> Outcome {
+    use petrel_can_bridge::serve::{replay_log as replay_can, serve, ServeOptions};
+    let checked = match require_clean(
+        &a.dir,
+        Scope {
+            can: true,
+            quick_verify: false,
+        },
+        "bridge",
+    ) {
+        Ok(c) => c,
+        Err(o) => return o,
+    };
+    let Some(c) = checked.compiled else {
+        return Outcome::Errors;
+    };
+    let Some((config, dbc)) = checked.can else {
+        return Outcome::Usage(format!(
+            "{} has no can.toml: the CAN data server has nothing to serve",
+            a.dir.display()
+        ));
+    };
+    if let Some(log) = a.replay {
+        return match replay_can(&log, config, dbc) {
+            Ok(events) => {
+                let mut text = String::new();
+                for e in events {
+                    let params: Vec<serde_json::Value> =
+                        e.msg.params.iter().map(|v| v.to_json()).collect();
+                    let doc = serde_json::json!({"time_us": e.time_us, "event": e.msg.name, "params": params});
+                    text.push_str(&format!("{doc}\n"));
+                }
+                out(&text);
+                Outcome::Clean
+            }
+            Err(e) => {
+                eprintln!("error: {e}");
+                Outcome::Errors
+            }
+        };
+    }
+    let strategy = match wait_strategy(&a.wait) {
+        Ok(s) => s,
+        Err(o) => return o,
+    };
+    let v = match vehicle_of(&c, a.vehicle) {
+        Ok(v) => v,
+        Err(o) => return o,
+    };
+    let opts = ServeOptions {
+        bus: a.bus,
+        record: a.record,
+        wait: strategy,
+        sim_faults: petrel_can_bridge::sim::SimFaults {
+            leak_at_depth: a.sim_leak_at,
+        },
+    };
+    match serve(&v, config, dbc, opts) {
+        Ok(r) => {
+            eprintln!("bridge stopped: {r:?}");
+            Outcome::Clean
+        }
+        Err(e) => Outcome::Usage(e.to_string()),
+    }
+}

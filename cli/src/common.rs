@@ -1,0 +1,173 @@
+//! What every command shares: how a command ends, where its output goes, and the one way a
+//! project is loaded and checked.
+
+use petrel_nets::compiled::CompiledProject;
+use petrel_nets::diag::{Diagnostic, Diagnostics, Severity};
+use petrel_nets::project::{self, LoadError, LoadedProject};
+use petrel_nets::source::SourceMap;
+use petrel_nets::verify;
+use std::path::Path;
+
+/// How a command ended; the exit code follows from it.
+pub enum Outcome {
+    /// Exit 0.
+    Clean,
+    /// Exit 1: the project or file has errors (already reported).
+    Errors,
+    /// Exit 2: a usage or I/O error, printed as `error: ...`.
+    Usage(String),
+}
+
+impl From<LoadError> for Outcome {
+    fn from(e: LoadError) -> Self {
+        Outcome::Usage(e.to_string())
+    }
+}
+
+/// Output format of the commands that report findings.
+#[derive(Clone, Copy, clap::ValueEnum, PartialEq)]
+pub enum Format {
+    /// For people: each finding with its line and a caret.
+    Human,
+    /// For tools: one JSON document.
+    Json,
+}
+
+/// Writes to standard output. A closed pipe (`petrel ... | head`) ends the command quietly:
+/// the reader has what it wanted.
+pub fn out(text: &str) {
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
+    if let Err(e) = stdout
+        .write_all(text.as_bytes())
+        .and_then(|_| stdout.flush())
+    {
+        if e.kind() == std::io::ErrorKind::BrokenPipe {
+            std::process::exit(0);
+        }
+        eprintln!("error: cannot write to standard output: {e}");
+        std::process::exit(2);
+    }
+}
+
+/// Prints diagnostics for people, on standard error.
+pub fn report(d: &Diagnostics, sources: &SourceMap) {
+    if !d.is_empty() {
+        eprint!("{}", d.render_human(sources));
+    }
+}
+
+/// Writes `text` to `output`, or to standard output.
+pub fn write_output(output: Option<&Path>, text: &str) -> Result<(), Outcome> {
+    match output {
+        Some(p) => std::fs::write(p, text)
+            .map_err(|e| Outcome::Usage(format!("cannot write {}: {e}", p.display()))),
+        None => {
+            out(text);
+            Ok(())
+        }
+    }
+}
+
+/// True when progress lines may be drawn on standard error.
+pub fn interactive(format: Format) -> bool {
+    format == Format::Human && std::io::IsTerminal::is_terminal(&std::io::stderr())
+}
+
+/// States explored by the quick verification of `petrel check`.
+pub const QUICK_VERIFY_STATES: u64 = 100_000;
+
+/// What a check covers beyond the project itself.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Scope {
+    /// The CAN data server's files (can.toml and its DBC), against the project's events.
+    pub can: bool,
+    /// The quick verification (reachable states, up to [`QUICK_VERIFY_STATES`]).
+    pub quick_verify: bool,
+}
+
+/// A project read and checked: what every command starts from.
+pub struct Checked {
+    /// The project as written, with its sources.
+    pub loaded: LoadedProject,
+    /// The project as it runs, when it has no error.
+    pub compiled: Option<CompiledProject>,
+    /// Every finding, sorted.
+    pub diagnostics: Diagnostics,
+    /// The CAN data server's configuration and DBC, when asked for and present.
+    pub can: Option<(petrel_can_bridge::CanConfig, petrel_can_bridge::Dbc)>,
+}
+
+/// What `petrel check` means: the project (syntax, names, types, markings), then, within
+/// `scope`, its can.toml and DBC against the project's events and the quick verification.
+/// Nothing is printed.
+pub fn check_project(dir: &Path, scope: Scope) -> Result<Checked, Outcome> {
+    let (mut loaded, compiled, mut d) = project::load_and_check(dir)?;
+    let mut can = None;
+    if let (Some(c), true) = (&compiled, scope.can) {
+        can = petrel_can_bridge::load_project_can(dir, c, &mut loaded.sources, &mut d)
+            .map_err(|e| Outcome::Usage(format!("cannot read the project's CAN files: {e}")))?;
+        d.sort();
+    }
+    if let (Some(c), true) = (&compiled, scope.quick_verify) {
+        let opts = verify::VerifyOptions {
+            max_states: Some(QUICK_VERIFY_STATES),
+            ..Default::default()
+        };
+        match verify::verify(c, opts) {
+            Ok(report) => d.extend(verify::diagnostics(&loaded.project, &report)),
+            Err(e) => d.push(Diagnostic {
+                severity: Severity::Warning,
+                ..Diagnostic::global(
+                    "W0605",
+                    format!("the quick verification did not finish: {e}"),
+                )
+                .help("run `petrel verify` on the project for the full analysis")
+            }),
+        }
+        d.sort();
+    }
+    Ok(Checked {
+        loaded,
+        compiled,
+        diagnostics: d,
+        can,
+    })
+}
+
+/// For the commands that need a project free of errors: checks it within `scope`, reports the
+/// findings on standard error, and ends the command (exit 1) if there is an error.
+pub fn require_clean(dir: &Path, scope: Scope, command: &str) -> Result<Checked, Outcome> {
+    let checked = check_project(dir, scope)?;
+    report(&checked.diagnostics, &checked.loaded.sources);
+    if checked.diagnostics.has_errors() || checked.compiled.is_none() {
+        eprintln!(
+            "fix the errors above first: `petrel {command}` needs a project that checks clean (`petrel check` lists them)"
+        );
+        return Err(Outcome::Errors);
+    }
+    Ok(checked)
+}
+
+/// The compiled project, for the commands that run it or talk to its vehicle.
+pub fn compiled(dir: &Path, command: &str) -> Result<CompiledProject, Outcome> {
+    let checked = require_clean(dir, Scope::default(), command)?;
+    checked
+        .compiled
+        .ok_or_else(|| Outcome::Usage("the project did not compile".into()))
+}
+
+/// The vehicle to talk to: `--vehicle`, or the project's name.
+pub fn vehicle_of(
+    c: &CompiledProject,
+    vehicle: Option<String>,
+) -> Result<petrel_ipc::Vehicle, Outcome> {
+    let name = vehicle.unwrap_or_else(|| c.name.clone());
+    petrel_ipc::Vehicle::new(&name)
+        .map_err(|e| Outcome::Usage(format!("bad vehicle name `{name}`: {e}")))
+}
+
+/// Parses a wait strategy option (`block`, `spin`, `spin-then-block:<microseconds>`).
+pub fn wait_strategy(text: &str) -> Result<petrel_ipc::WaitStrategy, Outcome> {
+    text.parse().map_err(Outcome::Usage)
+}

@@ -1,0 +1,383 @@
+//! Commands on a mission project's files: `check`, `verify`, `fmt`, `dot`, `export`, `import`.
+
+use crate::common::{
+    check_project, interactive, out, report, require_clean, write_output, Format, Outcome, Scope,
+};
+use petrel_nets::diag::Diagnostics;
+use petrel_nets::project;
+use petrel_nets::source::SourceMap;
+use petrel_nets::verify;
+use std::path::{Path, PathBuf};
+
+/// `petrel check`.
+#[derive(clap::Args)]
+pub struct CheckArgs {
+    /// The project directory (the one holding petrel.toml).
+    dir: PathBuf,
+    /// Output format.
+    #[arg(long, value_enum, default_value = "human")]
+    format: Format,
+    /// Skip the quick verification (reachable states, up to 100,000) that runs after a
+    /// clean check.
+    #[arg(long)]
+    no_verify: bool,
+}
+
+/// Checks a project: syntax, names, types, markings, can.toml, and the quick verification.
+pub fn check(a: CheckArgs) -> Outcome {
+    let checked = match check_project(
+        &a.dir,
+        Scope {
+            can: true,
+            quick_verify: !a.no_verify,
+        },
+    ) {
+        Ok(c) => c,
+        Err(o) => return o,
+    };
+    let d = &checked.diagnostics;
+    match a.format {
+        Format::Json => {
+            let doc = d.to_json(&checked.loaded.sources);
+            out(&format!(
+                "{}\n",
+                serde_json::to_string_pretty(&doc).unwrap_or_default()
+            ));
+        }
+        Format::Human => {
+            report(d, &checked.loaded.sources);
+            if let Some(c) = checked.compiled.as_ref().filter(|_| !d.has_errors()) {
+                let places: usize = c.nets.iter().map(|n| n.places.len()).sum();
+                let transitions: usize = c.nets.iter().map(|n| n.transitions.len()).sum();
+                out(&format!(
+                    "project `{}` checks clean: {} nets ({} active at start), {} places, {} global places, {} transitions, {} events, {} programs, {} timers, {} warnings\n",
+                    c.name,
+                    c.nets.len(),
+                    c.start.len(),
+                    places,
+                    c.globals.len(),
+                    transitions,
+                    c.events.len(),
+                    c.programs.len(),
+                    c.timers.len(),
+                    d.warning_count()
+                ));
+            }
+        }
+    }
+    if d.has_errors() {
+        Outcome::Errors
+    } else {
+        Outcome::Clean
+    }
+}
+
+/// `petrel verify`.
+#[derive(clap::Args)]
+pub struct VerifyArgs {
+    /// The project directory, or a PNML file.
+    dir: PathBuf,
+    /// Verify this net alone, its global places and events being free choices.
+    #[arg(long)]
+    net: Option<String>,
+    /// Output format.
+    #[arg(long, value_enum, default_value = "human")]
+    format: Format,
+    /// Stop with an error beyond this many states.
+    #[arg(long)]
+    max_states: Option<u64>,
+}
+
+/// Verifies a project (or one of its nets), or explores a PNML file as a P/T net.
+pub fn verify(a: VerifyArgs) -> Outcome {
+    if a.dir.is_file() {
+        return verify_pnml(&a.dir, a.format, a.max_states);
+    }
+    let checked = match require_clean(&a.dir, Scope::default(), "verify") {
+        Ok(c) => c,
+        Err(o) => return o,
+    };
+    let Some(c) = checked.compiled else {
+        return Outcome::Errors;
+    };
+    let interactive = interactive(a.format);
+    let opts = verify::VerifyOptions {
+        max_states: a.max_states,
+        only_net: a.net,
+        progress: interactive.then(|| {
+            Box::new(|states: u64, rate: f64| {
+                eprint!("\r{states} states, {rate:.0} states/s   ");
+            }) as Box<dyn FnMut(u64, f64)>
+        }),
+    };
+    let r = match verify::verify(&c, opts) {
+        Ok(r) => r,
+        Err(verify::VerifyError::UnknownNet(n)) => {
+            let names: Vec<_> = c.nets.iter().map(|n| n.name.as_str()).collect();
+            return Outcome::Usage(format!(
+                "no net named `{n}`; the nets are: {}",
+                names.join(", ")
+            ));
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            return Outcome::Errors;
+        }
+    };
+    if interactive {
+        eprint!("\r\x1b[K");
+    }
+    match a.format {
+        Format::Json => out(&format!(
+            "{}\n",
+            serde_json::to_string_pretty(&verify::to_json(&r)).unwrap_or_default()
+        )),
+        Format::Human => out(&verify::render_human(&c.name, &r)),
+    }
+    if r.is_clean() {
+        Outcome::Clean
+    } else {
+        Outcome::Errors
+    }
+}
+
+fn verify_pnml(file: &Path, format: Format, max_states: Option<u64>) -> Outcome {
+    use petrel_nets::reach;
+    let text = match std::fs::read_to_string(file) {
+        Ok(t) => t,
+        Err(e) => return Outcome::Usage(format!("cannot read {}: {e}", file.display())),
+    };
+    let mut sources = SourceMap::new();
+    let id = sources.add(file.display().to_string(), text.clone());
+    let mut d = Diagnostics::new();
+    let nets = petrel_nets::pnml::parse_pnml(id, &text, &mut d);
+    report(&d, &sources);
+    if d.has_errors() || nets.is_empty() {
+        return Outcome::Errors;
+    }
+    let interactive = interactive(format);
+    let mut clean = true;
+    let mut docs = Vec::new();
+    for net in &nets {
+        let opts = reach::ExploreOptions {
+            max_states,
+            progress: interactive.then(|| {
+                Box::new(|p: reach::Progress| {
+                    eprint!(
+                        "\r{} states, {:.0} states/s   ",
+                        p.states, p.states_per_second
+                    );
+                }) as Box<dyn FnMut(reach::Progress)>
+            }),
+            ..Default::default()
+        };
+        let result = reach::explore(net, opts);
+        if interactive {
+            eprint!("\r\x1b[K");
+        }
+        match (result, format) {
+            (Ok(r), Format::Human) => {
+                clean &= r.safe && !r.deadlock;
+                out(&reach::render_human(net, &r));
+            }
+            (Ok(r), Format::Json) => {
+                clean &= r.safe && !r.deadlock;
+                docs.push(reach::to_json(net, &r));
+            }
+            (Err(e), Format::Human) => {
+                clean = false;
+                eprintln!("error: {}", reach::render_error(net, &e));
+            }
+            (Err(e), Format::Json) => {
+                clean = false;
+                docs.push(reach::error_to_json(net, &e));
+            }
+        }
+    }
+    if format == Format::Json {
+        let doc = if docs.len() == 1 {
+            docs.pop().unwrap_or_default()
+        } else {
+            serde_json::Value::Array(docs)
+        };
+        out(&format!(
+            "{}\n",
+            serde_json::to_string_pretty(&doc).unwrap_or_default()
+        ));
+    }
+    if clean {
+        Outcome::Clean
+    } else {
+        Outcome::Errors
+    }
+}
+
+/// `petrel fmt`.
+#[derive(clap::Args)]
+pub struct FmtArgs {
+    /// The project directory.
+    dir: PathBuf,
+    /// Change nothing; exit 1 if a file is not in canonical layout.
+    #[arg(long)]
+    check: bool,
+}
+
+/// Rewrites the project's net files in canonical layout.
+pub fn fmt(a: FmtArgs) -> Outcome {
+    let (dir, check_only) = (&a.dir, a.check);
+    let loaded = match project::load(dir) {
+        Ok(l) => l,
+        Err(e) => return e.into(),
+    };
+    // A file with a syntax error is left alone: formatting it would drop what could not be read.
+    let broken: Vec<_> = loaded
+        .diagnostics
+        .iter()
+        .filter(|d| d.code == "E0001")
+        .filter_map(|d| d.span.map(|s| s.file))
+        .collect();
+    report(&loaded.diagnostics, &loaded.sources);
+    let mut unformatted = Vec::new();
+    for (file, id) in loaded.project.files.iter().zip(&loaded.file_ids) {
+        if broken.iter().any(|b| b.0 == id.0) {
+            continue;
+        }
+        let text = petrel_nets::fmt::format_file(file);
+        let source = loaded.sources.get(*id);
+        if text != source.text {
+            unformatted.push(source.name.clone());
+            if !check_only {
+                let path = dir.join(&file.path);
+                if let Err(e) = std::fs::write(&path, &text) {
+                    return Outcome::Usage(format!("cannot write {}: {e}", path.display()));
+                }
+            }
+        }
+    }
+    for name in &unformatted {
+        if check_only {
+            out(&format!("not in canonical layout: {name}\n"));
+        } else {
+            out(&format!("formatted {name}\n"));
+        }
+    }
+    if loaded.diagnostics.has_errors() || (check_only && !unformatted.is_empty()) {
+        Outcome::Errors
+    } else {
+        Outcome::Clean
+    }
+}
+
+/// `petrel dot`.
+#[derive(clap::Args)]
+pub struct DotArgs {
+    /// The project directory.
+    dir: PathBuf,
+    /// Only this net (and the global places it uses).
+    #[arg(long)]
+    net: Option<String>,
+    /// Write to this file instead of standard output.
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+}
+
+/// Prints the project's nets as Graphviz DOT.
+pub fn dot(a: DotArgs) -> Outcome {
+    let checked = match require_clean(&a.dir, Scope::default(), "dot") {
+        Ok(c) => c,
+        Err(o) => return o,
+    };
+    match petrel_nets::dot::project_to_dot(&checked.loaded.project, a.net.as_deref()) {
+        Ok(text) => match write_output(a.output.as_deref(), &text) {
+            Ok(()) => Outcome::Clean,
+            Err(o) => o,
+        },
+        Err(msg) => Outcome::Usage(msg),
+    }
+}
+
+/// `petrel export`.
+#[derive(clap::Args)]
+pub struct ExportArgs {
+    /// The project directory.
+    dir: PathBuf,
+    /// Write PNML (the only export format for now).
+    #[arg(long, required = true)]
+    pnml: bool,
+    /// Write to this file instead of standard output.
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+}
+
+/// Exports the project as PNML.
+pub fn export(a: ExportArgs) -> Outcome {
+    let checked = match require_clean(&a.dir, Scope::default(), "export") {
+        Ok(c) => c,
+        Err(o) => return o,
+    };
+    let text = petrel_nets::pnml::export_pnml(&checked.loaded.project);
+    match write_output(a.output.as_deref(), &text) {
+        Ok(()) => Outcome::Clean,
+        Err(o) => o,
+    }
+}
+
+/// `petrel import`.
+#[derive(clap::Args)]
+pub struct ImportArgs {
+    /// The PNML file.
+    file: PathBuf,
+    /// The project directory to create (default: the file's name without extension).
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+    /// Overwrite files in an existing directory.
+    #[arg(long)]
+    force: bool,
+}
+
+/// Imports a PNML file as a Petrel project.
+pub fn import(a: ImportArgs) -> Outcome {
+    let (file, output, force) = (&a.file, a.output, a.force);
+    let text = match std::fs::read_to_string(file) {
+        Ok(t) => t,
+        Err(e) => return Outcome::Usage(format!("cannot read {}: {e}", file.display())),
+    };
+    let dest = output.unwrap_or_else(|| {
+        let stem = file.file_stem().unwrap_or_default();
+        PathBuf::from(stem)
+    });
+    let mut sources = SourceMap::new();
+    let id = sources.add(file.display().to_string(), text.clone());
+    let mut d = Diagnostics::new();
+    let project = petrel_nets::pnml::import_pnml(id, &text, &mut d);
+    d.sort();
+    report(&d, &sources);
+    let Some(project) = project.filter(|_| !d.has_errors()) else {
+        eprintln!(
+            "nothing written: {} cannot be held by a Petrel project as it is",
+            file.display()
+        );
+        return Outcome::Errors;
+    };
+    let occupied = std::fs::read_dir(&dest)
+        .map(|mut e| e.next().is_some())
+        .unwrap_or(false);
+    if occupied && !force {
+        return Outcome::Usage(format!(
+            "{} exists and is not empty: choose another directory with --output, or pass --force to overwrite",
+            dest.display()
+        ));
+    }
+    if let Err(e) = project::write(&dest, &project) {
+        return Outcome::Usage(format!("cannot write {}: {e}", dest.display()));
+    }
+    let nets = project.nets().count();
+    let places: usize = project.nets().map(|n| n.places().count()).sum();
+    let transitions: usize = project.nets().map(|n| n.transitions().count()).sum();
+    out(&format!(
+        "imported {} into {}: {nets} net(s), {places} places, {transitions} transitions\n",
+        file.display(),
+        dest.display()
+    ));
+    Outcome::Clean
+}

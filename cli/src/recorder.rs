@@ -1,0 +1,283 @@
+//! The flight recorder's commands: `replay` and `journal show`.
+
+use crate::common::{compiled, out, Outcome};
+use std::path::{Path, PathBuf};
+
+/// `petrel replay`.
+#[derive(clap::Args)]
+pub struct ReplayArgs {
+    /// The journal directory (or one segment file).
+    journal: PathBuf,
+    /// The project (default: the directory recorded in the journal).
+    #[arg(long)]
+    project: Option<PathBuf>,
+    /// Stop at this mission time (seconds) and print the state there.
+    #[arg(long)]
+    until: Option<f64>,
+}
+
+/// `petrel journal ...`.
+#[derive(clap::Subcommand)]
+pub enum JournalCommand {
+    /// Print every entry.
+    Show {
+        /// The journal directory (or one segment file).
+        journal: PathBuf,
+        /// Output format: text, json (one document a line) or csv.
+        #[arg(long, default_value = "text")]
+        format: String,
+    },
+}
+
+/// Runs a `petrel journal` subcommand.
+pub fn journal(c: JournalCommand) -> Outcome {
+    match c {
+        JournalCommand::Show { journal, format } => journal_show(&journal, &format),
+    }
+}
+
+/// Replays a journal through the engine and checks every recorded marking.
+pub fn replay(a: ReplayArgs) -> Outcome {
+    let (journal, project_dir, until) = (&a.journal, a.project.as_deref(), a.until);
+    use petrel_player::journal::{read_journal, Entry};
+    let read = match read_journal(journal) {
+        Ok(r) => r,
+        Err(e) => return Outcome::Usage(e.to_string()),
+    };
+    if let Some(t) = &read.torn {
+        eprintln!(
+            "warning: the last record of {} (byte {}) is torn: {}; replaying what precedes it",
+            t.segment.display(),
+            t.offset,
+            t.what
+        );
+    }
+    let (recorded_dir, digest) = match read.entries.first() {
+        Some(Entry::Header {
+            project_dir,
+            digest,
+            ..
+        }) => (PathBuf::from(project_dir), *digest),
+        _ => {
+            return Outcome::Usage(format!(
+                "{} does not start with a journal header",
+                journal.display()
+            ))
+        }
+    };
+    let dir = project_dir.map(Path::to_path_buf).unwrap_or(recorded_dir);
+    let c = match compiled(&dir, "replay") {
+        Ok(c) => c,
+        Err(o) => return o,
+    };
+    if petrel_player::journal::project_digest(&c) != digest {
+        eprintln!(
+            "error: {} is not the project this journal recorded (its nets or manifest changed): replay would not mean anything",
+            dir.display()
+        );
+        return Outcome::Errors;
+    }
+    let until_us = until.map(|s| (s * 1e6).round().max(0.0) as u64);
+    let (engine, r) = petrel_player::replay::replay(&c, &read.entries, until_us);
+    if let Some(d) = &r.divergence {
+        eprintln!(
+            "divergence at entry {} (t = {:.6} s), event `{}`: {}\n  recorded: {}\n  replayed: {}",
+            d.entry,
+            d.time as f64 / 1e6,
+            d.event,
+            d.what,
+            d.recorded.join(" "),
+            d.replayed.join(" ")
+        );
+        return Outcome::Errors;
+    }
+    if let Some(c) = &read.corrupt {
+        eprintln!(
+            "error: {} is damaged at record {} (byte {}): {}; the {} entries before it replay to the recorded markings",
+            c.segment.display(),
+            c.record,
+            c.offset,
+            c.what,
+            r.entries
+        );
+        return Outcome::Errors;
+    }
+    let marking: Vec<String> = engine
+        .marking()
+        .into_iter()
+        .map(|(n, p)| format!("{n}{{{}}}", p.join(", ")))
+        .collect();
+    out(&format!(
+        "replayed {} entries, {} steps: every recorded marking reproduced{}\nstate at t = {:.6} s: {}\n",
+        r.entries,
+        r.steps,
+        if r.stopped_early { " (stopped at --until)" } else { "" },
+        match until {
+            Some(u) if r.stopped_early => u,
+            _ => r.last_time as f64 / 1e6,
+        },
+        marking.join(" ")
+    ));
+    Outcome::Clean
+}
+
+fn journal_show(journal: &Path, format: &str) -> Outcome {
+    use petrel_player::journal::{read_journal, Entry};
+    let read = match read_journal(journal) {
+        Ok(r) => r,
+        Err(e) => return Outcome::Usage(e.to_string()),
+    };
+    let wire = |params: &[petrel_nets::compiled::Value]| -> Vec<String> {
+        params.iter().map(|v| v.literal()).collect()
+    };
+    let csv_field = |s: &str| format!("\"{}\"", s.replace('"', "\"\""));
+    let mut text = String::new();
+    if format == "csv" {
+        text.push_str("index,time_s,kind,event,params,origin,outcome,fired,actions\n");
+    } else if format != "text" && format != "json" {
+        return Outcome::Usage(format!("unknown format `{format}`: use text, json or csv"));
+    }
+    for (i, e) in read.entries.iter().enumerate() {
+        let t = e.time().map(|t| t as f64 / 1e6);
+        let (kind, event, params, origin, outcome, fired, actions) = match e {
+            Entry::Header {
+                project, vehicle, ..
+            } => (
+                "header",
+                project.clone(),
+                vec![],
+                vehicle.clone(),
+                String::new(),
+                vec![],
+                vec![],
+            ),
+            Entry::Start { .. } => (
+                "start",
+                String::new(),
+                vec![],
+                String::new(),
+                String::new(),
+                vec![],
+                vec![],
+            ),
+            Entry::Resume { .. } => (
+                "resume",
+                String::new(),
+                vec![],
+                String::new(),
+                String::new(),
+                vec![],
+                vec![],
+            ),
+            Entry::Submit {
+                event,
+                params,
+                origin,
+                seq,
+                ..
+            } => (
+                "submit",
+                event.clone(),
+                wire(params),
+                format!("{origin}#{seq}"),
+                String::new(),
+                vec![],
+                vec![],
+            ),
+            Entry::Refused {
+                what,
+                reason,
+                origin,
+                ..
+            } => (
+                "refused",
+                what.clone(),
+                vec![],
+                origin.clone(),
+                reason.clone(),
+                vec![],
+                vec![],
+            ),
+            Entry::Step {
+                event,
+                params,
+                outcome,
+                fired,
+                actions,
+                ..
+            } => (
+                "step",
+                event.clone(),
+                wire(params),
+                String::new(),
+                outcome.clone(),
+                fired.clone(),
+                actions.clone(),
+            ),
+        };
+        match format {
+            "json" => {
+                let doc = serde_json::json!({
+                    "index": i, "time": t, "kind": kind, "event": event, "params": params,
+                    "origin": origin, "outcome": outcome, "fired": fired, "actions": actions,
+                });
+                text.push_str(&format!("{doc}\n"));
+            }
+            "csv" => text.push_str(&format!(
+                "{i},{},{kind},{},{},{},{},{},{}\n",
+                t.map(|t| format!("{t:.6}")).unwrap_or_default(),
+                csv_field(&event),
+                csv_field(&params.join(", ")),
+                csv_field(&origin),
+                csv_field(&outcome),
+                csv_field(&fired.join(" ")),
+                csv_field(&actions.join("; "))
+            )),
+            _ => {
+                let time = t
+                    .map(|t| format!("{t:>12.6}"))
+                    .unwrap_or_else(|| " ".repeat(12));
+                let args = if params.is_empty() {
+                    String::new()
+                } else {
+                    format!("({})", params.join(", "))
+                };
+                let mut line = format!("{i:>6} {time}  {kind:<7} {event}{args}");
+                if !origin.is_empty() {
+                    line.push_str(&format!("  from {origin}"));
+                }
+                if !outcome.is_empty() {
+                    line.push_str(&format!("  [{outcome}]"));
+                }
+                if !fired.is_empty() {
+                    line.push_str(&format!("  fired {}", fired.join(", ")));
+                }
+                if !actions.is_empty() {
+                    line.push_str(&format!("  => {}", actions.join("; ")));
+                }
+                text.push_str(&line);
+                text.push('\n');
+            }
+        }
+    }
+    out(&text);
+    if let Some(t) = &read.torn {
+        eprintln!(
+            "warning: torn last record in {} at byte {}: {}",
+            t.segment.display(),
+            t.offset,
+            t.what
+        );
+    }
+    if let Some(c) = &read.corrupt {
+        eprintln!(
+            "error: {} damaged at record {} (byte {}): {}",
+            c.segment.display(),
+            c.record,
+            c.offset,
+            c.what
+        );
+        return Outcome::Errors;
+    }
+    Outcome::Clean
+}

@@ -1,0 +1,67 @@
+//! `petrel run`: a mission script in virtual time, with no process.
+
+use crate::common::{compiled, out, Outcome};
+use std::path::PathBuf;
+
+/// `petrel run`.
+#[derive(clap::Args)]
+pub struct RunArgs {
+    /// The project directory.
+    dir: PathBuf,
+    /// The script: lines `TIME EVENT(args)`, `TIME wait`, `expect ...`.
+    #[arg(long)]
+    script: PathBuf,
+    /// Print nothing but the result of the expectations.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+/// Runs a script; a failed expectation exits 1.
+pub fn run(a: RunArgs) -> Outcome {
+    let (script_path, quiet) = (&a.script, a.quiet);
+    let c = match compiled(&a.dir, "run") {
+        Ok(c) => c,
+        Err(o) => return o,
+    };
+    let text = match std::fs::read_to_string(script_path) {
+        Ok(t) => t,
+        Err(e) => return Outcome::Usage(format!("cannot read {}: {e}", script_path.display())),
+    };
+    let script = match petrel_player::script::parse_script(&text, &c) {
+        Ok(s) => s,
+        Err(errors) => {
+            let list: Vec<String> = errors
+                .iter()
+                .map(|(n, e)| format!("{}:{n}: {e}", script_path.display()))
+                .collect();
+            return Outcome::Usage(format!("the script has errors:\n{}", list.join("\n")));
+        }
+    };
+    let outcome = petrel_player::script::run_script(&c, &script, |step| {
+        if !quiet {
+            out(&format!("{step}\n"));
+        }
+    });
+    let expectations = script
+        .lines
+        .iter()
+        .filter(|(_, l)| matches!(l, petrel_player::script::Line::Expect { .. }))
+        .count();
+    match outcome.failure {
+        Some((line, msg)) => {
+            eprintln!(
+                "{}:{line}: expectation failed: {msg}",
+                script_path.display()
+            );
+            Outcome::Errors
+        }
+        None => {
+            eprintln!(
+                "{}: {} steps, {expectations} expectations met",
+                script_path.display(),
+                outcome.steps.len()
+            );
+            Outcome::Clean
+        }
+    }
+}

@@ -1,0 +1,200 @@
+//! The record of one step: what the engine did while it processed an event.
+//!
+//! Every reader of the player's steps sees them through [`StepRecord`], a [`Sink`] that keeps
+//! the event taken, the transitions fired, the calls made and every action as a line of text
+//! (`call GUI.roll()`, `start dec_answer (expires at 12.5)`, `refused MISSION.t: a second token
+//! in global.x`). The script runner prints it and checks expectations against it, the player
+//! journals it and publishes it to monitors, the replay compares it with the journal. The texts
+//! are part of the journal and of `petrel run`'s JSON lines, so they stay stable.
+
+use crate::engine::{ArgValue, Args, Micros, Sink};
+use petrel_nets::compiled::{
+    CompiledProject, EventId, FunctionId, NetId, ProgramId, TimerId, Value,
+};
+use petrel_nets::semantics::{Layout, Notice, StepOutcome};
+
+/// What one step did, for people and for the expectations of scripts. Clear it between steps.
+pub struct StepRecord<'p> {
+    /// The project the names come from.
+    pub project: &'p CompiledProject,
+    /// The event taken, with its parameters.
+    pub taken: Option<(String, Vec<Value>)>,
+    /// Transitions fired, in order.
+    pub fired: Vec<(NetId, u32)>,
+    /// Every action and notice, as text, in order.
+    pub actions: Vec<String>,
+    /// Calls made, with their arguments.
+    pub calls: Vec<(ProgramId, FunctionId, Vec<Value>)>,
+    /// Nets activated, in order.
+    pub activated: Vec<NetId>,
+    /// Nets deactivated, in order.
+    pub deactivated: Vec<NetId>,
+}
+
+impl<'p> StepRecord<'p> {
+    /// An empty record.
+    pub fn new(project: &'p CompiledProject) -> Self {
+        StepRecord {
+            project,
+            taken: None,
+            fired: Vec::new(),
+            actions: Vec::new(),
+            calls: Vec::new(),
+            activated: Vec::new(),
+            deactivated: Vec::new(),
+        }
+    }
+
+    /// The transitions fired since the last clear, as `NET.transition`.
+    pub fn fired_names(&self) -> Vec<String> {
+        self.fired
+            .iter()
+            .map(|&(n, t)| transition_name(self.project, n, t))
+            .collect()
+    }
+
+    /// Forgets what was recorded (the step is over).
+    pub fn clear(&mut self) {
+        self.taken = None;
+        self.fired.clear();
+        self.actions.clear();
+        self.calls.clear();
+        self.activated.clear();
+        self.deactivated.clear();
+    }
+}
+
+/// `NET.transition`.
+pub fn transition_name(project: &CompiledProject, net: NetId, transition: u32) -> String {
+    let n = &project.nets[net as usize];
+    format!("{}.{}", n.name, n.transitions[transition as usize].name)
+}
+
+/// `PROGRAM.function(args)`, arguments as the language writes them.
+pub fn call_text(
+    project: &CompiledProject,
+    program: ProgramId,
+    function: FunctionId,
+    args: &[Value],
+) -> String {
+    let prog = &project.programs[program as usize];
+    format!(
+        "{}.{}({})",
+        prog.name,
+        prog.functions[function as usize].name,
+        args.iter()
+            .map(Value::literal)
+            .collect::<Vec<_>>()
+            .join(", ")
+    )
+}
+
+/// How the journal and the replay name a step's outcome.
+pub fn outcome_name(outcome: StepOutcome) -> &'static str {
+    match outcome {
+        StepOutcome::Processed => "processed",
+        StepOutcome::Unused => "unused",
+        StepOutcome::RefusedAfterCatastrophic => "refused",
+    }
+}
+
+fn seconds(t: Micros) -> f64 {
+    t as f64 / 1e6
+}
+
+impl Sink for StepRecord<'_> {
+    fn taken(&mut self, event: EventId, params: &[Value]) {
+        self.taken = Some((
+            self.project.events[event as usize].name.clone(),
+            params.to_vec(),
+        ));
+    }
+    fn fired(&mut self, net: NetId, transition: u32) {
+        self.fired.push((net, transition));
+    }
+    fn call(&mut self, program: ProgramId, function: FunctionId, args: Args<'_>) {
+        let values: Vec<Value> = args.iter().map(ArgValue::to_value).collect();
+        self.actions.push(format!(
+            "call {}",
+            call_text(self.project, program, function, &values)
+        ));
+        self.calls.push((program, function, values));
+    }
+    fn emitted(&mut self, event: EventId) {
+        self.actions
+            .push(format!("emit {}", self.project.events[event as usize].name));
+    }
+    fn timer_started(&mut self, timer: TimerId, deadline: Micros) {
+        self.actions.push(format!(
+            "start {} (expires at {})",
+            self.project.timers[timer as usize].name,
+            seconds(deadline)
+        ));
+    }
+    fn timer_cancelled(&mut self, timer: TimerId) {
+        self.actions.push(format!(
+            "cancel {}",
+            self.project.timers[timer as usize].name
+        ));
+    }
+    fn safety_violation(&mut self, net: NetId, transition: u32, place: &str) {
+        self.actions.push(format!(
+            "refused {}: a second token in {place}",
+            transition_name(self.project, net, transition)
+        ));
+    }
+    fn conflict(&mut self, net: NetId, transition: u32) {
+        self.actions.push(format!(
+            "conflict: {} does not fire",
+            transition_name(self.project, net, transition)
+        ));
+    }
+    fn notice(&mut self, notice: Notice) {
+        let text = match notice {
+            Notice::AlreadyActive(n) => format!(
+                "activate {}: already active",
+                self.project.nets[n as usize].name
+            ),
+            Notice::AlreadyInactive(n) => format!(
+                "deactivate {}: already inactive",
+                self.project.nets[n as usize].name
+            ),
+        };
+        self.actions.push(text);
+    }
+    fn activated(&mut self, net: NetId) {
+        self.activated.push(net);
+        self.actions
+            .push(format!("activate {}", self.project.nets[net as usize].name));
+    }
+    fn deactivated(&mut self, net: NetId) {
+        self.deactivated.push(net);
+        self.actions.push(format!(
+            "deactivate {}",
+            self.project.nets[net as usize].name
+        ));
+    }
+    fn livelock(&mut self) {
+        self.actions
+            .push("livelock: immediate transitions did not settle".into());
+    }
+}
+
+/// The marked places of `state` as `NET.place` and `global.place` (every net's places, active
+/// or not: an inactive net has none), in layout order. What marking messages carry.
+pub fn marked_places(project: &CompiledProject, layout: &Layout, state: &[u64]) -> Vec<String> {
+    let mut out = Vec::new();
+    for (n, net) in project.nets.iter().enumerate() {
+        for (i, p) in net.places.iter().enumerate() {
+            if Layout::bit(state, layout.net_base[n] + i as u32) {
+                out.push(format!("{}.{}", net.name, p.name));
+            }
+        }
+    }
+    for (g, gp) in project.globals.iter().enumerate() {
+        if Layout::bit(state, layout.global_base + g as u32) {
+            out.push(format!("global.{}", gp.name));
+        }
+    }
+    out
+}
