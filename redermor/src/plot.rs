@@ -100,6 +100,9 @@ fn draw_err<E: std::error::Error + Send + Sync>(e: DrawingAreaErrorKind<E>) -> P
 const MAX_DRAWN_POINTS: usize = 4000;
 
 fn thin<T: Copy>(items: &[T]) -> Vec<T> {
+    if items.is_empty() {
+        return Vec::new();
+    }
     let stride = items.len().div_ceil(MAX_DRAWN_POINTS).max(1);
     let mut out: Vec<T> = items.iter().step_by(stride).copied().collect();
     if let (Some(&last), true) = (items.last(), (items.len() - 1) % stride != 0) {
@@ -326,6 +329,9 @@ where
         )))
         .map_err(draw_err)?;
     for event in &trace.events {
+        if !(event.position.x.is_finite() && event.position.y.is_finite()) {
+            continue;
+        }
         let at = xy(&event.position);
         chart
             .draw_series(std::iter::once(
@@ -382,7 +388,7 @@ where
             VEHICLE.stroke_width(2),
         ))
         .map_err(draw_err)?;
-    for event in &trace.events {
+    for event in trace.events.iter().filter(|e| e.time.is_finite()) {
         let i = trace.points.partition_point(|p| p.time < event.time);
         let depth = trace
             .points

@@ -8,7 +8,7 @@
 
 use crate::evt::{Detection, EventListener, EvtConfig, MissionEvent, OperatorRequest};
 use crate::gdd::{Gdd, NavState};
-use crate::geom::Position;
+use crate::geom::{self, Position};
 use crate::guidance::{Guidance, GuidanceConfig, GuidanceEvent, Setpoint};
 use crate::mission::{DepthTarget, Mission, Seabed};
 use crate::pilot::{Pilot, PilotConfig};
@@ -371,8 +371,32 @@ impl MissionRun {
         });
     }
 
-    fn start_trajectory(&mut self, trajectory: Trajectory) {
-        self.trace.planned.push(trajectory.waypoints());
+    /// Follows `trajectory` from now on. A trajectory that starts away from the vehicle (a
+    /// survey replanned with a new entry point) is joined by a path to its start first, so that
+    /// no leg is begun from the side.
+    /// A replan (`replan`, or a trajectory that needed joining) is recorded for the map; the
+    /// nominal stages are already in the plan recorded at the start.
+    fn start_trajectory(&mut self, mut trajectory: Trajectory, replan: bool) {
+        let here = self.gdd.state().position;
+        let mut replan = replan;
+        if let Some(first) = trajectory.legs.first() {
+            if geom::distance(here, first.from) > self.config.guidance.arrival_radius {
+                match self
+                    .planner
+                    .route(here, first.from, LegKind::Transit, first.depth)
+                {
+                    Ok(mut legs) => {
+                        legs.append(&mut trajectory.legs);
+                        trajectory.legs = legs;
+                        replan = true;
+                    }
+                    Err(e) => return self.strand(e),
+                }
+            }
+        }
+        if replan {
+            self.trace.planned.push(trajectory.waypoints());
+        }
         self.guidance = Guidance::new(trajectory, self.config.guidance);
     }
 
@@ -463,7 +487,7 @@ impl MissionRun {
                 match self.planner.to_end_area(nav.position) {
                     Ok(t) => {
                         self.phase = Phase::Returning(event.clone());
-                        self.start_trajectory(t);
+                        self.start_trajectory(t, true);
                     }
                     Err(e) => self.strand(e),
                 }
@@ -488,7 +512,7 @@ impl MissionRun {
                 ) {
                     Ok(mut t) => {
                         t.legs.extend(rest.legs);
-                        self.start_trajectory(t);
+                        self.start_trajectory(t, true);
                     }
                     // An object that cannot be reached is left alone: the survey goes on.
                     Err(e) => self.event(format!("inspection refused: {e}")),
@@ -518,7 +542,7 @@ impl MissionRun {
                                 Err(e) => return self.strand(e),
                             }
                         }
-                        self.start_trajectory(survey.trajectory);
+                        self.start_trajectory(survey.trajectory, true);
                     }
                     Err(e) => self.event(format!("survey replan refused: {e}")),
                 }
@@ -579,7 +603,7 @@ impl MissionRun {
                     .get(i + 1)
                     .map(|s| s.trajectory.clone())
                     .unwrap_or_default();
-                self.start_trajectory(next);
+                self.start_trajectory(next, false);
                 if let Some(StageKind::TransitToArea(area)) = kind {
                     let predicted = self.mission.area(&area).and_then(|a| a.predicted_current);
                     if self.gdd.current_known() {
