@@ -7,8 +7,8 @@
 //! consecutive legs ([`Trajectory::course_changes`]).
 //!
 //! Paths: a visibility graph over the vertices of the forbidden zones inflated by the safety
-//! margin (geo's buffer, mitred so a convex zone keeps its vertex count, and the union of the
-//! inflated zones so overlapping ones merge), searched with `pathfinding`'s A*. A segment is
+//! margin (geo's buffer, mitred so that a zone keeps about its vertex count, corners sharper
+//! than 0.5 rad bevelled; then the union of the inflated zones, so that overlapping ones merge), searched with `pathfinding`'s A*. A segment is
 //! usable when it does not enter the interior of an inflated zone (geo's DE-9IM relate); running
 //! along an inflated zone's edge is allowed, that edge being the safety margin away. A point
 //! already inside an inflated zone (but outside the zone itself) may leave it by any segment
@@ -28,9 +28,7 @@
 use std::fmt;
 
 use geo::algorithm::buffer::{BufferStyle, LineJoin};
-use geo::{
-    BooleanOps, Buffer, ConvexHull, LineString, MultiLineString, MultiPolygon, Polygon, Rect,
-};
+use geo::{BooleanOps, Buffer, ConvexHull, LineString, MultiLineString, MultiPolygon, Polygon};
 use pathfinding::prelude::astar;
 
 use crate::geom::{self, Position};
@@ -858,20 +856,4 @@ pub fn narrowest_direction(polygon: &Polygon<f64>) -> f64 {
         }
     }
     best.1
-}
-
-/// The bounding rectangle of everything a mission draws (areas, zones, start, end), for plots.
-pub fn mission_bounds(mission: &Mission) -> Option<Rect<f64>> {
-    use geo::BoundingRect;
-    let mut points: Vec<Position> = vec![mission.start, mission.end.target()];
-    for a in &mission.areas {
-        points.extend(a.polygon.exterior().0.iter().copied());
-    }
-    for z in &mission.forbidden {
-        points.extend(z.polygon.exterior().0.iter().copied());
-    }
-    if let crate::mission::EndArea::Polygon(p) = &mission.end {
-        points.extend(p.exterior().0.iter().copied());
-    }
-    LineString::from(points).bounding_rect()
 }

@@ -328,10 +328,18 @@ where
             VEHICLE.stroke_width(2),
         )))
         .map_err(draw_err)?;
+    let mut marked: Vec<Position> = Vec::new();
     for event in &trace.events {
         if !(event.position.x.is_finite() && event.position.y.is_finite()) {
             continue;
         }
+        // Events at one place (a fault and its alarm) get their labels stacked, not overlaid.
+        let stacked = marked
+            .iter()
+            .filter(|&&p| crate::geom::distance(p, event.position) < 15.0 * scale)
+            .count();
+        marked.push(event.position);
+        let dy = -12 - 14 * i32::try_from(stacked).unwrap_or(i32::MAX / 28);
         let at = xy(&event.position);
         chart
             .draw_series(std::iter::once(
@@ -339,7 +347,7 @@ where
                     + Cross::new((0, 0), 5, EVENT.stroke_width(2))
                     + Text::new(
                         event.label.clone(),
-                        (7, -12),
+                        (7, dy),
                         ("sans-serif", 12).into_font().color(&EVENT),
                     ),
             ))

@@ -9,7 +9,7 @@
 use crate::evt::{Detection, EventListener, EvtConfig, MissionEvent, OperatorRequest};
 use crate::gdd::{Gdd, NavState};
 use crate::geom::{self, Position};
-use crate::guidance::{Guidance, GuidanceConfig, GuidanceEvent, Setpoint};
+use crate::guidance::{Guidance, GuidanceConfig, GuidanceEvent};
 use crate::mission::{DepthTarget, Mission, Seabed};
 use crate::pilot::{Pilot, PilotConfig};
 use crate::plan::{LegKind, MissionPlan, PlanError, Planner, StageKind, Trajectory};
@@ -436,14 +436,23 @@ impl MissionRun {
             self.on_event(e, &nav);
         }
 
-        let (setpoint, guidance_events) = self.guidance.update(nav.position, nav.current);
-        if guidance_events.contains(&GuidanceEvent::Arrived) {
+        // An arrival starts the next stage's trajectory at once (several, when a transit has
+        // no leg because the vehicle is already there): the pilot never goes a step without a
+        // setpoint until the mission is over.
+        let mut setpoint = None;
+        for _ in 0..=self.plan.stages.len() + 1 {
+            let (sp, guidance_events) = self.guidance.update(nav.position, nav.current);
+            setpoint = sp;
+            if matches!(self.phase, Phase::Finished)
+                || !guidance_events.contains(&GuidanceEvent::Arrived)
+            {
+                break;
+            }
             self.on_arrival(&nav);
         }
-        let setpoint = match self.phase {
-            Phase::Finished => None,
-            _ => setpoint.or_else(|| self.guidance_setpoint(&nav)),
-        };
+        if matches!(self.phase, Phase::Finished) {
+            setpoint = None;
+        }
         let dt = self.config.step_us as f64 / 1e6;
         self.commands = self.pilot.update(dt, setpoint.as_ref(), &nav);
 
@@ -465,16 +474,6 @@ impl MissionRun {
             surveying: area,
         });
         self.outcome.as_ref()
-    }
-
-    /// Guidance had nothing (an empty trajectory just started): hold depth and stop turning
-    /// until the next stage's trajectory comes in at the next step.
-    fn guidance_setpoint(&self, nav: &NavState) -> Option<Setpoint> {
-        (!matches!(self.phase, Phase::Finished)).then_some(Setpoint {
-            heading: nav.heading,
-            speed: 0.0,
-            depth: DepthTarget::Depth(nav.depth),
-        })
     }
 
     fn on_event(&mut self, event: MissionEvent, nav: &NavState) {

@@ -95,18 +95,36 @@ fn small_and_odd_traces_still_plot() {
                 depth: 0.0,
                 surveying: None,
             }],
-            events: vec![TraceEvent {
-                time: 0.0,
-                position: pos(f64::NAN, 1.0),
-                label: "odd <event> & co".into(),
-            }],
+            events: vec![
+                TraceEvent {
+                    time: f64::NAN,
+                    position: pos(f64::NAN, 1.0),
+                    label: "nowhere".into(),
+                },
+                TraceEvent {
+                    time: 0.0,
+                    position: pos(10.0, 10.0),
+                    label: "odd <event> & co".into(),
+                },
+            ],
             planned: vec![vec![]],
         },
     ] {
+        for size in [(400, 300), (0, 0), (5, 3)] {
+            if let Ok(svg) = plot::map_svg(&mission, &trace, size) {
+                elements(&svg);
+            }
+            if let Ok(svg) = plot::depth_svg(&trace, size) {
+                elements(&svg);
+            }
+        }
         let svg = plot::map_svg(&mission, &trace, (400, 300)).unwrap();
-        elements(&svg);
-        let svg = plot::depth_svg(&trace, (400, 300)).unwrap();
-        elements(&svg);
+        // Labels are escaped (the XML parsed), and an event with no position is not drawn.
+        assert_eq!(
+            svg.contains("odd &lt;event&gt; &amp; co"),
+            !trace.events.is_empty()
+        );
+        assert!(!svg.contains("nowhere"));
     }
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("no/such/dir/map.svg");
