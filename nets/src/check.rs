@@ -7,6 +7,7 @@
 use crate::compiled as c;
 use crate::diag::{Diagnostic, Diagnostics};
 use crate::model::*;
+use crate::names::{suggest, Candidates};
 use crate::source::Span;
 use std::collections::HashMap;
 
@@ -36,43 +37,6 @@ struct Checker<'p> {
     events: HashMap<&'p str, u32>,
     programs: HashMap<&'p str, u32>,
     timers: HashMap<&'p str, u32>,
-}
-
-/// Edit distance (Levenshtein, over characters), for "did you mean" hints.
-pub fn distance(a: &str, b: &str) -> usize {
-    let b: Vec<char> = b.chars().collect();
-    let mut row: Vec<usize> = (0..=b.len()).collect();
-    for (i, ca) in a.chars().enumerate() {
-        let mut prev = row[0];
-        row[0] = i + 1;
-        for (j, cb) in b.iter().enumerate() {
-            let cur = row[j + 1];
-            row[j + 1] = (prev + usize::from(ca != *cb)).min(row[j] + 1).min(cur + 1);
-            prev = cur;
-        }
-    }
-    row[b.len()]
-}
-
-/// "did you mean `x`?" when a candidate is close, else the list of candidates when short.
-fn suggest<'a>(name: &str, candidates: impl Iterator<Item = &'a str>) -> String {
-    let all: Vec<&str> = candidates.collect();
-    let best = all
-        .iter()
-        .map(|c| (distance(&name.to_lowercase(), &c.to_lowercase()), *c))
-        .min();
-    match best {
-        Some((d, c)) if d <= 2.max(name.len() / 3) => format!("did you mean `{c}`?"),
-        _ if all.is_empty() => "none is declared".to_string(),
-        _ if all.len() <= 8 => format!(
-            "the declared ones are {}",
-            all.iter()
-                .map(|c| format!("`{c}`"))
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
-        _ => format!("{} are declared; check the spelling", all.len()),
-    }
 }
 
 /// Registers names of one kind, reporting duplicates against the first declaration.
@@ -302,14 +266,14 @@ impl<'p> Checker<'p> {
 
     fn unknown(&mut self, code: &'static str, what: &str, n: &Name, mut candidates: Vec<&str>) {
         candidates.sort_unstable();
-        let mut hint = suggest(n.as_str(), candidates.iter().copied());
+        let mut hint = suggest(n.as_str(), candidates.iter().copied(), Candidates::Declared);
         if what == "event" && !hint.starts_with("did you mean") {
             // List what the user declared; built-ins are documented, not declared.
             let declared = candidates
                 .iter()
                 .copied()
                 .filter(|c| !builtin_events().iter().any(|b| b.name.text == *c));
-            hint = suggest(n.as_str(), declared);
+            hint = suggest(n.as_str(), declared, Candidates::Declared);
         }
         let declare = match what {
             "net" => "nets are declared with `net NAME { ... }` in a file the manifest lists",
@@ -403,7 +367,7 @@ impl<'p> Checker<'p> {
                 let mut cands: Vec<&str> = locals.keys().copied().collect();
                 cands.extend(self.globals.keys().copied());
                 cands.sort_unstable();
-                let hint = suggest(n.as_str(), cands.into_iter());
+                let hint = suggest(n.as_str(), cands, Candidates::Declared);
                 self.d.push(
                     Diagnostic::error(
                         "E0201",
@@ -631,6 +595,7 @@ impl<'p> Checker<'p> {
                     let hint = suggest(
                         function.as_str(),
                         decl.functions.iter().map(|f| f.name.as_str()),
+                        Candidates::Declared,
                     );
                     self.d.push(
                         Diagnostic::error(
@@ -833,19 +798,4 @@ pub fn literal(e: &Expr, ty: Type) -> Option<c::Value> {
         }
         _ => return None,
     })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn suggestions_find_near_names() {
-        assert_eq!(
-            suggest("rolin", ["rolling", "climb"].into_iter()),
-            "did you mean `rolling`?"
-        );
-        assert!(suggest("zzz", ["a", "b"].into_iter()).contains("`a`, `b`"));
-        assert_eq!(distance("kitten", "sitting"), 3);
-    }
 }

@@ -289,48 +289,7 @@ impl Expr {
     }
 }
 
-/// A unit of a duration literal.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum TimeUnit {
-    /// Milliseconds, `ms`.
-    Millis,
-    /// Seconds, `s`.
-    Seconds,
-    /// Minutes, `min`.
-    Minutes,
-    /// Hours, `h`.
-    Hours,
-}
-
-impl TimeUnit {
-    /// Every unit.
-    pub const ALL: [TimeUnit; 4] = [
-        TimeUnit::Millis,
-        TimeUnit::Seconds,
-        TimeUnit::Minutes,
-        TimeUnit::Hours,
-    ];
-
-    /// The suffix as written.
-    pub fn suffix(self) -> &'static str {
-        match self {
-            TimeUnit::Millis => "ms",
-            TimeUnit::Seconds => "s",
-            TimeUnit::Minutes => "min",
-            TimeUnit::Hours => "h",
-        }
-    }
-
-    /// Milliseconds in one unit.
-    pub fn millis(self) -> f64 {
-        match self {
-            TimeUnit::Millis => 1.0,
-            TimeUnit::Seconds => 1e3,
-            TimeUnit::Minutes => 60e3,
-            TimeUnit::Hours => 3600e3,
-        }
-    }
-}
+pub use crate::duration::TimeUnit;
 
 /// How long a timer runs.
 #[derive(Clone, Debug, PartialEq)]

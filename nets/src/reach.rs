@@ -44,7 +44,7 @@
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
-use crate::pnml::{PtNet, PtNode};
+use crate::pt::{PtNet, PtNode};
 use std::fmt;
 use std::fmt::Write as _;
 use std::time::Instant;

@@ -133,7 +133,7 @@ fn lex(file: FileId, text: &str, diags: &mut Diagnostics) -> Vec<Token> {
             }
             let suffix = &text[suffix_start..i];
             if !suffix.is_empty() {
-                match TimeUnit::ALL.into_iter().find(|u| u.suffix() == suffix) {
+                match TimeUnit::from_suffix(suffix) {
                     Some(unit) => match number.parse::<f64>() {
                         Ok(v) => Tok::Duration(v, unit),
                         Err(_) => {

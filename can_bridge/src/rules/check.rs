@@ -63,7 +63,10 @@ use std::path::Path;
 use petrel_ipc::Value;
 use petrel_nets::compiled::CompiledProject;
 use petrel_nets::diag::{Diagnostic, Diagnostics};
+use petrel_nets::duration::parse_duration_us;
+use petrel_nets::manifest::Ordered;
 use petrel_nets::model::Type;
+use petrel_nets::names::{self, Candidates};
 use petrel_nets::source::{FileId, SourceMap, Span};
 use serde::Deserialize;
 use toml::Spanned;
@@ -77,38 +80,6 @@ use crate::faults::BusState;
 
 /// The name of the CAN configuration file in a project directory.
 pub const CAN_TOML: &str = "can.toml";
-
-/// A TOML table read in document order, keys with their spans.
-struct Ordered<V>(Vec<(Spanned<String>, V)>);
-
-impl<V> Default for Ordered<V> {
-    fn default() -> Self {
-        Ordered(Vec::new())
-    }
-}
-
-impl<'de, V: Deserialize<'de>> Deserialize<'de> for Ordered<V> {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        struct Visit<V>(std::marker::PhantomData<V>);
-        impl<'de, V: Deserialize<'de>> serde::de::Visitor<'de> for Visit<V> {
-            type Value = Ordered<V>;
-            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-                f.write_str("a table")
-            }
-            fn visit_map<A: serde::de::MapAccess<'de>>(
-                self,
-                mut map: A,
-            ) -> Result<Self::Value, A::Error> {
-                let mut out = Vec::new();
-                while let Some((k, v)) = map.next_entry()? {
-                    out.push((k, v));
-                }
-                Ok(Ordered(out))
-            }
-        }
-        d.deserialize_map(Visit(std::marker::PhantomData))
-    }
-}
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -202,54 +173,14 @@ struct RawRule {
     params: Option<Spanned<Vec<Spanned<RawParam>>>>,
 }
 
-/// Parses a duration: a number and a unit, `us`, `ms`, `s`, `min` or `h` (`200ms`, `1.5s`,
-/// `2min`), into microseconds. `None` for anything else, a negative or a non-finite value,
-/// or more than about 290,000 years.
-pub fn parse_duration_us(text: &str) -> Option<u64> {
-    let t = text.trim();
-    let split = t
-        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
-        .unwrap_or(t.len());
-    let (number, unit) = t.split_at(split);
-    let scale = match unit.trim() {
-        "us" => 1.0,
-        "ms" => 1e3,
-        "s" => 1e6,
-        "min" => 60e6,
-        "h" => 3600e6,
-        _ => return None,
-    };
-    if number.is_empty() || number.starts_with('.') || number.ends_with('.') {
-        return None;
-    }
-    let v: f64 = number.parse().ok()?;
-    let us = (v * scale).round();
-    (0.0..9.2e18).contains(&us).then_some(us as u64)
-}
-
+/// The hint for a misspelt name: can.toml's names come from the DBC and fixed lists, known
+/// rather than declared by the user.
 fn suggest(name: &str, candidates: &[String]) -> String {
-    let best = candidates
-        .iter()
-        .map(|c| {
-            (
-                petrel_nets::check::distance(&name.to_lowercase(), &c.to_lowercase()),
-                c,
-            )
-        })
-        .min();
-    match best {
-        Some((d, c)) if d <= 2.max(name.len() / 3) => format!("did you mean `{c}`?"),
-        _ if candidates.is_empty() => "there is none".to_owned(),
-        _ if candidates.len() <= 8 => format!(
-            "the known ones are {}",
-            candidates
-                .iter()
-                .map(|c| format!("`{c}`"))
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
-        _ => format!("{} are known; check the spelling", candidates.len()),
-    }
+    names::suggest(
+        name,
+        candidates.iter().map(String::as_str),
+        Candidates::Known,
+    )
 }
 
 struct Checker<'a> {

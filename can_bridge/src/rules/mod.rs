@@ -20,7 +20,7 @@
 
 pub mod check;
 
-pub use check::{check_rules, load_project_can, parse_duration_us, CAN_TOML};
+pub use check::{check_rules, load_project_can, CAN_TOML};
 
 use std::sync::Arc;
 

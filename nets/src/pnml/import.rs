@@ -1,0 +1,784 @@
+//! Reading a PNML document as a Petrel project ([`import_pnml`]): an export back to the exact
+//! project, or a plain P/T net to a project of immediate transitions.
+
+use std::collections::HashMap;
+
+use super::read::{parse_document, RawNet, PETREL_DATA_HELP};
+use super::view::{sanitize, structure, Layout, Unique};
+use super::xml::Node;
+use crate::diag::{Diagnostic, Diagnostics};
+use crate::model::*;
+use crate::pt::PtNode;
+use crate::source::{FileId, Span};
+use crate::syntax::parse_action;
+
+/// The hint for nets Petrel cannot take as mission nets but can still analyse.
+const VERIFY_HINT: &str = "`petrel verify FILE.pnml` analyses weighted, unsafe P/T nets directly";
+
+/// Reads a PNML document as a Petrel project.
+///
+/// A document written by [`super::export_pnml`] (it carries a net-level `<toolspecific
+/// tool="petrel">` block) gives back the exact project, after checking that the P/T structure
+/// still agrees with the Petrel data (`E0506` otherwise). Any other P/T net becomes a project
+/// with one net file per net, named from the PNML ids made into identifiers, with immediate
+/// transitions and no actions; every arc weight above 1 (`E0504`) and every initial marking
+/// above 1 (`E0505`) is reported, since Petrel nets are unary and safe. Returns `None` when any
+/// error was found.
+pub fn import_pnml(file: FileId, text: &str, diags: &mut Diagnostics) -> Option<Project> {
+    let before = diags.error_count();
+    let raws = parse_document(file, text, diags);
+    let parse_failed = diags.error_count() > before;
+    if raws.iter().any(|r| r.petrel.is_some()) {
+        if raws.len() > 1 {
+            let span = raws.get(1).map(|r| r.span).unwrap_or_default();
+            diags.push(
+                Diagnostic::error(
+                    "E0506",
+                    span,
+                    format!(
+                        "this document holds {} nets and Petrel data: a Petrel export is one net",
+                        raws.len()
+                    ),
+                )
+                .label("a second net")
+                .help(PETREL_DATA_HELP),
+            );
+            return None;
+        }
+        if parse_failed {
+            return None;
+        }
+        let raw = raws.first()?;
+        return Rebuild {
+            file,
+            diags,
+            raw,
+            before,
+        }
+        .project();
+    }
+    if raws.is_empty() {
+        if !parse_failed {
+            diags.push(
+                Diagnostic::error("E0501", Span::new(file, 0, 0), "this document holds no `<net>`")
+                    .label("no net to import")
+                    .help("a PNML file holds one or more `<net type=\"http://www.pnml.org/version-2009/grammar/ptnet\">`"),
+            );
+        }
+        return None;
+    }
+    let project = plain_project(&raws, diags);
+    if diags.error_count() > before {
+        return None;
+    }
+    Some(project)
+}
+
+/// The project of plain P/T nets, reporting whatever Petrel nets cannot express.
+fn plain_project(raws: &[RawNet], diags: &mut Diagnostics) -> Project {
+    let mut net_names = Unique::default();
+    let mut manifest = Manifest::default();
+    let mut files = Vec::new();
+    for raw in raws {
+        let pt = &raw.net;
+        for p in &pt.places {
+            if p.initial > 1 {
+                diags.push(
+                    Diagnostic::error(
+                        "E0505",
+                        p.span,
+                        format!(
+                            "place `{}` starts with {} tokens, but a Petrel place holds at most one",
+                            p.id, p.initial
+                        ),
+                    )
+                    .label(format!("initial marking {}", p.initial))
+                    .help(format!("Petrel mission nets are safe, so this net cannot become one; {VERIFY_HINT}")),
+                );
+            }
+        }
+        let mut seen: HashMap<(usize, usize, bool), &str> = HashMap::new();
+        for a in &pt.arcs {
+            let end = |n: PtNode| match n {
+                PtNode::Place(i) => pt.places.get(i).map(|p| p.id.as_str()),
+                PtNode::Transition(i) => pt.transitions.get(i).map(|t| t.id.as_str()),
+            };
+            let (from, to) = (end(a.source).unwrap_or("?"), end(a.target).unwrap_or("?"));
+            let key = (
+                a.place().unwrap_or(0),
+                a.transition().unwrap_or(0),
+                a.is_input(),
+            );
+            if a.weight > 1 {
+                diags.push(
+                    Diagnostic::error(
+                        "E0504",
+                        a.span,
+                        format!(
+                            "arc `{}` from `{from}` to `{to}` has weight {}, but Petrel nets have unary arcs",
+                            a.id, a.weight
+                        ),
+                    )
+                    .label(format!("weight {}", a.weight))
+                    .help(format!("a Petrel transition moves one token per place, so this net cannot become a mission net; {VERIFY_HINT}")),
+                );
+            } else if let Some(first) = seen.get(&key) {
+                diags.push(
+                    Diagnostic::error(
+                        "E0504",
+                        a.span,
+                        format!(
+                            "arc `{}` from `{from}` to `{to}` repeats arc `{first}`: together they weigh 2, but Petrel nets have unary arcs",
+                            a.id
+                        ),
+                    )
+                    .label("parallel arc")
+                    .help(format!("merge the two arcs if one is a mistake; {VERIFY_HINT}")),
+                );
+            }
+            seen.entry(key).or_insert(a.id.as_str());
+        }
+        let net_name = net_names.take(&sanitize(&pt.id), "_");
+        let origin = |id: &str, name: &str| {
+            if id == name {
+                Vec::new()
+            } else {
+                vec![format!("PNML id {id:?}")]
+            }
+        };
+        let mut names = Unique::default();
+        let place_names: Vec<String> = pt
+            .places
+            .iter()
+            .map(|p| names.take(&sanitize(&p.id), "_"))
+            .collect();
+        let mut items = Vec::new();
+        for (p, name) in pt.places.iter().zip(&place_names) {
+            items.push(Item {
+                trivia: Trivia {
+                    blank_before: false,
+                    comments: origin(&p.id, name),
+                },
+                kind: ItemKind::Place(PlaceDecl {
+                    name: Name {
+                        text: name.clone(),
+                        span: p.span,
+                    },
+                    tokens: u32::try_from(p.initial).unwrap_or(u32::MAX),
+                    tokens_span: (p.initial > 0).then_some(p.span),
+                }),
+                trailing: None,
+            });
+        }
+        let mut inputs: Vec<Vec<Name>> = vec![Vec::new(); pt.transitions.len()];
+        let mut outputs: Vec<Vec<Name>> = vec![Vec::new(); pt.transitions.len()];
+        for a in &pt.arcs {
+            let (Some(p), Some(t)) = (a.place(), a.transition()) else {
+                continue;
+            };
+            let (Some(name), Some(list)) = (
+                place_names.get(p),
+                if a.is_input() {
+                    inputs.get_mut(t)
+                } else {
+                    outputs.get_mut(t)
+                },
+            ) else {
+                continue;
+            };
+            list.push(Name {
+                text: name.clone(),
+                span: a.span,
+            });
+        }
+        for ((t, ins), outs) in pt.transitions.iter().zip(inputs).zip(outputs) {
+            let name = names.take(&sanitize(&t.id), "_");
+            items.push(Item {
+                trivia: Trivia {
+                    blank_before: false,
+                    comments: origin(&t.id, &name),
+                },
+                kind: ItemKind::Transition(TransitionDecl {
+                    name: Name {
+                        text: name,
+                        span: t.span,
+                    },
+                    trigger: None,
+                    inputs: ins,
+                    outputs: outs,
+                    actions: Vec::new(),
+                    end_comments: Vec::new(),
+                }),
+                trailing: None,
+            });
+        }
+        let path = format!("{net_name}.pn");
+        manifest.files.push(FileRef {
+            path: path.clone(),
+            span: raw.span,
+        });
+        manifest.start.push(Name {
+            text: net_name.clone(),
+            span: raw.span,
+        });
+        files.push(NetFile {
+            path,
+            nets: vec![NetDecl {
+                trivia: Trivia {
+                    blank_before: false,
+                    comments: origin(&pt.id, &net_name),
+                },
+                name: Name {
+                    text: net_name,
+                    span: raw.span,
+                },
+                items,
+                end_comments: Vec::new(),
+            }],
+            end_comments: Vec::new(),
+        });
+    }
+    manifest.name = raws
+        .first()
+        .map(|r| sanitize(&r.net.id))
+        .unwrap_or_default();
+    Project { manifest, files }
+}
+
+/// Rebuilds a project from an export's Petrel blocks, reporting every problem (`E0506`).
+struct Rebuild<'r, 'd> {
+    file: FileId,
+    diags: &'d mut Diagnostics,
+    raw: &'r RawNet,
+    /// Error count when the import began: any more means failure.
+    before: usize,
+}
+
+impl Rebuild<'_, '_> {
+    fn bad(&mut self, span: Span, message: impl Into<String>) {
+        self.diags.push(
+            Diagnostic::error("E0506", span, message)
+                .label("Petrel data in question")
+                .help(PETREL_DATA_HELP),
+        );
+    }
+
+    fn req<'n>(&mut self, n: &'n Node, key: &str) -> &'n str {
+        match n.attr(key) {
+            Some(v) => v,
+            None => {
+                self.bad(
+                    n.span,
+                    format!("petrel element `<{}>` lacks its `{key}` attribute", n.name),
+                );
+                ""
+            }
+        }
+    }
+
+    fn name(&mut self, n: &Node, key: &str) -> Name {
+        Name {
+            text: self.req(n, key).to_string(),
+            span: n.span,
+        }
+    }
+
+    fn flag(&mut self, n: &Node, key: &str) -> bool {
+        match n.attr(key) {
+            None | Some("false") => false,
+            Some("true") => true,
+            Some(other) => {
+                self.bad(
+                    n.span,
+                    format!(
+                        "petrel attribute `{key}` of `<{}>` is `{other}`, not `true` or `false`",
+                        n.name
+                    ),
+                );
+                false
+            }
+        }
+    }
+
+    fn number<T: std::str::FromStr + Default>(&mut self, n: &Node, key: &str) -> T {
+        let v = self.req(n, key).to_string();
+        match v.parse() {
+            Ok(x) => x,
+            Err(_) => {
+                if n.attr(key).is_some() {
+                    self.bad(
+                        n.span,
+                        format!(
+                            "petrel attribute `{key}` of `<{}>` is `{v}`, not a number",
+                            n.name
+                        ),
+                    );
+                }
+                T::default()
+            }
+        }
+    }
+
+    fn ty(&mut self, n: &Node) -> Type {
+        let v = self.req(n, "type").to_string();
+        Type::from_keyword(&v).unwrap_or_else(|| {
+            if n.attr("type").is_some() {
+                self.bad(n.span, format!("`{v}` is not a Petrel type"));
+            }
+            Type::Int
+        })
+    }
+
+    fn trivia(&mut self, n: &Node) -> Trivia {
+        Trivia {
+            blank_before: self.flag(n, "blank-before"),
+            comments: texts(n, "comment"),
+        }
+    }
+
+    fn params(&mut self, n: &Node) -> Vec<Param> {
+        n.children("param")
+            .map(|p| Param {
+                name: self.name(p, "name"),
+                ty: self.ty(p),
+            })
+            .collect()
+    }
+
+    fn manifest(&mut self, n: &Node) -> Manifest {
+        let mut m = Manifest {
+            name: self.req(n, "name").to_string(),
+            description: n.child("description").map(|d| d.text.clone()),
+            ..Manifest::default()
+        };
+        for f in n.children("file") {
+            m.files.push(FileRef {
+                path: self.req(f, "path").to_string(),
+                span: f.span,
+            });
+        }
+        for s in n.children("start") {
+            m.start.push(self.name(s, "net"));
+        }
+        for g in n.children("global") {
+            m.globals.push(GlobalPlaceDecl {
+                name: self.name(g, "name"),
+                tokens: self.number(g, "tokens"),
+            });
+        }
+        for e in n.children("event") {
+            let cat = self.req(e, "category").to_string();
+            let category = Category::from_keyword(&cat).unwrap_or_else(|| {
+                if e.attr("category").is_some() {
+                    self.bad(e.span, format!("`{cat}` is not an event category"));
+                }
+                Category::Nominal
+            });
+            m.events.push(EventDecl {
+                name: self.name(e, "name"),
+                category,
+                params: self.params(e),
+                description: e.child("description").map(|d| d.text.clone()),
+            });
+        }
+        for p in n.children("program") {
+            let functions = p
+                .children("function")
+                .map(|f| FunctionDecl {
+                    name: self.name(f, "name"),
+                    params: self.params(f),
+                })
+                .collect();
+            m.programs.push(ProgramDecl {
+                name: self.name(p, "name"),
+                description: p.child("description").map(|d| d.text.clone()),
+                functions,
+            });
+        }
+        for t in n.children("timer") {
+            m.timers.push(TimerDecl {
+                name: self.name(t, "name"),
+                event: self.name(t, "event"),
+            });
+        }
+        for f in n.children("final") {
+            let places = f
+                .children("place")
+                .map(|p| Name {
+                    text: self.req(p, "name").to_string(),
+                    span: p.span,
+                })
+                .collect();
+            m.finals.push(places);
+        }
+        m
+    }
+
+    /// The data node (`<place>` or `<transition>`) of an element's Petrel block.
+    fn element_data<'n>(
+        &mut self,
+        block: Option<&'n Node>,
+        kind: &str,
+        id: &str,
+        span: Span,
+    ) -> Option<&'n Node> {
+        let found = block.and_then(|b| b.child(kind));
+        if found.is_none() {
+            self.bad(
+                span,
+                format!("{kind} `{id}` has no petrel data, though the net's petrel block lists it"),
+            );
+        }
+        found
+    }
+
+    fn place(&mut self, n: &Node) -> Item {
+        let tokens = self.number(n, "tokens");
+        let tokens_span = self.flag(n, "marking-written").then_some(n.span);
+        Item {
+            trivia: self.trivia(n),
+            kind: ItemKind::Place(PlaceDecl {
+                name: self.name(n, "name"),
+                tokens,
+                tokens_span,
+            }),
+            trailing: n.child("trailing").map(|t| t.text.clone()),
+        }
+    }
+
+    fn transition(&mut self, n: &Node) -> Item {
+        let trigger = n.child("trigger").map(|tr| Trigger {
+            event: self.name(tr, "event"),
+            bindings: tr
+                .children("binding")
+                .map(|b| Binding {
+                    name: self.name(b, "name"),
+                    ty: b.attr("type").is_some().then(|| (self.ty(b), b.span)),
+                })
+                .collect(),
+        });
+        let inputs = n.children("input").map(|i| self.name(i, "place")).collect();
+        let outputs = n
+            .children("output")
+            .map(|o| self.name(o, "place"))
+            .collect();
+        let actions = n
+            .children("action")
+            .filter_map(|a| self.action(a))
+            .collect();
+        Item {
+            trivia: self.trivia(n),
+            kind: ItemKind::Transition(TransitionDecl {
+                name: self.name(n, "name"),
+                trigger,
+                inputs,
+                outputs,
+                actions,
+                end_comments: texts(n, "end-comment"),
+            }),
+            trailing: n.child("trailing").map(|t| t.text.clone()),
+        }
+    }
+
+    fn action(&mut self, n: &Node) -> Option<ActionItem> {
+        let Some(code) = n.child("code") else {
+            self.bad(n.span, "petrel `<action>` lacks its `<code>`");
+            return None;
+        };
+        // The action text has its own offsets, so its diagnostics are summarised at the
+        // `<code>` element, and its spans all point there.
+        let mut inner = Diagnostics::new();
+        let parsed = parse_action(self.file, &code.text, &mut inner);
+        let action = match parsed {
+            Some(a) if !inner.has_errors() => a,
+            _ => {
+                let why = inner
+                    .iter()
+                    .next()
+                    .map(|d| d.message.clone())
+                    .unwrap_or_else(|| "it is not an action".into());
+                self.bad(
+                    code.span,
+                    format!("petrel action `{}` does not parse: {why}", code.text),
+                );
+                return None;
+            }
+        };
+        Some(ActionItem {
+            trivia: self.trivia(n),
+            action: respan_action(action, code.span),
+            trailing: n.child("trailing").map(|t| t.text.clone()),
+        })
+    }
+
+    fn project(mut self) -> Option<Project> {
+        let raw = self.raw;
+        let pt = &raw.net;
+        let block = raw.petrel.as_ref()?;
+        if block.attr("version") != Some("1") {
+            self.bad(
+                block.span,
+                format!(
+                    "petrel data version `{}` is not version 1, the one this Petrel reads",
+                    block.attr("version").unwrap_or("")
+                ),
+            );
+            return None;
+        }
+        let Some(mnode) = block.child("manifest") else {
+            self.bad(block.span, "the petrel block has no `<manifest>`");
+            return None;
+        };
+        let manifest = self.manifest(mnode);
+
+        let place_ids: HashMap<&str, usize> = pt
+            .places
+            .iter()
+            .enumerate()
+            .map(|(i, p)| (p.id.as_str(), i))
+            .collect();
+        let transition_ids: HashMap<&str, usize> = pt
+            .transitions
+            .iter()
+            .enumerate()
+            .map(|(i, t)| (t.id.as_str(), i))
+            .collect();
+        let mut place_used = vec![false; pt.places.len()];
+        let mut transition_used = vec![false; pt.transitions.len()];
+        let mut layout = Layout::default();
+
+        for g in mnode.children("global") {
+            let id = self.req(g, "ref").to_string();
+            match place_ids.get(id.as_str()) {
+                Some(&i) if !place_used[i] => place_used[i] = true,
+                Some(_) => self.bad(g.span, format!("place `{id}` is claimed twice")),
+                None => self.bad(
+                    g.span,
+                    format!("global place `{id}` is not a place of the P/T net"),
+                ),
+            }
+            layout.globals.push(id);
+        }
+
+        let mut files = Vec::new();
+        for f in block.children("netfile") {
+            let mut nets = Vec::new();
+            for n in f.children("net") {
+                let mut items = Vec::new();
+                let mut ids = Vec::new();
+                for item in n.children("item") {
+                    let id = self.req(item, "ref").to_string();
+                    if let Some(&i) = place_ids.get(id.as_str()) {
+                        if std::mem::replace(&mut place_used[i], true) {
+                            self.bad(item.span, format!("place `{id}` is claimed twice"));
+                        }
+                        let span = pt.places[i].span;
+                        let data = raw.place_petrel.get(i).and_then(Option::as_ref);
+                        if let Some(d) = self.element_data(data, "place", &id, span) {
+                            items.push(self.place(d));
+                        }
+                    } else if let Some(&i) = transition_ids.get(id.as_str()) {
+                        if std::mem::replace(&mut transition_used[i], true) {
+                            self.bad(item.span, format!("transition `{id}` is claimed twice"));
+                        }
+                        let span = pt.transitions[i].span;
+                        let data = raw.transition_petrel.get(i).and_then(Option::as_ref);
+                        if let Some(d) = self.element_data(data, "transition", &id, span) {
+                            items.push(self.transition(d));
+                        }
+                    } else {
+                        self.bad(
+                            item.span,
+                            format!("item `{id}` is no place or transition of the P/T net"),
+                        );
+                    }
+                    ids.push(id);
+                }
+                layout.nets.push(ids);
+                nets.push(NetDecl {
+                    trivia: self.trivia(n),
+                    name: self.name(n, "name"),
+                    items,
+                    end_comments: texts(n, "end-comment"),
+                });
+            }
+            files.push(NetFile {
+                path: self.req(f, "path").to_string(),
+                nets,
+                end_comments: texts(f, "end-comment"),
+            });
+        }
+        for (p, used) in pt.places.iter().zip(&place_used) {
+            if !used {
+                self.bad(
+                    p.span,
+                    format!(
+                        "place `{}` is not in the Petrel data: the P/T net was changed",
+                        p.id
+                    ),
+                );
+            }
+        }
+        for (t, used) in pt.transitions.iter().zip(&transition_used) {
+            if !used {
+                self.bad(
+                    t.span,
+                    format!(
+                        "transition `{}` is not in the Petrel data: the P/T net was changed",
+                        t.id
+                    ),
+                );
+            }
+        }
+        if self.diags.error_count() > self.before {
+            return None;
+        }
+        let project = Project { manifest, files };
+        self.check_structure(&project, &layout, &place_ids, &transition_ids);
+        (self.diags.error_count() == self.before).then_some(project)
+    }
+
+    /// Compares the P/T net with the structure the rebuilt project implies.
+    fn check_structure(
+        &mut self,
+        project: &Project,
+        layout: &Layout,
+        place_ids: &HashMap<&str, usize>,
+        transition_ids: &HashMap<&str, usize>,
+    ) {
+        let raw = self.raw;
+        let pt = &raw.net;
+        let expected = structure(project, layout);
+        for (id, tokens) in &expected.marking {
+            if let Some(p) = place_ids.get(id.as_str()).and_then(|&i| pt.places.get(i)) {
+                if p.initial != *tokens {
+                    self.bad(
+                        p.span,
+                        format!(
+                            "place `{id}` starts with {} tokens in the P/T net, but the Petrel data gives {tokens}",
+                            p.initial
+                        ),
+                    );
+                }
+            }
+        }
+        let mut actual: Vec<((String, String, bool), u64, Span)> = Vec::new();
+        let mut index: HashMap<(String, String, bool), usize> = HashMap::new();
+        for a in &pt.arcs {
+            let (Some(p), Some(t)) = (
+                a.place().and_then(|i| pt.places.get(i)),
+                a.transition().and_then(|i| pt.transitions.get(i)),
+            ) else {
+                continue;
+            };
+            let key = (p.id.clone(), t.id.clone(), a.is_input());
+            match index.get(&key) {
+                Some(&i) => actual[i].1 = actual[i].1.saturating_add(a.weight),
+                None => {
+                    index.insert(key.clone(), actual.len());
+                    actual.push((key, a.weight, a.span));
+                }
+            }
+        }
+        let wanted: HashMap<&(String, String, bool), u64> =
+            expected.arcs.iter().map(|(k, w)| (k, *w)).collect();
+        let describe = |(p, t, input): &(String, String, bool)| {
+            if *input {
+                format!("from `{p}` to `{t}`")
+            } else {
+                format!("from `{t}` to `{p}`")
+            }
+        };
+        for (key, weight, span) in &actual {
+            match wanted.get(key) {
+                Some(w) if w == weight => {}
+                Some(w) => self.bad(
+                    *span,
+                    format!(
+                        "the arc {} weighs {weight} in the P/T net, but the Petrel data gives {w}",
+                        describe(key)
+                    ),
+                ),
+                None => self.bad(
+                    *span,
+                    format!(
+                        "the arc {} is not in the Petrel data: the P/T net was changed",
+                        describe(key)
+                    ),
+                ),
+            }
+        }
+        for (key, _) in &expected.arcs {
+            if !index.contains_key(key) {
+                let span = transition_ids
+                    .get(key.1.as_str())
+                    .and_then(|&i| pt.transitions.get(i))
+                    .map(|t| t.span)
+                    .unwrap_or(raw.span);
+                self.bad(
+                    span,
+                    format!(
+                        "the P/T net lacks the arc {} that the transition's Petrel inputs and outputs imply",
+                        describe(key)
+                    ),
+                );
+            }
+        }
+    }
+}
+
+/// The exact texts of the children named `name`.
+fn texts(n: &Node, name: &str) -> Vec<String> {
+    n.children(name).map(|c| c.text.clone()).collect()
+}
+
+/// Points every span of an action parsed from a Petrel block at the block's `<code>` element:
+/// the parser's offsets are into the action text, which is not the file.
+fn respan_action(a: Action, span: Span) -> Action {
+    let name = |n: Name| Name { text: n.text, span };
+    match a {
+        Action::Activate(n) => Action::Activate(name(n)),
+        Action::Deactivate(n) => Action::Deactivate(name(n)),
+        Action::CancelTimer(n) => Action::CancelTimer(name(n)),
+        Action::StartTimer { timer, after } => Action::StartTimer {
+            timer: name(timer),
+            after: match after {
+                DurationExpr::Literal { value, unit, .. } => {
+                    DurationExpr::Literal { value, unit, span }
+                }
+                DurationExpr::Seconds(n) => DurationExpr::Seconds(name(n)),
+            },
+        },
+        Action::Call {
+            program,
+            function,
+            args,
+            ..
+        } => Action::Call {
+            program: name(program),
+            function: name(function),
+            args: args.into_iter().map(|e| respan_expr(e, span)).collect(),
+            span,
+        },
+        Action::Emit { event, args, .. } => Action::Emit {
+            event: name(event),
+            args: args.into_iter().map(|e| respan_expr(e, span)).collect(),
+            span,
+        },
+    }
+}
+
+fn respan_expr(e: Expr, span: Span) -> Expr {
+    match e {
+        Expr::Int(v, _) => Expr::Int(v, span),
+        Expr::Float(v, _) => Expr::Float(v, span),
+        Expr::Bool(v, _) => Expr::Bool(v, span),
+        Expr::Text(v, _) => Expr::Text(v, span),
+        // Lists nest only as deep as the action text, which the parser already read.
+        Expr::List(items, _) => Expr::List(
+            items.into_iter().map(|i| respan_expr(i, span)).collect(),
+            span,
+        ),
+        Expr::Var(n) => Expr::Var(Name { text: n.text, span }),
+    }
+}
