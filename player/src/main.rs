@@ -719,18 +719,17 @@ fn bridge(
                 let mut text = String::new();
                 for e in events {
                     let params: Vec<serde_json::Value> = e
-                        .msg
                         .params
                         .iter()
                         .map(|v| match v {
-                            petrel_ipc::Value::Int(i) => (*i).into(),
-                            petrel_ipc::Value::Float(f) => (*f).into(),
-                            petrel_ipc::Value::Bool(b) => (*b).into(),
-                            petrel_ipc::Value::Text(s) => s.clone().into(),
-                            petrel_ipc::Value::FloatList(l) => l.clone().into(),
+                            petrel_nets::compiled::Value::Int(i) => (*i).into(),
+                            petrel_nets::compiled::Value::Float(f) => (*f).into(),
+                            petrel_nets::compiled::Value::Bool(b) => (*b).into(),
+                            petrel_nets::compiled::Value::Text(s) => s.clone().into(),
+                            petrel_nets::compiled::Value::FloatList(l) => l.clone().into(),
                         })
                         .collect();
-                    let doc = serde_json::json!({"time_us": e.time_us, "event": e.msg.name, "params": params});
+                    let doc = serde_json::json!({"time_us": e.time_us, "event": e.name, "params": params});
                     text.push_str(&format!("{doc}\n"));
                 }
                 out(&text);
