@@ -14,7 +14,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use petrel_can_bridge::bridge::BridgeCore;
-use petrel_can_bridge::rules::check_rules;
+use petrel_can_bridge::config::check_rules;
 use petrel_can_bridge::{CanId, Dbc, Frame};
 use petrel_nets::diag::Diagnostics;
 use petrel_nets::source::SourceMap;

@@ -17,12 +17,15 @@
 
 use std::sync::Arc;
 
-use petrel_ipc::{CallMsg, Value};
+use petrel_nets::compiled::Value;
 
-use crate::dbc::{Dbc, DecodeOutcome, DecodedMessage, EncodeError, MessageId, Mux, SignalRef};
-use crate::faults::{state_from_error_frame, BusHealth, BusState};
-use crate::frame::{CanId, Frame};
-use crate::rules::{CanConfig, EventOut, RuleEngine};
+use crate::bus_state::BusState;
+use crate::config::CanConfig;
+use crate::dbc::{Dbc, DecodeOutcome, DecodedMessage, EncodeError, Mux, SignalRef};
+use crate::event::EventOut;
+use crate::faults::BusHealth;
+use crate::frame::Frame;
+use crate::rules::RuleEngine;
 
 /// The latest value of one signal.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -35,11 +38,8 @@ pub struct SignalSample {
     pub time_us: u64,
 }
 
-/// The latest value of every signal, for the programs.
-///
-/// Until the ipc crate has a service for them (a latest-value publish-subscribe service
-/// `petrel/<vehicle>/signals`), programs in the bridge's process read this table, and the
-/// runtime logs it.
+/// The latest value of every signal, for the programs: the runtime publishes it on the
+/// vehicle's latest-value service `petrel/<vehicle>/signals` whenever it changes.
 #[derive(Clone, Debug, Default)]
 pub struct SignalTable {
     values: Vec<Vec<Option<SignalSample>>>,
@@ -72,19 +72,6 @@ impl SignalTable {
                 }
             }
             self.updates += 1;
-        }
-    }
-
-    /// The latest value of a signal.
-    /// The latest value of every signal seen, as the `signals` service publishes them.
-    pub fn to_msg(&self, dbc: &Dbc) -> petrel_ipc::SignalsMsg {
-        let values: Vec<(String, f64, u64)> = self
-            .iter()
-            .map(|(r, s)| (dbc.signal_path(r), s.physical, s.time_us))
-            .collect();
-        petrel_ipc::SignalsMsg {
-            time_us: values.iter().map(|v| v.2).max().unwrap_or(0),
-            values,
         }
     }
 
@@ -151,33 +138,11 @@ pub struct Counters {
     pub heartbeats_failed: u64,
 }
 
-/// What a received frame turned out to be.
-#[derive(Clone, Debug, PartialEq)]
-pub enum FrameOutcome {
-    /// Decoded as this message.
-    Decoded(MessageId),
-    /// A data frame the DBC does not know.
-    UnknownId(CanId),
-    /// A known message with the wrong length.
-    WrongLength {
-        /// The message.
-        message: MessageId,
-        /// The DBC's length.
-        expected: usize,
-        /// The frame's.
-        got: usize,
-    },
-    /// A remote frame.
-    Remote(CanId),
-    /// An error frame, and the bus state it tells, if any.
-    Error(Option<BusState>),
-}
-
 /// What [`BridgeCore::on_frame`] made of a frame.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FrameReport {
-    /// What the frame was (count and log the unusual ones).
-    pub outcome: FrameOutcome,
+    /// What the frame was, as the DBC decodes it (count and log the unusual ones).
+    pub outcome: DecodeOutcome,
     /// Events, in the order they happened.
     pub events: Vec<EventOut>,
 }
@@ -364,40 +329,29 @@ impl BridgeCore {
     /// Takes a frame received at `time_us`.
     pub fn on_frame(&mut self, time_us: u64, frame: &Frame) -> FrameReport {
         self.counters.frames += 1;
-        let (outcome, events) = match self.dbc.decode(frame) {
+        let outcome = self.dbc.decode(frame);
+        let events = match &outcome {
             DecodeOutcome::Message(dm) => {
                 self.counters.decoded += 1;
-                let events = self.decoded(time_us, &dm);
-                (FrameOutcome::Decoded(dm.message), events)
+                self.decoded(time_us, dm)
             }
-            DecodeOutcome::UnknownId(id) => {
+            DecodeOutcome::UnknownId(_) => {
                 self.counters.unknown_id += 1;
-                (FrameOutcome::UnknownId(id), self.rules.on_time(time_us))
+                self.rules.on_time(time_us)
             }
-            DecodeOutcome::WrongLength {
-                message,
-                expected,
-                got,
-            } => {
+            DecodeOutcome::WrongLength { .. } => {
                 self.counters.wrong_length += 1;
-                (
-                    FrameOutcome::WrongLength {
-                        message,
-                        expected,
-                        got,
-                    },
-                    self.rules.on_time(time_us),
-                )
+                self.rules.on_time(time_us)
             }
-            DecodeOutcome::Remote(id) => {
+            DecodeOutcome::Remote(_) => {
                 self.counters.remote += 1;
-                (FrameOutcome::Remote(id), self.rules.on_time(time_us))
+                self.rules.on_time(time_us)
             }
             DecodeOutcome::Error => {
                 self.counters.error_frames += 1;
                 let mut events = self.rules.on_time(time_us);
                 events.extend(self.health.on_error_frame(time_us, frame));
-                (FrameOutcome::Error(state_from_error_frame(frame)), events)
+                events
             }
         };
         self.counters.events += events.len() as u64;
@@ -565,33 +519,33 @@ impl BridgeCore {
         events
     }
 
-    /// Encodes a command received as a call: the function is the message's name, the
-    /// arguments its signals in DBC order (multiplexed messages are refused: name their
-    /// signals with [`command`](Self::command)).
-    pub fn command_call(&mut self, call: &CallMsg) -> Result<Frame, CommandError> {
+    /// Encodes a command received as a call, `function(args)`: the function is the message's
+    /// name, the arguments its signals in DBC order (multiplexed messages are refused: name
+    /// their signals with [`command`](Self::command)).
+    pub fn command_call(&mut self, function: &str, args: &[Value]) -> Result<Frame, CommandError> {
         let dbc = self.dbc.clone();
         let Some(m) = dbc
-            .message_by_name(&call.function)
+            .message_by_name(function)
             .filter(|id| self.config.commands.messages.contains(id))
             .and_then(|id| dbc.message(id))
         else {
             self.counters.commands_refused += 1;
-            return Err(CommandError::NotAllowed(call.function.clone()));
+            return Err(CommandError::NotAllowed(function.to_owned()));
         };
         if m.multiplexor.is_some() {
             self.counters.commands_refused += 1;
             return Err(CommandError::Multiplexed(m.name.clone()));
         }
         let names: Vec<&str> = m.signals.iter().map(|s| s.name.as_str()).collect();
-        if names.len() != call.args.len() {
+        if names.len() != args.len() {
             self.counters.commands_refused += 1;
             return Err(CommandError::Arity {
                 message: m.name.clone(),
                 expected: names.len(),
-                got: call.args.len(),
+                got: args.len(),
             });
         }
-        let values: Vec<(&str, Value)> = names.into_iter().zip(call.args.iter().cloned()).collect();
+        let values: Vec<(&str, Value)> = names.into_iter().zip(args.iter().cloned()).collect();
         let name = m.name.clone();
         self.command(&name, &values)
     }

@@ -841,7 +841,7 @@ pub enum DecodeOutcome {
     },
     /// A remote frame (a request, no data).
     Remote(CanId),
-    /// An error frame (see [`crate::faults`]).
+    /// An error frame ([`crate::bus_state::state_from_error_frame`] reads the state it tells).
     Error,
 }
 

@@ -298,19 +298,6 @@ impl Frame {
     }
 }
 
-impl fmt::Debug for Frame {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "Frame({})", crate::log::format_frame(self))
-    }
-}
-
-impl fmt::Display for Frame {
-    /// The frame as candump writes it: `123#DEADBEEF`, `123##1AABB`, `123#R`...
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&crate::log::format_frame(self))
-    }
-}
-
 /// A frame with the time it was received (or sent), in microseconds.
 ///
 /// The time is the bus's clock: kernel receive timestamps (microseconds since the Unix epoch)

@@ -264,6 +264,21 @@ pub fn parse_line(line: &str) -> Result<LogRecord, LogLineError> {
     })
 }
 
+// A frame prints as its candump text, which this module owns; the impls are here so that
+// `frame` stays below `log`.
+impl fmt::Debug for Frame {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "Frame({})", format_frame(self))
+    }
+}
+
+impl fmt::Display for Frame {
+    /// The frame as candump writes it: `123#DEADBEEF`, `123##1AABB`, `123#R`...
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&format_frame(self))
+    }
+}
+
 /// The frame as candump writes it.
 pub fn format_frame(frame: &Frame) -> String {
     let mut s = String::with_capacity(24 + 2 * frame.len());

@@ -10,8 +10,8 @@
 
 use crate::bridge::BridgeCore;
 use crate::clock::Clock;
+use crate::event::EventOut;
 use crate::log::{read_log, Direction, LogError, LogRecord};
-use crate::rules::EventOut;
 
 /// How fast a log is replayed.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -31,15 +31,37 @@ use std::time::Duration;
 
 use petrel_ipc::{
     CallReceiver, EventMsg, EventSender, FdSource, Participant, Reactor, ReactorError, Role,
-    SendError, SetupError, Source, Value, Vehicle, WaitStrategy,
+    SendError, SetupError, SignalsMsg, Source, Vehicle, WaitStrategy,
 };
+use petrel_nets::compiled::Value;
 
-use crate::bridge::{BridgeCore, Counters, FrameOutcome};
+use crate::bridge::{BridgeCore, Counters, SignalTable};
 use crate::bus::{Bus, BusError, BusStats};
+use crate::bus_state::{describe_error_frame, state_from_error_frame, BusState};
 use crate::clock::Clock;
-use crate::faults::{describe_error_frame, BusState};
+use crate::dbc::{Dbc, DecodeOutcome};
+use crate::event::{EventCause, EventOut};
 use crate::log::{format_record, Direction, LogRecord};
-use crate::rules::{EventCause, EventOut};
+
+// The one place where the core's types meet `petrel_ipc`'s. The core (everything but this
+// module, `serve` and `bus`) does not know the transport; what crosses goes through this pair.
+
+/// An event of the core as the player receives it.
+pub fn event_msg(event: &EventOut) -> EventMsg {
+    EventMsg::new(event.name.clone(), event.params.clone())
+}
+
+/// The latest value of every signal seen, as the `signals` service publishes them.
+fn signals_msg(table: &SignalTable, dbc: &Dbc) -> SignalsMsg {
+    let values: Vec<(String, f64, u64)> = table
+        .iter()
+        .map(|(r, s)| (dbc.signal_path(r), s.physical, s.time_us))
+        .collect();
+    SignalsMsg {
+        time_us: values.iter().map(|v| v.2).max().unwrap_or(0),
+        values,
+    }
+}
 
 /// How the loop runs.
 pub struct RuntimeOptions {
@@ -195,12 +217,7 @@ impl<B: Bus> Loop<B> {
 
     fn queue_events(&mut self, events: Vec<EventOut>) {
         for e in events {
-            tracing::info!(
-                time_us = e.time_us,
-                "event {} {:?}",
-                e.msg.name,
-                e.msg.params
-            );
+            tracing::info!(time_us = e.time_us, "event {} {:?}", e.name, e.params);
             if self.outbox.len() >= self.opts.outbox.max(1) {
                 if let Some(old) = self.outbox.pop_front() {
                     self.report.events_dropped += 1;
@@ -211,7 +228,7 @@ impl<B: Bus> Loop<B> {
                     );
                 }
             }
-            self.outbox.push_back(e.msg);
+            self.outbox.push_back(event_msg(&e));
         }
     }
 
@@ -271,16 +288,13 @@ impl<B: Bus> Loop<B> {
             return;
         };
         self.report.commands_failed += 1;
-        let msg = EventMsg::new(
+        let time_us = self.clock.now_us();
+        self.queue_events(vec![EventOut::new(
+            time_us,
+            EventCause::Command,
             "call_failed",
             vec![Value::Text(program), Value::Text(function.to_owned())],
-        );
-        let time_us = self.clock.now_us();
-        self.queue_events(vec![EventOut {
-            time_us,
-            cause: EventCause::Command,
-            msg,
-        }]);
+        )]);
     }
 
     /// The interface went down or away: the bus is stopped until [`Bus::state`] says
@@ -312,14 +326,19 @@ impl<B: Bus> Loop<B> {
             self.record(tf.time_us, &tf.frame, Direction::Received);
             let report = self.core.on_frame(tf.time_us, &tf.frame);
             let c = self.core.counters();
+            // Error frames tell the state they report here, where it is logged and acted on.
+            let error_state = match report.outcome {
+                DecodeOutcome::Error => state_from_error_frame(&tf.frame),
+                _ => None,
+            };
             match &report.outcome {
-                FrameOutcome::Decoded(_) => {}
-                FrameOutcome::UnknownId(id) if worth_logging(c.unknown_id) => tracing::warn!(
+                DecodeOutcome::Message(_) => {}
+                DecodeOutcome::UnknownId(id) if worth_logging(c.unknown_id) => tracing::warn!(
                     "frame {} with identifier {id} unknown to the DBC ({} so far)",
                     tf.frame,
                     c.unknown_id
                 ),
-                FrameOutcome::WrongLength {
+                DecodeOutcome::WrongLength {
                     message,
                     expected,
                     got,
@@ -332,15 +351,15 @@ impl<B: Bus> Loop<B> {
                         .map_or("?", |m| m.name.as_str()),
                     c.wrong_length
                 ),
-                FrameOutcome::Error(state) if worth_logging(c.error_frames) => tracing::warn!(
+                DecodeOutcome::Error if worth_logging(c.error_frames) => tracing::warn!(
                     "error frame: {}{} ({} so far)",
                     describe_error_frame(&tf.frame),
-                    state.map_or(String::new(), |s| format!(", bus {s}")),
+                    error_state.map_or(String::new(), |s| format!(", bus {s}")),
                     c.error_frames
                 ),
                 _ => {}
             }
-            if let FrameOutcome::Error(Some(BusState::BusOff)) = report.outcome {
+            if error_state == Some(BusState::BusOff) {
                 self.restart_if_asked();
             }
             self.queue_events(report.events);
@@ -366,7 +385,7 @@ impl<B: Bus> Loop<B> {
             tracing::warn!("commands could not be read: {e}");
         }
         for call in received {
-            match self.core.command_call(&call) {
+            match self.core.command_call(&call.function, &call.args) {
                 Ok(frame) => {
                     if !self.send(&frame, "command") {
                         self.command_failed(&call.function);
@@ -486,7 +505,7 @@ pub fn run<B: Bus>(
         let updates = lp.core.signals().updates();
         if updates != published_updates {
             published_updates = updates;
-            let msg = lp.core.signals().to_msg(lp.core.dbc());
+            let msg = signals_msg(lp.core.signals(), lp.core.dbc());
             match signals.send(&msg) {
                 // Latest-value service: nobody reading is not an error.
                 Ok(_) | Err(petrel_ipc::SendError::NoReceiver { .. }) => {}

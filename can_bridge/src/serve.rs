@@ -8,11 +8,12 @@
 use crate::bridge::BridgeCore;
 use crate::bus::{MemoryHub, SocketCanBus, SocketCanOptions};
 use crate::clock::{Clock, ManualClock, SystemClock};
+use crate::config::CanConfig;
+use crate::dbc::Dbc;
+use crate::event::EventOut;
 use crate::replay::{replay_text, Pacing};
-use crate::rules::{CanConfig, EventOut};
 use crate::runtime::{run, RunReport, RuntimeError, RuntimeOptions};
 use crate::sim::SimFaults;
-use crate::Dbc;
 use petrel_ipc::{Vehicle, WaitStrategy};
 use std::path::Path;
 use std::sync::atomic::AtomicBool;

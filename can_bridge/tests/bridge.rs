@@ -6,14 +6,14 @@ mod common;
 use std::sync::Arc;
 
 use common::{config, dbc};
-use petrel_can_bridge::bridge::{BridgeCore, CommandError, FrameOutcome};
+use petrel_can_bridge::bridge::{BridgeCore, CommandError};
 use petrel_can_bridge::bus::{Bus, BusError, MemoryHub, Sent};
+use petrel_can_bridge::bus_state::{state_from_error_frame, BusState};
 use petrel_can_bridge::clock::{Clock, ManualClock};
-use petrel_can_bridge::dbc::{EncodeError, ValueError};
-use petrel_can_bridge::faults::{state_from_error_frame, BusState};
+use petrel_can_bridge::dbc::{DecodeOutcome, EncodeError, ValueError};
+use petrel_can_bridge::event::EventOut;
 use petrel_can_bridge::frame::{err, CanId, Frame};
-use petrel_can_bridge::rules::EventOut;
-use petrel_ipc::{CallMsg, Value};
+use petrel_nets::compiled::Value;
 use proptest::prelude::*;
 
 const MS: u64 = 1000;
@@ -51,7 +51,7 @@ fn garbage_frames_are_counted_without_a_crash() {
     assert_eq!(core.bus_state(), BusState::ErrorActive);
     assert_eq!(
         core.on_frame(10 * MS, &frames[2]).outcome,
-        FrameOutcome::WrongLength {
+        DecodeOutcome::WrongLength {
             message: dbc.message_by_name("Depth").unwrap(),
             expected: 3,
             got: 1
@@ -111,7 +111,7 @@ fn error_frames_tell_the_bus_state() {
         Some(BusState::ErrorPassive)
     );
     assert_eq!(
-        petrel_can_bridge::faults::describe_error_frame(&e(err::BUSOFF | err::CRTL, 0)),
+        petrel_can_bridge::bus_state::describe_error_frame(&e(err::BUSOFF | err::CRTL, 0)),
         "controller problem, bus-off"
     );
 }
@@ -139,15 +139,15 @@ fn a_simulated_dive_end_to_end_on_the_memory_bus() {
 
     // The supervisor commands 30 m and the thrusters, as the player's calls would.
     let target = core
-        .command_call(&CallMsg::new("DepthCmd", vec![Value::Float(30.0)]))
+        .command_call("DepthCmd", &[Value::Float(30.0)])
         .unwrap();
     assert_eq!(bridge_bus.send(&target).unwrap(), Sent::Now);
     assert!(core.on_sent(clock.now_us(), &target).is_empty());
     let cmd = core
-        .command_call(&CallMsg::new(
+        .command_call(
             "ThrusterCmd",
-            vec![Value::Int(-1500), Value::Float(1500.0), Value::Bool(true)],
-        ))
+            &[Value::Int(-1500), Value::Float(1500.0), Value::Bool(true)],
+        )
         .unwrap();
     bridge_bus.send(&cmd).unwrap();
     // The thrusters see the DBC's bytes: -1500 = 0xFA24, 1500 = 0x05DC, enable at bit 32.
@@ -174,12 +174,12 @@ fn a_simulated_dive_end_to_end_on_the_memory_bus() {
     }
     let reached: Vec<&EventOut> = events
         .iter()
-        .filter(|e| e.msg.name == "depth_reached")
+        .filter(|e| e.name == "depth_reached")
         .collect();
     assert_eq!(reached.len(), 1, "{events:?}");
     // 30 m at i = 30: 1 s + 31 x 100 ms.
     assert_eq!(reached[0].time_us, 1_000_000 + 31 * 100 * MS);
-    assert_eq!(reached[0].msg.params, vec![Value::Float(30.0)]);
+    assert_eq!(reached[0].params, vec![Value::Float(30.0)]);
     let latest = core.signals().get_path(&dbc, "Depth.depth").unwrap();
     assert!((latest.physical - 30.2).abs() < 1e-9, "{latest:?}");
 
@@ -199,7 +199,7 @@ fn a_simulated_dive_end_to_end_on_the_memory_bus() {
     let faults = pump(&mut core, &mut bridge_bus);
     let names: Vec<(&str, &[Value])> = faults
         .iter()
-        .map(|e| (e.msg.name.as_str(), &e.msg.params[..]))
+        .map(|e| (e.name.as_str(), &e.params[..]))
         .collect();
     assert_eq!(
         names,
@@ -226,7 +226,7 @@ fn a_simulated_dive_end_to_end_on_the_memory_bus() {
     let sent = thrusters.recv().unwrap().unwrap();
     assert_eq!(sent.frame.payload(), &[0x00, 0x00, 0xDC, 0x05, 0x01]);
     let back = pump(&mut core, &mut bridge_bus);
-    assert_eq!(back[0].msg.params, vec![Value::Text("error_active".into())]);
+    assert_eq!(back[0].params, vec![Value::Text("error_active".into())]);
     assert_eq!(bridge_bus.stats().deferred, 1);
 }
 
@@ -245,7 +245,7 @@ fn commands_are_checked_before_they_become_frames() {
         "{e}"
     );
     let e = core
-        .command_call(&CallMsg::new("ThrusterCmd", vec![Value::Int(1)]))
+        .command_call("ThrusterCmd", &[Value::Int(1)])
         .unwrap_err();
     assert!(
         matches!(

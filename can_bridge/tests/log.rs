@@ -227,7 +227,7 @@ fn a_recorded_mission_replays_to_the_same_events() {
     }
     let text = String::from_utf8(writer.into_inner()).unwrap();
     assert_eq!(text.lines().count(), records.len());
-    let names: Vec<&str> = live_events.iter().map(|e| e.msg.name.as_str()).collect();
+    let names: Vec<&str> = live_events.iter().map(|e| e.name.as_str()).collect();
     assert_eq!(
         names,
         // AHRS silent from 1.92 s: lost 500 ms later; bus-off at 3.3 s and back at 3.4 s;

@@ -4,10 +4,11 @@ mod common;
 
 use common::{check, codes, config, dbc};
 use petrel_can_bridge::bridge::BridgeCore;
+use petrel_can_bridge::config::RuleKind;
+use petrel_can_bridge::event::{EventCause, EventOut};
 use petrel_can_bridge::frame::Frame;
-use petrel_can_bridge::rules::{EventCause, EventOut, RuleKind};
 use petrel_can_bridge::Dbc;
-use petrel_ipc::Value;
+use petrel_nets::compiled::Value;
 
 const MS: u64 = 1000;
 
@@ -22,7 +23,7 @@ fn depth(dbc: &Dbc, m: f64) -> Frame {
 fn names(events: &[EventOut]) -> Vec<(u64, String, Vec<Value>)> {
     events
         .iter()
-        .map(|e| (e.time_us, e.msg.name.clone(), e.msg.params.clone()))
+        .map(|e| (e.time_us, e.name.clone(), e.params.clone()))
         .collect()
 }
 
@@ -278,7 +279,7 @@ fn band_around_a_commanded_target() {
     }
     let got: Vec<(u64, f64)> = seen
         .iter()
-        .map(|e| match e.msg.params[..] {
+        .map(|e| match e.params[..] {
             [Value::Float(d)] => (e.time_us, (d * 100.0).round() / 100.0),
             _ => panic!("{e:?}"),
         })

@@ -14,7 +14,7 @@ use petrel_can_bridge::bus::{Bus, MemoryHub};
 use petrel_can_bridge::clock::{Clock, ManualClock, SystemClock};
 use petrel_can_bridge::frame::CanId;
 use petrel_can_bridge::replay::{replay_text, Pacing};
-use petrel_can_bridge::runtime::{run, RuntimeOptions};
+use petrel_can_bridge::runtime::{event_msg, run, RuntimeOptions};
 use petrel_ipc::{CallMsg, EventMsg, Participant, Role, SendError, Value, Vehicle};
 
 #[test]
@@ -142,9 +142,9 @@ fn the_bridge_process_loop_over_iceoryx2() {
     )
     .unwrap();
     let live: Vec<&EventMsg> = got.iter().filter(|e| e.name == "depth_reached").collect();
+    let replayed: Vec<EventMsg> = replayed.iter().map(event_msg).collect();
     let off: Vec<&EventMsg> = replayed
         .iter()
-        .map(|e| &e.msg)
         .filter(|e| e.name == "depth_reached")
         .collect();
     assert_eq!(live, off);

@@ -42,7 +42,7 @@ use petrel_can_bridge::clock::{Clock, ManualClock, SystemClock};
 use petrel_can_bridge::frame::{err, CanId, Frame, FrameKind};
 use petrel_can_bridge::log::{read_log, Direction};
 use petrel_can_bridge::replay::{replay_text, Pacing};
-use petrel_can_bridge::runtime::{run, RunReport, RuntimeError, RuntimeOptions};
+use petrel_can_bridge::runtime::{event_msg, run, RunReport, RuntimeError, RuntimeOptions};
 use petrel_can_bridge::Dbc;
 use petrel_ipc::{
     CallMsg, CallSender, EventMsg, EventReceiver, Participant, Role, SendError, Value, Vehicle,
@@ -724,7 +724,7 @@ fn the_recorded_log_replays_to_the_same_events() {
     )
     .unwrap();
     let took = t0.elapsed();
-    let msgs: Vec<EventMsg> = replayed.iter().map(|e| e.msg.clone()).collect();
+    let msgs: Vec<EventMsg> = replayed.iter().map(event_msg).collect();
     assert_eq!(msgs, d.events, "the replay differs from the flight");
     assert!(
         replayed.windows(2).all(|w| w[0].time_us <= w[1].time_us)
@@ -941,8 +941,8 @@ fn a_bus_off_on_the_bus_becomes_events() {
         assert_eq!(got, [bus_off, marker], "with the error filter");
         assert!(got[0].is_error() && got[0].error_class() == err::BUSOFF);
         assert_eq!(
-            petrel_can_bridge::faults::state_from_error_frame(&got[0]),
-            Some(petrel_can_bridge::faults::BusState::BusOff)
+            petrel_can_bridge::bus_state::state_from_error_frame(&got[0]),
+            Some(petrel_can_bridge::BusState::BusOff)
         );
         assert_eq!(until_marker(&mut without, &marker), [marker], "without");
     }

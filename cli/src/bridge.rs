@@ -59,8 +59,8 @@ pub fn bridge(a: BridgeArgs) -> Outcome {
                 let mut text = String::new();
                 for e in events {
                     let params: Vec<serde_json::Value> =
-                        e.msg.params.iter().map(|v| v.to_json()).collect();
-                    let doc = serde_json::json!({"time_us": e.time_us, "event": e.msg.name, "params": params});
+                        e.params.iter().map(|v| v.to_json()).collect();
+                    let doc = serde_json::json!({"time_us": e.time_us, "event": e.name, "params": params});
                     text.push_str(&format!("{doc}\n"));
                 }
                 out(&text);

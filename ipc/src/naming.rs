@@ -16,7 +16,7 @@ use iceoryx2::prelude::{FileName, SemanticString};
 pub const MAX_VEHICLE_NAME_LEN: usize = 32;
 /// Longest program or tool name accepted (the node name `program/NAME` must fit in the
 /// 32-byte origin field of every message header).
-pub const MAX_PROGRAM_NAME_LEN: usize = 24;
+pub const MAX_PROGRAM_NAME_LEN: usize = petrel_value::MAX_PROGRAM_NAME_LEN;
 /// Longest file prefix accepted.
 pub const MAX_PREFIX_LEN: usize = 64;
 
@@ -109,7 +109,15 @@ fn check_name(what: &'static str, name: &str, max: usize, extra: &[char]) -> Res
 /// Checks a program name (`PLN`, `GUI`, `can_bridge`...): 1 to 24 characters among
 /// `A-Z a-z 0-9 _ -`.
 pub fn check_program_name(name: &str) -> Result<(), NameError> {
-    check_name("program", name, MAX_PROGRAM_NAME_LEN, &[])
+    // The rule is the one every crate holds program names to; the details say what is wrong.
+    if petrel_value::is_program_name(name) {
+        return Ok(());
+    }
+    check_name("program", name, MAX_PROGRAM_NAME_LEN, &[])?;
+    Err(NameError::Refused {
+        what: "program",
+        name: name.to_owned(),
+    })
 }
 
 /// One vehicle: its name, the file prefix that isolates it, and every service name it uses.

@@ -105,7 +105,7 @@ fn thin<T: Copy>(items: &[T]) -> Vec<T> {
     }
     let stride = items.len().div_ceil(MAX_DRAWN_POINTS).max(1);
     let mut out: Vec<T> = items.iter().step_by(stride).copied().collect();
-    if let (Some(&last), true) = (items.last(), (items.len() - 1) % stride != 0) {
+    if let (Some(&last), true) = (items.last(), !(items.len() - 1).is_multiple_of(stride)) {
         out.push(last);
     }
     out

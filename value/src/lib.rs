@@ -173,6 +173,20 @@ impl From<Vec<f64>> for Value {
     }
 }
 
+/// Longest program name (the node name `program/NAME` of its process must fit in the 32-byte
+/// origin field of every message header).
+pub const MAX_PROGRAM_NAME_LEN: usize = 24;
+
+/// Whether `name` can name a software program of a vehicle: 1 to [`MAX_PROGRAM_NAME_LEN`]
+/// ASCII letters, digits, `_` or `-`. The manifest's checker, the CAN data server's
+/// configuration and the shared-memory transport all hold program names to this one rule.
+pub fn is_program_name(name: &str) -> bool {
+    (1..=MAX_PROGRAM_NAME_LEN).contains(&name.len())
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+}
+
 /// A float as the language writes it: the shortest text that reads back to the same bits, with
 /// `.0` kept on whole numbers (`2.0`, not `2`).
 pub fn format_float(v: f64) -> String {
@@ -221,6 +235,16 @@ mod tests {
         assert_eq!(Type::from_keyword("[ float ]"), Some(Type::FloatList));
         assert_eq!(Type::from_keyword("double"), None);
         assert_eq!(Value::FloatList(vec![]).type_name(), "[float]");
+    }
+
+    #[test]
+    fn program_names() {
+        for ok in ["CAN", "can_bridge", "a-b", "PLN9", &"P".repeat(24)] {
+            assert!(is_program_name(ok), "{ok}");
+        }
+        for bad in ["", "a b", "a.b", "é", "a/b", &"P".repeat(25)] {
+            assert!(!is_program_name(bad), "{bad}");
+        }
     }
 
     #[test]

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use petrel_can_bridge::rules::{check_rules, CanConfig};
+use petrel_can_bridge::config::{check_rules, CanConfig};
 use petrel_can_bridge::Dbc;
 use petrel_nets::compiled::CompiledProject;
 use petrel_nets::diag::Diagnostics;

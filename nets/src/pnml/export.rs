@@ -9,7 +9,7 @@ use super::{PNML_NAMESPACE, PTNET_TYPE};
 use crate::fmt::format_action;
 use crate::model::*;
 
-/// A minimal indenting XML writer; every value goes through [`escape`](super::xml::escape).
+/// A minimal indenting XML writer; every value goes through [`escape`].
 struct Writer {
     out: String,
     depth: usize,

@@ -9,12 +9,14 @@
 //!   structure and initial state; everything else Petrel knows (manifest, triggers, actions,
 //!   comments, written order) travels in `<toolspecific tool="petrel" version="1">` blocks, which
 //!   other tools must keep and ignore.
-//! - [`import_pnml`] reads such an export back into the identical [`Project`], or turns a plain
-//!   P/T net into a project of immediate transitions, refusing (with a diagnostic per element)
-//!   what Petrel's safe, unary nets cannot hold.
+//! - [`import_pnml`] reads such an export back into the identical
+//!   [`Project`](crate::model::Project), or turns a plain P/T net into a project of immediate
+//!   transitions, refusing (with a diagnostic per element) what Petrel's safe, unary nets cannot
+//!   hold.
 //!
 //! The reader streams with `quick_xml` over the text (no DOM) so a megabyte of PNML reads in
-//! milliseconds, and turns byte positions into [`Span`]s so every problem shows `file:line:col`.
+//! milliseconds, and turns byte positions into [`Span`](crate::source::Span)s so every problem
+//! shows `file:line:col`.
 //!
 //! Diagnostic codes:
 //!

@@ -1,73 +1,12 @@
-//! Reading and checking `can.toml`.
-//!
-//! ```toml
-//! dbc = "auv.dbc"                 # the DBC, relative to the project directory
-//!
-//! [bus]
-//! interface = "can0"              # default interface (the command line may override it)
-//! fd = false                      # open it for CAN FD frames
-//! state_event = "bus_fault"       # bus_fault(state: text) on every change of bus state
-//! restart_after_bus_off = true    # ask the interface to restart after a bus-off
-//! [bus.on_state]                  # events without parameters, one per state entered
-//! bus_off = "bus_lost"
-//!
-//! [heartbeat]                     # the supervisor heartbeat the thrusters expect
-//! message = "SupervisorHeartbeat"
-//! period = "100ms"                # default: the message's GenMsgCycleTime
-//! counter = "alive"               # incremented at each frame, wrapping within its range
-//! signals = { mode = "mission" }  # the other signals: numbers or value-table names
-//!
-//! [commands]
-//! messages = ["ThrusterCmd"]      # what programs may have the bridge send
-//! program = "CAN"                 # receive them as calls CAN.ThrusterCmd(rpm_left, ...)
-//!
-//! [[rule]]
-//! event = "depth_reached"         # a declared event of the project
-//! kind = "band"                   # threshold | band | debounce | edge | stale
-//! signal = "Depth.depth"          # MESSAGE.signal of the DBC
-//! target = "DepthCmd.target"      # a number, or a signal
-//! within = 0.5
-//! hysteresis = 0.2
-//! params = ["Depth.depth"]        # signals, literals, or { text = "..." }
-//! ```
-//!
-//! Fields of a rule:
-//!
-//! | field | kinds | meaning |
-//! |---|---|---|
-//! | `event` | all | the event sent (declared in `petrel.toml`) |
-//! | `name` | all | the rule's name in logs (default: the event) |
-//! | `signal` | all but `stale` (there: or `message`) | `MESSAGE.signal` |
-//! | `above`, `below` | threshold, debounce, edge | the condition `signal >= above` / `signal <= below` |
-//! | `target`, `within` | band, debounce, edge | the condition `abs(signal - target) <= within` |
-//! | `equals` | debounce, edge | the condition `raw == equals` (a number or a value-table name) |
-//! | `hysteresis` | with above, below, band | how far back the value must go to end the condition |
-//! | `for` | all but stale (required by debounce) | how long a change must last: `200ms`, `2s` |
-//! | `edge` | all but stale | `rising` (default), `falling` or `both` |
-//! | `message` | stale | the message watched |
-//! | `timeout` | stale | the silence that fires: a duration, or else |
-//! | `periods`, `period` | stale | `periods` (default 3) times `period` (default: GenMsgCycleTime) |
-//! | `params` | all | the event's parameters in order |
-//!
-//! A parameter is `"MESSAGE.signal"` (its latest value, converted to the declared type), a
-//! number or `true`/`false` (a literal), or `{ text = "..." }` (a text literal).
-//!
-//! Codes: E0701 not valid TOML or an unknown key; E0702 the DBC cannot be read or is invalid;
-//! E0703 unknown message or signal; E0704 unknown event; E0705 wrong number of parameters;
-//! E0706 a parameter of the wrong type; E0707 a duration that does not read; E0708 a field that
-//! does not fit the rule's kind or has an invalid value; E0709 no period known; E0710 a
-//! value-table name the signal does not have; W0701 a threshold the signal can never reach.
+//! Reading and checking the text of `can.toml` against the DBC and the project (codes E07xx).
 
-use std::path::Path;
-
-use petrel_ipc::Value;
-use petrel_nets::compiled::CompiledProject;
+use petrel_nets::compiled::{CompiledProject, Value};
 use petrel_nets::diag::{Diagnostic, Diagnostics};
 use petrel_nets::duration::parse_duration_us;
 use petrel_nets::manifest::Ordered;
 use petrel_nets::model::Type;
 use petrel_nets::names::{self, Candidates};
-use petrel_nets::source::{FileId, SourceMap, Span};
+use petrel_nets::source::{FileId, Span};
 use serde::Deserialize;
 use toml::Spanned;
 
@@ -75,11 +14,8 @@ use super::{
     BusEvents, CanConfig, CommandSpec, Condition, Edge, HeartbeatSpec, ParamSource, Rule, RuleKind,
     Target,
 };
-use crate::dbc::{Dbc, DbcErrorKind, Message, MessageId, SignalRef};
-use crate::faults::BusState;
-
-/// The name of the CAN configuration file in a project directory.
-pub const CAN_TOML: &str = "can.toml";
+use crate::bus_state::BusState;
+use crate::dbc::{Dbc, Message, MessageId, SignalRef};
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -1143,7 +1079,7 @@ impl Checker<'_> {
             }
         }
         if let Some(p) = &raw.program {
-            if petrel_ipc::naming::check_program_name(p.get_ref()).is_err() {
+            if !petrel_value::is_program_name(p.get_ref()) {
                 self.bad_field(
                     p.span(),
                     format!("`{}` is not a program name", p.get_ref()),
@@ -1261,112 +1197,4 @@ pub fn check_rules(
         heartbeat,
         commands,
     })
-}
-
-/// Reads the project's `can.toml` (if `dir` has one) and the DBC it names, checks them and
-/// returns both. The files are added to `sources` so that their diagnostics render like the
-/// nets'. `Ok(None)` when the project has no `can.toml`; `Err` only when a file exists but
-/// cannot be read. A DBC that does not parse is E0702 (at its error when the parser locates
-/// it, else at the `dbc` value).
-pub fn load_project_can(
-    dir: &Path,
-    project: &CompiledProject,
-    sources: &mut SourceMap,
-    diags: &mut Diagnostics,
-) -> std::io::Result<Option<(CanConfig, Dbc)>> {
-    let path = dir.join(CAN_TOML);
-    let text = match std::fs::read_to_string(&path) {
-        Ok(t) => t,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(e),
-    };
-    let file = sources.add(path.display().to_string(), text.clone());
-    let dbc_name = match toml::from_str::<DbcOnly>(&text) {
-        Ok(d) => d.dbc,
-        Err(_) => {
-            // Not valid TOML: check_rules reports it.
-            let _ = check_rules(file, &text, &Dbc::empty(), project, diags);
-            return Ok(None);
-        }
-    };
-    let Some(dbc_name) = dbc_name else {
-        diags.push(
-            Diagnostic::error(
-                "E0701",
-                Span::new(file, 0, 0),
-                "can.toml does not name its DBC file",
-            )
-            .label("no `dbc`")
-            .help(
-                "add `dbc = \"vehicle.dbc\"` at the top, a path relative to the project directory",
-            ),
-        );
-        return Ok(None);
-    };
-    let dbc_path = dir.join(dbc_name.get_ref());
-    let dbc_text = match std::fs::read(&dbc_path) {
-        Ok(b) => match String::from_utf8(b) {
-            Ok(s) => s,
-            Err(e) => e.into_bytes().iter().map(|&b| char::from(b)).collect(),
-        },
-        Err(e) => {
-            diags.push(
-                Diagnostic::error(
-                    "E0702",
-                    Span::new(file, dbc_name.span().start, dbc_name.span().end),
-                    format!("cannot read the DBC file `{}`: {e}", dbc_path.display()),
-                )
-                .label("named here")
-                .help("the path is relative to the project directory"),
-            );
-            return Ok(None);
-        }
-    };
-    let dbc = match Dbc::parse(&dbc_text) {
-        Ok(d) => d,
-        Err(e) => {
-            let help = match e.kind {
-                DbcErrorKind::Syntax(_) => {
-                    "fix the DBC file (cantools or a DBC editor can tell more)"
-                }
-                _ => {
-                    "fix the DBC file: every signal must fit in its message, with a non-zero factor"
-                }
-            };
-            let d = match e.offset {
-                Some(at) => {
-                    let dfile = sources.add(dbc_path.display().to_string(), dbc_text.clone());
-                    let end = dbc_text[at..]
-                        .find('\n')
-                        .map_or(dbc_text.len(), |n| at + n)
-                        .max(at);
-                    Diagnostic::error(
-                        "E0702",
-                        Span::new(dfile, at, end),
-                        format!("invalid DBC: {e}"),
-                    )
-                    .label("here")
-                    .related(
-                        Span::new(file, dbc_name.span().start, dbc_name.span().end),
-                        "the DBC named here",
-                    )
-                }
-                None => Diagnostic::error(
-                    "E0702",
-                    Span::new(file, dbc_name.span().start, dbc_name.span().end),
-                    format!("invalid DBC: {e}"),
-                )
-                .label("this DBC"),
-            };
-            diags.push(d.help(help));
-            return Ok(None);
-        }
-    };
-    Ok(check_rules(file, &text, &dbc, project, diags).map(|c| (c, dbc)))
-}
-
-/// Only the `dbc` key of `can.toml`, with its span.
-#[derive(Deserialize)]
-struct DbcOnly {
-    dbc: Option<Spanned<String>>,
 }

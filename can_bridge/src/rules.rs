@@ -1,10 +1,12 @@
-//! Rules that turn signals into player events, and the engine that runs them.
+//! The engine that runs the rules turning signals into player events.
 //!
-//! The rules are written in the project's `can.toml` (its format is in [`check`] and in the
-//! crate's README); [`check_rules`] reads and checks them against the DBC and the project's
-//! events and gives a [`CanConfig`]. The [`RuleEngine`] is a pure state machine over it:
-//! decoded frames and the time go in ([`RuleEngine::on_message`], [`RuleEngine::on_time`]),
-//! events come out, in a deterministic order, stamped with the time they happened.
+//! The rules are written in the project's `can.toml` (its format is in [`crate::config`] and in
+//! the crate's README); [`check_rules`](crate::config::check_rules) reads and checks them
+//! against the DBC and the project's events and gives a
+//! [`CanConfig`](crate::config::CanConfig). The [`RuleEngine`] is a pure state machine over its
+//! rules: decoded frames and the time go in ([`RuleEngine::on_message`],
+//! [`RuleEngine::on_time`]), events come out, in a deterministic order, stamped with the time
+//! they happened.
 //!
 //! **Conditions** are evaluated on each new value of their signal (and of a band's target
 //! signal), with hysteresis (a Schmitt trigger: the condition becomes true at the threshold and
@@ -18,234 +20,14 @@
 //! Deadlines due at or before a frame's time are handled before the frame: a frame arriving
 //! exactly at a staleness deadline comes too late.
 
-pub mod check;
-
-pub use check::{check_rules, load_project_can, CAN_TOML};
-
 use std::sync::Arc;
 
-use petrel_ipc::{EventMsg, Value};
+use petrel_nets::compiled::Value;
 use petrel_nets::model::Type;
 
-use crate::dbc::{Dbc, DecodedMessage, MessageId, SignalRef};
-use crate::faults::BusState;
-
-/// Which changes of a condition fire the event.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Edge {
-    /// The condition becomes true.
-    Rising,
-    /// The condition becomes false.
-    Falling,
-    /// Either.
-    Both,
-}
-
-/// The target of a band: a fixed value or the latest value of another signal.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Target {
-    /// A fixed value.
-    Value(f64),
-    /// The latest value of a signal (received, or sent by the bridge itself).
-    Signal(SignalRef),
-}
-
-/// A condition on one signal.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Condition {
-    /// True from `value >= threshold`; false again below `threshold - hysteresis`.
-    Above {
-        /// The signal.
-        signal: SignalRef,
-        /// The threshold (physical).
-        threshold: f64,
-        /// The hysteresis, at least 0.
-        hysteresis: f64,
-    },
-    /// True from `value <= threshold`; false again above `threshold + hysteresis`.
-    Below {
-        /// The signal.
-        signal: SignalRef,
-        /// The threshold (physical).
-        threshold: f64,
-        /// The hysteresis, at least 0.
-        hysteresis: f64,
-    },
-    /// True from `|value - target| <= within`; false again beyond `within + hysteresis`.
-    Band {
-        /// The signal.
-        signal: SignalRef,
-        /// The target.
-        target: Target,
-        /// Half-width of the band, above 0.
-        within: f64,
-        /// The hysteresis, at least 0.
-        hysteresis: f64,
-    },
-    /// True when the raw value equals `raw` (a bit, a value-table entry).
-    Equals {
-        /// The signal.
-        signal: SignalRef,
-        /// The raw value.
-        raw: i64,
-    },
-}
-
-impl Condition {
-    /// The signal the condition watches.
-    pub fn signal(&self) -> SignalRef {
-        match *self {
-            Condition::Above { signal, .. }
-            | Condition::Below { signal, .. }
-            | Condition::Band { signal, .. }
-            | Condition::Equals { signal, .. } => signal,
-        }
-    }
-
-    /// The target signal of a band, if it has one.
-    pub fn target_signal(&self) -> Option<SignalRef> {
-        match *self {
-            Condition::Band {
-                target: Target::Signal(s),
-                ..
-            } => Some(s),
-            _ => None,
-        }
-    }
-}
-
-/// What a rule watches.
-#[derive(Clone, Debug, PartialEq)]
-pub enum RuleKind {
-    /// A condition on a signal (kinds `threshold`, `band`, `debounce`, `edge`).
-    Condition {
-        /// The condition.
-        condition: Condition,
-        /// Which changes fire.
-        edge: Edge,
-        /// How long a change must last to count, in microseconds (0: at once).
-        hold_us: u64,
-    },
-    /// A message that stops arriving (kind `stale`).
-    Stale {
-        /// The message.
-        message: MessageId,
-        /// Silence after which the event fires, in microseconds.
-        timeout_us: u64,
-    },
-}
-
-/// Where an event parameter comes from.
-#[derive(Clone, Debug, PartialEq)]
-pub enum ParamSource {
-    /// The latest value of a signal, as the declared type: `float` the physical value, `int`
-    /// the physical value of an integral signal, `bool` whether it is not zero, `text` its
-    /// value-table name (or the number when the value has no name).
-    ///
-    /// A signal never received gives NaN, 0, false or the empty text.
-    Signal {
-        /// The signal.
-        signal: SignalRef,
-        /// The declared type of the parameter.
-        ty: Type,
-    },
-    /// A literal written in the rule.
-    Literal(Value),
-}
-
-/// A checked rule.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Rule {
-    /// The rule's name (its `name`, else its event's).
-    pub name: String,
-    /// The event it sends, by name.
-    pub event: String,
-    /// What it watches.
-    pub kind: RuleKind,
-    /// The event's parameters, in declaration order.
-    pub params: Vec<ParamSource>,
-}
-
-/// Events for changes of the bus state (`[bus]` of `can.toml`).
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct BusEvents {
-    /// An event with one `text` parameter, sent on every change of state with the state's
-    /// name (`error_active`, `error_warning`, `error_passive`, `bus_off`, `stopped`,
-    /// `sleeping`).
-    pub state_event: Option<String>,
-    /// Events without parameters, one per state entered.
-    pub on_state: Vec<(BusState, String)>,
-    /// Ask the interface to restart after a bus-off (SocketCAN; needs the privilege, and
-    /// is refused by interfaces that restart by themselves).
-    pub restart_after_bus_off: bool,
-}
-
-/// The supervisor heartbeat the thrusters expect (`[heartbeat]`).
-#[derive(Clone, Debug, PartialEq)]
-pub struct HeartbeatSpec {
-    /// The message sent.
-    pub message: MessageId,
-    /// Its period, in microseconds.
-    pub period_us: u64,
-    /// A signal of the message incremented at each frame, wrapping within its range.
-    pub counter: Option<usize>,
-    /// Physical values of the other signals, by index in the message.
-    pub values: Vec<(usize, f64)>,
-}
-
-/// What programs may command (`[commands]`).
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct CommandSpec {
-    /// Messages programs may have the bridge send.
-    pub messages: Vec<MessageId>,
-    /// The program name under which the bridge receives commands as calls (a function per
-    /// message, the signals as arguments in DBC order), if any.
-    pub program: Option<String>,
-}
-
-/// A checked `can.toml`.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct CanConfig {
-    /// The DBC file, as written (relative to the project directory).
-    pub dbc_path: Option<String>,
-    /// The interface to open when none is given on the command line.
-    pub interface: Option<String>,
-    /// Open the interface for CAN FD frames.
-    pub fd: bool,
-    /// `[bus] receive = "dbc"`: the socket's identifier filters pass only the DBC's messages
-    /// (and error frames), so that a busy bus costs the bridge only what it decodes.
-    pub receive_only_dbc: bool,
-    /// The rules, in written order (the order their simultaneous events come out).
-    pub rules: Vec<Rule>,
-    /// Bus fault events.
-    pub bus: BusEvents,
-    /// The heartbeat, if any.
-    pub heartbeat: Option<HeartbeatSpec>,
-    /// Commands.
-    pub commands: CommandSpec,
-}
-
-/// Who produced an event.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum EventCause {
-    /// Rule number N of the configuration.
-    Rule(usize),
-    /// A change of the bus state.
-    Bus(BusState),
-    /// A command the bridge could not carry out (`call_failed`).
-    Command,
-}
-
-/// An event for the player, with the time it happened.
-#[derive(Clone, Debug, PartialEq)]
-pub struct EventOut {
-    /// When the condition was met, in the bus clock's microseconds.
-    pub time_us: u64,
-    /// Who produced it.
-    pub cause: EventCause,
-    /// The event, ready to send.
-    pub msg: EventMsg,
-}
+use crate::config::{Condition, Edge, ParamSource, Rule, RuleKind, Target};
+use crate::dbc::{Dbc, DecodedMessage, SignalRef};
+use crate::event::{EventCause, EventOut};
 
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct Latest {
@@ -269,7 +51,7 @@ enum State {
     },
 }
 
-/// Runs the rules of a [`CanConfig`] over decoded frames and time.
+/// Runs the rules of a [`CanConfig`](crate::config::CanConfig) over decoded frames and time.
 #[derive(Clone, Debug)]
 pub struct RuleEngine {
     dbc: Arc<Dbc>,
@@ -572,11 +354,7 @@ impl RuleEngine {
                 ParamSource::Signal { signal, ty } => self.param(*signal, *ty),
             })
             .collect();
-        EventOut {
-            time_us,
-            cause: EventCause::Rule(rule),
-            msg: EventMsg::new(r.event.clone(), params),
-        }
+        EventOut::new(time_us, EventCause::Rule(rule), r.event.clone(), params)
     }
 
     fn param(&self, s: SignalRef, ty: Type) -> Value {
