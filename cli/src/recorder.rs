@@ -36,22 +36,26 @@ pub fn journal(c: JournalCommand) -> Outcome {
     }
 }
 
+/// Reads a journal; a torn last record (a crash while writing it) is said and dropped.
+fn read(journal: &Path) -> Result<petrel_player::journal::JournalRead, Outcome> {
+    let read =
+        petrel_player::journal::read_journal(journal).map_err(|e| Outcome::Usage(e.to_string()))?;
+    if let Some(t) = &read.torn {
+        eprintln!(
+            "warning: the last record is torn (a crash while writing it): {t}; it is dropped"
+        );
+    }
+    Ok(read)
+}
+
 /// Replays a journal through the engine and checks every recorded marking.
 pub fn replay(a: ReplayArgs) -> Outcome {
     let (journal, project_dir, until) = (&a.journal, a.project.as_deref(), a.until);
-    use petrel_player::journal::{read_journal, Entry};
-    let read = match read_journal(journal) {
+    use petrel_player::journal::Entry;
+    let read = match read(journal) {
         Ok(r) => r,
-        Err(e) => return Outcome::Usage(e.to_string()),
+        Err(o) => return o,
     };
-    if let Some(t) = &read.torn {
-        eprintln!(
-            "warning: the last record of {} (byte {}) is torn: {}; replaying what precedes it",
-            t.segment.display(),
-            t.offset,
-            t.what
-        );
-    }
     let (recorded_dir, digest) = match read.entries.first() {
         Some(Entry::Header {
             project_dir,
@@ -93,11 +97,7 @@ pub fn replay(a: ReplayArgs) -> Outcome {
     }
     if let Some(c) = &read.corrupt {
         eprintln!(
-            "error: {} is damaged at record {} (byte {}): {}; the {} entries before it replay to the recorded markings",
-            c.segment.display(),
-            c.record,
-            c.offset,
-            c.what,
+            "error: the journal is damaged at {c}; the {} entries before it replay to the recorded markings",
             r.entries
         );
         return Outcome::Errors;
@@ -122,10 +122,10 @@ pub fn replay(a: ReplayArgs) -> Outcome {
 }
 
 fn journal_show(journal: &Path, format: &str) -> Outcome {
-    use petrel_player::journal::{read_journal, Entry};
-    let read = match read_journal(journal) {
+    use petrel_player::journal::Entry;
+    let read = match read(journal) {
         Ok(r) => r,
-        Err(e) => return Outcome::Usage(e.to_string()),
+        Err(o) => return o,
     };
     let wire = |params: &[petrel_nets::compiled::Value]| -> Vec<String> {
         params.iter().map(|v| v.literal()).collect()
@@ -261,22 +261,8 @@ fn journal_show(journal: &Path, format: &str) -> Outcome {
         }
     }
     out(&text);
-    if let Some(t) = &read.torn {
-        eprintln!(
-            "warning: torn last record in {} at byte {}: {}",
-            t.segment.display(),
-            t.offset,
-            t.what
-        );
-    }
     if let Some(c) = &read.corrupt {
-        eprintln!(
-            "error: {} damaged at record {} (byte {}): {}",
-            c.segment.display(),
-            c.record,
-            c.offset,
-            c.what
-        );
+        eprintln!("error: the journal is damaged at {c}");
         return Outcome::Errors;
     }
     Outcome::Clean

@@ -354,6 +354,20 @@ pub struct Damage {
     pub what: String,
 }
 
+impl std::fmt::Display for Damage {
+    /// `record N of SEGMENT (byte B): WHAT`, the way every command names a damaged record.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "record {} of {} (byte {}): {}",
+            self.record,
+            self.segment.display(),
+            self.offset,
+            self.what
+        )
+    }
+}
+
 /// A journal as read: its entries, and what could not be read.
 #[derive(Clone, Debug, Default)]
 pub struct JournalRead {
