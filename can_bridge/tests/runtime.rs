@@ -15,11 +15,11 @@ use petrel_can_bridge::clock::{Clock, ManualClock, SystemClock};
 use petrel_can_bridge::frame::CanId;
 use petrel_can_bridge::replay::{replay_text, Pacing};
 use petrel_can_bridge::runtime::{event_msg, run, RuntimeOptions};
-use petrel_ipc::{CallMsg, EventMsg, Participant, Role, SendError, Value, Vehicle};
+use petrel_ipc::{CallMsg, EventMsg, IsolatedVehicle, Participant, Role, SendError, Value};
 
 #[test]
 fn the_bridge_process_loop_over_iceoryx2() {
-    let vehicle = Vehicle::isolated("auv").unwrap();
+    let vehicle = IsolatedVehicle::new("auv").unwrap();
     let clock: Arc<dyn Clock> = Arc::new(SystemClock);
     let hub = MemoryHub::new(clock.clone());
     let bridge_bus = hub.endpoint("mem0").unwrap();
@@ -152,7 +152,7 @@ fn the_bridge_process_loop_over_iceoryx2() {
 
 #[test]
 fn decoded_signals_are_published_as_latest_values_for_the_programs() {
-    let vehicle = Vehicle::isolated("sig").unwrap();
+    let vehicle = IsolatedVehicle::new("sig").unwrap();
     let clock: Arc<dyn Clock> = Arc::new(SystemClock);
     let hub = MemoryHub::new(clock.clone());
     let bridge_bus = hub.endpoint("mem0").unwrap();
@@ -214,7 +214,7 @@ fn decoded_signals_are_published_as_latest_values_for_the_programs() {
 /// is, once its 500 ms have passed.
 #[test]
 fn a_slow_start_does_not_make_a_speaking_sensor_look_lost() {
-    let vehicle = Vehicle::isolated("slow").unwrap();
+    let vehicle = IsolatedVehicle::new("slow").unwrap();
     let clock: Arc<dyn Clock> = Arc::new(SystemClock);
     let hub = MemoryHub::new(clock.clone());
     let bridge_bus = hub.endpoint("mem0").unwrap();

@@ -484,7 +484,7 @@ fn run_dive(bench: &Bench) -> Dive {
     let iface = bench.iface.as_str();
     let t0 = Instant::now();
     let dbc = dbc();
-    let vehicle = Vehicle::isolated("auv").unwrap();
+    let vehicle = petrel_ipc::IsolatedVehicle::new("auv").unwrap();
     let mut player = Player::join(&vehicle);
     let dir = tempfile::tempdir().unwrap();
     let log_path = dir.path().join("bus.log");
@@ -772,7 +772,7 @@ fn player_calls_become_frames_and_the_heartbeat_runs() {
     };
     let iface = bench.iface.as_str();
     let t0 = Instant::now();
-    let vehicle = Vehicle::isolated("auv").unwrap();
+    let vehicle = petrel_ipc::IsolatedVehicle::new("auv").unwrap();
     let mut player = Player::join(&vehicle);
     let thrusters = node_socket(iface, &[0x100, 0x110, 0x120]);
     thrusters.set_recv_timestamp(true).unwrap();
@@ -948,7 +948,7 @@ fn a_bus_off_on_the_bus_becomes_events() {
     }
 
     // Through the bridge.
-    let vehicle = Vehicle::isolated("auv").unwrap();
+    let vehicle = petrel_ipc::IsolatedVehicle::new("auv").unwrap();
     let mut player = Player::join(&vehicle);
     let bridge = Bridge::start(&vehicle, iface, None);
     let state = |s: &str| EventMsg::new("bus_fault", vec![Value::Text(s.to_owned())]);
@@ -1128,7 +1128,7 @@ fn an_interface_set_down_stops_the_bus_and_its_return_restarts_it() {
         return;
     };
     let t0 = Instant::now();
-    let vehicle = Vehicle::isolated("auv").unwrap();
+    let vehicle = petrel_ipc::IsolatedVehicle::new("auv").unwrap();
     let mut player = Player::join(&vehicle);
     let sensor = TolerantSensor::spawn(iface, 12.0);
     let bridge = Bridge::start(&vehicle, iface, None);
@@ -1218,7 +1218,7 @@ fn an_interface_removed_and_created_again_is_opened_again() {
         return;
     };
     let t0 = Instant::now();
-    let vehicle = Vehicle::isolated("auv").unwrap();
+    let vehicle = petrel_ipc::IsolatedVehicle::new("auv").unwrap();
     let mut player = Player::join(&vehicle);
     let sensor = TolerantSensor::spawn(&iface, 7.0);
     let bridge = Bridge::start(&vehicle, &iface, None);

@@ -65,8 +65,8 @@ pub use iceoryx2;
 
 pub use liveness::{
     cleanup_dead_nodes, dead_nodes, is_program_alive, list_nodes, program_status,
-    remove_vehicle_files, wait_acknowledged, CleanupReport, LivenessError, NodeInfo, NodeStatus,
-    ProgramChange, ProgramStatus, ProgramWatch,
+    remove_vehicle_files, wait_acknowledged, CleanupReport, IsolatedVehicle, LivenessError,
+    NodeInfo, NodeStatus, ProgramChange, ProgramStatus, ProgramWatch,
 };
 pub use naming::{NameError, Role, Vehicle};
 pub use participant::{Participant, ServiceFailure, SetupError};

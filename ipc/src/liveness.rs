@@ -359,6 +359,37 @@ fn remove_prefixed(dir: &std::path::Path, prefix: &str) -> Result<usize, Livenes
     Ok(removed)
 }
 
+/// A vehicle with a file prefix of its own ([`Vehicle::isolated`]) whose files are removed when
+/// it is dropped, pass or fail: for tests and throw-away tools, so that nothing is left in
+/// `/dev/shm` or iceoryx2's directory. Drop it after the processes that use it are gone.
+#[derive(Debug)]
+pub struct IsolatedVehicle(Vehicle);
+
+impl IsolatedVehicle {
+    /// A new isolated vehicle named `name`.
+    pub fn new(name: &str) -> Result<Self, crate::NameError> {
+        Ok(IsolatedVehicle(Vehicle::isolated(name)?))
+    }
+}
+
+impl std::ops::Deref for IsolatedVehicle {
+    type Target = Vehicle;
+    fn deref(&self) -> &Vehicle {
+        &self.0
+    }
+}
+
+impl Drop for IsolatedVehicle {
+    fn drop(&mut self) {
+        // Nodes of processes that died (a test that panicked) are cleaned first, so that the
+        // vehicle's files can go.
+        let _ = cleanup_dead_nodes(&self.0, Duration::from_secs(1));
+        if let Err(e) = remove_vehicle_files(&self.0) {
+            eprintln!("files of vehicle {} left behind: {e}", self.0.name());
+        }
+    }
+}
+
 /// Waits up to `grace` until the player's heartbeat says it has taken message `seq` of the
 /// sender `origin` (the sender's [`Origin`](crate::Origin) as text). True when it has.
 ///
