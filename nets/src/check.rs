@@ -3,40 +3,130 @@
 //! Every problem is reported (the checker never stops at the first), each with the place it was
 //! written and what to do. A compiled project is returned only when there is no error, so the
 //! verifier and the player never see a project that does not check.
+//!
+//! It goes in four passes:
+//!
+//! 1. the manifest's names (globals, events, programs, timers) and the nets' declarations;
+//! 2. the **roots**: the nets nobody declares as a child, each one net, or the instances the
+//!    manifest makes of it;
+//! 3. each net's **body, checked once** (a template's too), into a [`Template`] whose references
+//!    to other nets are left symbolic ([`NetRef`]), so that an error in a template is reported
+//!    once however many instances it has;
+//! 4. the **instances**, expanded from the roots down the `children` lines in pre-order (the
+//!    project order), each a [`c::Net`] with its references resolved and its fixed parameters
+//!    folded into literals; then `start`, final markings, invariants and scoped globals.
 
 use crate::compiled as c;
 use crate::diag::{Diagnostic, Diagnostics};
 use crate::model::*;
 use crate::names::{suggest, Candidates};
 use crate::source::Span;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 /// Checks a project; returns the compiled project when no error was found, and every finding.
 pub fn check(project: &Project) -> (Option<c::CompiledProject>, Diagnostics) {
     let mut ck = Checker {
         p: project,
         d: Diagnostics::new(),
-        nets: HashMap::new(),
+        decls: project.nets().collect(),
+        decl_ids: HashMap::new(),
         globals: HashMap::new(),
         events: HashMap::new(),
         programs: HashMap::new(),
         timers: HashMap::new(),
+        parents_of: Vec::new(),
+        roots: Vec::new(),
+        root_ids: HashMap::new(),
+        reported: HashSet::new(),
     };
     let compiled = ck.run();
     let mut d = ck.d;
+    apply_allows(project, &mut d, false);
     d.sort();
-    let compiled = if d.has_errors() { None } else { Some(compiled) };
+    let compiled = if d.has_errors() { None } else { compiled };
     (compiled, d)
+}
+
+/// How an instance's parameters are bound.
+#[derive(Clone, Debug, PartialEq)]
+enum ParamBinding {
+    /// The net has no parameter.
+    None,
+    /// Fixed when the instance was made (manifest `[instances]`, or `children X(args)`).
+    Fixed(Vec<c::Value>),
+    /// Bound at each activation (`activate X(args)`).
+    AtActivation,
+}
+
+/// How the nets of a `children` line or a root are bound, known before their values are.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Mode {
+    NoParams,
+    Fixed,
+    AtActivation,
+}
+
+/// A net that nobody declares as a child: a net of the project, or a manifest instance.
+struct Root {
+    name: String,
+    decl: usize,
+    mode: Mode,
+    /// The manifest instance, for its arguments.
+    instance: Option<usize>,
+}
+
+/// A net named in a net's body: itself, one of its children, or a root.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum NetRef {
+    SelfNet,
+    Child(usize),
+    Root(usize),
+}
+
+/// A child of a net's `children` line.
+struct ChildInfo<'p> {
+    decl: usize,
+    args: Option<&'p [Expr]>,
+    mode: Mode,
+}
+
+/// A net's body, checked once: places, transitions whose net references are indices into
+/// `refs` (to be resolved per instance), parameters as [`c::Arg::NetParam`].
+struct Template<'p> {
+    places: Vec<c::Place>,
+    transitions: Vec<c::Transition>,
+    refs: Vec<NetRef>,
+    children: Vec<ChildInfo<'p>>,
+    /// Global places the body names, with where (for scoped globals).
+    globals_used: Vec<(u32, Span)>,
+    /// `finish` appears in the body, at this place.
+    finishes: Option<Span>,
+}
+
+/// One instance, in project order.
+struct Inst {
+    name: String,
+    decl: usize,
+    binding: ParamBinding,
+    parent: Option<(usize, u32)>,
+    children: Vec<usize>,
 }
 
 struct Checker<'p> {
     p: &'p Project,
     d: Diagnostics,
-    nets: HashMap<&'p str, u32>,
+    decls: Vec<&'p NetDecl>,
+    decl_ids: HashMap<&'p str, usize>,
     globals: HashMap<&'p str, u32>,
     events: HashMap<&'p str, u32>,
     programs: HashMap<&'p str, u32>,
     timers: HashMap<&'p str, u32>,
+    /// For each declaration, the declarations whose `children` line names it.
+    parents_of: Vec<Vec<usize>>,
+    roots: Vec<Root>,
+    root_ids: HashMap<String, usize>,
+    /// Errors found while expanding instances, reported once per place.
+    reported: HashSet<(u32, u32, &'static str)>,
 }
 
 /// Registers names of one kind, reporting duplicates against the first declaration.
@@ -68,11 +158,27 @@ fn unique<'p>(
     map
 }
 
+/// The scope of a transition's expressions: its net's parameters, and the names its event binds.
+struct Scope<'a> {
+    net: &'a NetDecl,
+    transition: &'a TransitionDecl,
+    bound: &'a HashMap<&'a str, (u32, Type)>,
+}
+
 impl<'p> Checker<'p> {
-    fn run(&mut self) -> c::CompiledProject {
+    fn run(&mut self) -> Option<c::CompiledProject> {
         let m = &self.p.manifest;
         let d = &mut self.d;
-        self.nets = unique(d, "net", " in the project", self.p.nets().map(|n| &n.name));
+        let decl_names = unique(
+            d,
+            "net",
+            " in the project",
+            self.decls.iter().map(|n| &n.name),
+        );
+        self.decl_ids = decl_names
+            .into_iter()
+            .map(|(k, v)| (k, v as usize))
+            .collect();
         self.globals = unique(d, "global place", "", m.globals.iter().map(|g| &g.name));
         self.events = unique(d, "event", "", m.events.iter().map(|e| &e.name));
         for (k, b) in builtin_events().iter().enumerate() {
@@ -91,7 +197,7 @@ impl<'p> Checker<'p> {
                             bindings: b
                                 .params
                                 .iter()
-                                .map(|p| Binding {
+                                .map(|p| crate::model::Binding {
                                     name: p.name.clone(),
                                     ty: Some((p.ty, Span::default())),
                                 })
@@ -104,6 +210,22 @@ impl<'p> Checker<'p> {
                 .insert(b.name.as_str(), (m.events.len() + k) as u32);
         }
         self.programs = unique(d, "program", "", m.programs.iter().map(|p| &p.name));
+        for p in &m.programs {
+            if !petrel_value::is_program_name(&p.name.text) {
+                d.push(
+                    Diagnostic::error(
+                        "E0107",
+                        p.name.span,
+                        format!("program `{}` cannot name a program of the vehicle", p.name),
+                    )
+                    .label(format!(
+                        "more than {} characters, or a character other than letters, digits, `_` and `-`",
+                        petrel_value::MAX_PROGRAM_NAME_LEN
+                    ))
+                    .help("a program's name names its process on the vehicle's services: keep it short"),
+                );
+            }
+        }
         self.timers = unique(d, "timer", "", m.timers.iter().map(|t| &t.name));
         for e in &m.events {
             let scope = format!(" in event `{}`", e.name);
@@ -117,26 +239,91 @@ impl<'p> Checker<'p> {
                 unique(d, "parameter", &scope, f.params.iter().map(|p| &p.name));
             }
         }
-
-        let mut start = Vec::new();
-        for s in &m.start {
-            match self.nets.get(s.as_str()) {
-                Some(&id) if start.contains(&id) => self.d.push(
-                    Diagnostic::warning(
-                        "W0103",
-                        s.span,
-                        format!("net `{s}` is listed twice in `start`"),
-                    )
-                    .label("already listed")
-                    .help("remove the second entry"),
-                ),
-                Some(&id) => start.push(id),
-                None => self.unknown("E0202", "net", s, self.nets.keys().copied().collect()),
-            }
+        for n in &self.decls {
+            let scope = format!(" in net `{}`", n.name);
+            unique(d, "parameter", &scope, n.params.iter().map(|p| &p.name));
         }
+        let timers = self.timers_compiled();
+        self.hierarchy();
+        self.find_roots();
 
+        // Each body once.
+        let templates: Vec<Template> = (0..self.decls.len()).map(|i| self.template(i)).collect();
+
+        // Instances, from the roots down.
+        let mut insts: Vec<Inst> = Vec::new();
+        let mut root_inst: Vec<usize> = Vec::new();
+        for r in 0..self.roots.len() {
+            let binding = self.root_binding(r);
+            let (decl, name) = (self.roots[r].decl, self.roots[r].name.clone());
+            root_inst.push(insts.len());
+            let mut path = Vec::new();
+            self.expand(&templates, &mut insts, decl, name, binding, None, &mut path);
+        }
+        let nets: Vec<c::Net> = insts
+            .iter()
+            .enumerate()
+            .map(|(i, inst)| self.instantiate(&templates, &root_inst, i, inst))
+            .collect();
+
+        let globals = self.globals_compiled(&templates, &insts);
+        let events = m
+            .events
+            .iter()
+            .chain(builtin_events())
+            .map(|e| c::Event {
+                name: e.name.text.clone(),
+                category: e.category,
+                params: e
+                    .params
+                    .iter()
+                    .map(|p| (p.name.text.clone(), p.ty))
+                    .collect(),
+            })
+            .collect();
+        let programs = m
+            .programs
+            .iter()
+            .map(|p| c::Program {
+                name: p.name.text.clone(),
+                functions: p
+                    .functions
+                    .iter()
+                    .map(|f| c::Function {
+                        name: f.name.text.clone(),
+                        params: f
+                            .params
+                            .iter()
+                            .map(|p| (p.name.text.clone(), p.ty))
+                            .collect(),
+                    })
+                    .collect(),
+            })
+            .collect();
+        let mut project = c::CompiledProject {
+            name: m.name.clone(),
+            nets,
+            globals,
+            events,
+            programs,
+            timers,
+            start: Vec::new(),
+            finals: Vec::new(),
+            invariants: Vec::new(),
+        };
+        project.start = self.start(&project, &root_inst);
+        project.finals = m
+            .finals
+            .iter()
+            .map(|f| self.final_marking(&project, f))
+            .collect();
+        project.invariants = self.invariants(&project);
+        Some(project)
+    }
+
+    fn timers_compiled(&mut self) -> Vec<c::Timer> {
         let mut timers = Vec::new();
-        for t in &m.timers {
+        for t in &self.p.manifest.timers {
             let event = match self.events.get(t.event.as_str()) {
                 Some(&e) => {
                     let decl = self.event_decl(e);
@@ -173,82 +360,483 @@ impl<'p> Checker<'p> {
                 event,
             });
         }
+        timers
+    }
 
-        let globals = m
-            .globals
-            .iter()
-            .map(|g| c::GlobalPlace {
-                name: g.name.text.clone(),
-                initial: g.tokens > 0,
-            })
-            .collect();
-        let nets = self.p.nets().map(|n| self.net(n)).collect();
-        let finals = m.finals.iter().map(|f| self.final_marking(f)).collect();
-        c::CompiledProject {
-            name: m.name.clone(),
-            nets,
-            globals,
-            events: m
-                .events
-                .iter()
-                .chain(builtin_events())
-                .map(|e| c::Event {
-                    name: e.name.text.clone(),
-                    category: e.category,
-                    params: e
-                        .params
-                        .iter()
-                        .map(|p| (p.name.text.clone(), p.ty))
-                        .collect(),
-                })
-                .collect(),
-            programs: m
-                .programs
-                .iter()
-                .map(|p| c::Program {
-                    name: p.name.text.clone(),
-                    functions: p
-                        .functions
-                        .iter()
-                        .map(|f| c::Function {
-                            name: f.name.text.clone(),
-                            params: f
-                                .params
-                                .iter()
-                                .map(|p| (p.name.text.clone(), p.ty))
-                                .collect(),
-                        })
-                        .collect(),
-                })
-                .collect(),
-            timers,
-            start,
-            finals,
+    /// Who declares whom as a child; unknown children reported.
+    fn hierarchy(&mut self) {
+        self.parents_of = vec![Vec::new(); self.decls.len()];
+        for (i, n) in self.decls.clone().into_iter().enumerate() {
+            let scope = format!(" in the children of net `{}`", n.name);
+            unique(&mut self.d, "child", &scope, n.children().map(|c| &c.net));
+            for ch in n.children() {
+                match self.decl_ids.get(ch.net.as_str()) {
+                    Some(&k) if !self.parents_of[k].contains(&i) => self.parents_of[k].push(i),
+                    Some(_) => {}
+                    None => self.unknown(
+                        "E0202",
+                        "net",
+                        &ch.net,
+                        self.decl_ids.keys().copied().collect(),
+                    ),
+                }
+            }
         }
     }
 
-    /// A declared or built-in event.
-    fn event_decl(&self, e: u32) -> &'p EventDecl {
-        let m = &self.p.manifest.events;
-        m.get(e as usize)
-            .unwrap_or_else(|| &builtin_events()[e as usize - m.len()])
+    /// The nets nobody declares as a child, and the manifest's instances.
+    fn find_roots(&mut self) {
+        let m = &self.p.manifest;
+        let mut instanced: HashMap<usize, Vec<usize>> = HashMap::new();
+        let mut seen: HashMap<&str, Span> = self
+            .decls
+            .iter()
+            .map(|n| (n.name.as_str(), n.name.span))
+            .collect();
+        for (k, inst) in m.instances.iter().enumerate() {
+            if let Some(first) = seen.get(inst.name.as_str()) {
+                self.d.push(
+                    Diagnostic::error(
+                        "E0301",
+                        inst.name.span,
+                        format!("net `{}` is declared twice in the project", inst.name),
+                    )
+                    .label("an instance with the name of a net or of another instance")
+                    .related(*first, "first declared here")
+                    .help("give the instance another name"),
+                );
+                continue;
+            }
+            seen.insert(inst.name.as_str(), inst.name.span);
+            match self.decl_ids.get(inst.net.as_str()) {
+                None => self.unknown(
+                    "E0202",
+                    "net",
+                    &inst.net,
+                    self.decl_ids.keys().copied().collect(),
+                ),
+                Some(&decl) if !self.parents_of[decl].is_empty() => {
+                    let parent = &self.decls[self.parents_of[decl][0]].name;
+                    self.d.push(
+                        Diagnostic::error(
+                            "E0303",
+                            inst.net.span,
+                            format!("net `{}` is a child of `{parent}`: it cannot also be instantiated in the manifest", inst.net),
+                        )
+                        .label("a child net")
+                        .related(self.decls[decl].name.span, "declared here")
+                        .help(format!("each parent makes its own instance of its children; remove `{}` from `children`, or this instance", inst.net)),
+                    );
+                }
+                Some(&decl) => instanced.entry(decl).or_default().push(k),
+            }
+        }
+        for (i, n) in self.decls.clone().into_iter().enumerate() {
+            if !self.parents_of[i].is_empty() {
+                continue;
+            }
+            match instanced.get(&i) {
+                Some(list) => {
+                    for &k in list {
+                        let inst = &m.instances[k];
+                        self.root_ids
+                            .insert(inst.name.text.clone(), self.roots.len());
+                        self.roots.push(Root {
+                            name: inst.name.text.clone(),
+                            decl: i,
+                            mode: if n.params.is_empty() {
+                                Mode::NoParams
+                            } else {
+                                Mode::Fixed
+                            },
+                            instance: Some(k),
+                        });
+                    }
+                }
+                None => {
+                    self.root_ids.insert(n.name.text.clone(), self.roots.len());
+                    self.roots.push(Root {
+                        name: n.name.text.clone(),
+                        decl: i,
+                        mode: if n.params.is_empty() {
+                            Mode::NoParams
+                        } else {
+                            Mode::AtActivation
+                        },
+                        instance: None,
+                    });
+                }
+            }
+        }
+    }
+
+    /// The binding of a root: an instance's arguments checked against its template.
+    fn root_binding(&mut self, r: usize) -> ParamBinding {
+        let (decl, mode, instance) = (
+            self.roots[r].decl,
+            self.roots[r].mode,
+            self.roots[r].instance,
+        );
+        let net = self.decls[decl];
+        match (mode, instance) {
+            (Mode::AtActivation, _) => ParamBinding::AtActivation,
+            (_, Some(k)) => {
+                let inst = &self.p.manifest.instances[k];
+                let what = format!("net `{}`", net.name);
+                let values = self.constant_args(&what, &net.params, &inst.args, inst.name.span);
+                if net.params.is_empty() {
+                    ParamBinding::None
+                } else {
+                    values
+                        .map(ParamBinding::Fixed)
+                        .unwrap_or(ParamBinding::AtActivation)
+                }
+            }
+            _ => ParamBinding::None,
+        }
+    }
+
+    /// Literal arguments (an instance's) checked against parameters.
+    fn constant_args(
+        &mut self,
+        what: &str,
+        params: &[Param],
+        args: &[Expr],
+        span: Span,
+    ) -> Option<Vec<c::Value>> {
+        if params.len() != args.len() {
+            self.arity(what, params, args.len(), span);
+            return None;
+        }
+        let mut out = Vec::new();
+        for (p, a) in params.iter().zip(args) {
+            match literal(a, p.ty) {
+                Some(v) => out.push(v),
+                None => {
+                    self.mismatch(what, p, a.span(), "this value");
+                    return None;
+                }
+            }
+        }
+        Some(out)
+    }
+
+    fn arity(&mut self, what: &str, params: &[Param], given: usize, span: Span) {
+        let sig = params
+            .iter()
+            .map(|p| format!("{}: {}", p.name, p.ty))
+            .collect::<Vec<_>>()
+            .join(", ");
+        self.d.push(
+            Diagnostic::error(
+                "E0401",
+                span,
+                format!("{what} takes {} argument(s), {given} given", params.len()),
+            )
+            .label("wrong number of arguments")
+            .help(format!("its parameters are ({sig})")),
+        );
+    }
+
+    /// Expands an instance and, recursively, its children (pre-order).
+    #[allow(clippy::too_many_arguments)]
+    fn expand(
+        &mut self,
+        templates: &[Template<'p>],
+        insts: &mut Vec<Inst>,
+        decl: usize,
+        name: String,
+        binding: ParamBinding,
+        parent: Option<(usize, u32)>,
+        path: &mut Vec<usize>,
+    ) -> usize {
+        let me = insts.len();
+        insts.push(Inst {
+            name: name.clone(),
+            decl,
+            binding: binding.clone(),
+            parent,
+            children: Vec::new(),
+        });
+        if path.contains(&decl) {
+            let n = &self.decls[decl].name;
+            if self.reported.insert((n.span.file.0, n.span.start, "E0304")) {
+                self.d.push(
+                    Diagnostic::error(
+                        "E0304",
+                        n.span,
+                        format!("the children of net `{n}` lead back to it"),
+                    )
+                    .label("a net is its own descendant")
+                    .help("the `children` lines must form a tree: remove one of the lines that closes the cycle"),
+                );
+            }
+            return me;
+        }
+        path.push(decl);
+        let own_places = self.decls[decl].places().count() as u32;
+        for (k, ch) in templates[decl].children.iter().enumerate() {
+            let child_binding = match (ch.mode, ch.args) {
+                (Mode::NoParams, _) => ParamBinding::None,
+                (Mode::AtActivation, _) => ParamBinding::AtActivation,
+                (Mode::Fixed, Some(args)) => match self.child_args(decl, &binding, ch, args) {
+                    Some(v) => ParamBinding::Fixed(v),
+                    None => ParamBinding::AtActivation,
+                },
+                (Mode::Fixed, None) => ParamBinding::AtActivation,
+            };
+            let child_name = format!("{name}/{}", self.decls[ch.decl].name);
+            let id = self.expand(
+                templates,
+                insts,
+                ch.decl,
+                child_name,
+                child_binding,
+                Some((me, own_places + k as u32)),
+                path,
+            );
+            insts[me].children.push(id);
+        }
+        path.pop();
+        me
+    }
+
+    /// The values of a `children X(args)` line for one instance of its parent: literals, or the
+    /// parent's fixed parameters.
+    fn child_args(
+        &mut self,
+        parent_decl: usize,
+        parent: &ParamBinding,
+        ch: &ChildInfo<'p>,
+        args: &[Expr],
+    ) -> Option<Vec<c::Value>> {
+        let child = self.decls[ch.decl];
+        let mut out = Vec::new();
+        for (p, a) in child.params.iter().zip(args) {
+            match a {
+                Expr::SelfParam(n) => {
+                    let i = self.decls[parent_decl]
+                        .params
+                        .iter()
+                        .position(|q| q.name.text == n.text)?;
+                    match parent {
+                        ParamBinding::Fixed(values) => out.push(convert(&values[i], p.ty)?),
+                        _ => {
+                            if self.reported.insert((n.span.file.0, n.span.start, "E0415")) {
+                                self.d.push(
+                                    Diagnostic::error(
+                                        "E0415",
+                                        n.span,
+                                        format!("`self.{n}` is not fixed when the children of `{}` are made", self.decls[parent_decl].name),
+                                    )
+                                    .label("bound only at activation")
+                                    .help("a child's arguments are literals or parameters of an instance of the parent (manifest `[instances]`, or the parent's own `children` line with arguments)"),
+                                );
+                            }
+                            return None;
+                        }
+                    }
+                }
+                _ => out.push(literal(a, p.ty)?),
+            }
+        }
+        Some(out)
+    }
+
+    /// A compiled instance: its template with references resolved and fixed parameters folded.
+    fn instantiate(
+        &mut self,
+        templates: &[Template<'p>],
+        root_inst: &[usize],
+        me: usize,
+        inst: &Inst,
+    ) -> c::Net {
+        let t = &templates[inst.decl];
+        let decl = self.decls[inst.decl];
+        let resolve = |r: u32| -> c::NetId {
+            match t.refs[r as usize] {
+                NetRef::SelfNet => me as c::NetId,
+                NetRef::Child(k) => inst.children.get(k).copied().unwrap_or(me) as c::NetId,
+                NetRef::Root(k) => root_inst.get(k).copied().unwrap_or(me) as c::NetId,
+            }
+        };
+        let fixed = match &inst.binding {
+            ParamBinding::Fixed(v) => Some(v.as_slice()),
+            _ => None,
+        };
+        let transitions = t
+            .transitions
+            .iter()
+            .map(|tr| {
+                let mut tr = tr.clone();
+                for a in &mut tr.actions {
+                    match a {
+                        c::Action::Activate { net, args } => {
+                            *net = resolve(*net);
+                            fold_args(args, fixed);
+                        }
+                        c::Action::Deactivate(net) => *net = resolve(*net),
+                        c::Action::Emit { target, args, .. } => {
+                            if let Some(n) = target {
+                                *n = resolve(*n);
+                            }
+                            fold_args(args, fixed);
+                        }
+                        c::Action::Call { args, .. } => fold_args(args, fixed),
+                        c::Action::StartTimer { after, .. } => {
+                            if let (c::TimerDuration::NetParamSeconds(i), Some(values)) =
+                                (&*after, fixed)
+                            {
+                                *after = c::TimerDuration::Millis(seconds_to_millis(
+                                    &values[*i as usize],
+                                ));
+                            }
+                        }
+                        c::Action::CancelTimer(_) | c::Action::Finish => {}
+                    }
+                }
+                if let Some(g) = tr.guard.take() {
+                    tr.guard = match fold_guard(g, fixed) {
+                        c::Guard::Const(true) => None,
+                        g => Some(g),
+                    };
+                }
+                tr
+            })
+            .collect();
+        c::Net {
+            name: inst.name.clone(),
+            template: decl.name.text.clone(),
+            params: match inst.binding {
+                ParamBinding::AtActivation => decl
+                    .params
+                    .iter()
+                    .map(|p| (p.name.text.clone(), p.ty))
+                    .collect(),
+                _ => Vec::new(),
+            },
+            places: t.places.clone(),
+            transitions,
+            children: inst.children.iter().map(|&c| c as c::NetId).collect(),
+            parent: inst.parent.map(|(p, i)| (p as c::NetId, i)),
+        }
+    }
+
+    fn globals_compiled(
+        &mut self,
+        templates: &[Template<'p>],
+        insts: &[Inst],
+    ) -> Vec<c::GlobalPlace> {
+        let m = &self.p.manifest;
+        let mut out = Vec::new();
+        for (g, decl) in m.globals.iter().enumerate() {
+            let nets = decl.nets.as_ref().map(|names| {
+                let mut ids = Vec::new();
+                for n in names {
+                    let matched: Vec<usize> = insts
+                        .iter()
+                        .enumerate()
+                        .filter(|(_, i)| i.name == n.text || self.decls[i.decl].name.text == n.text)
+                        .map(|(k, _)| k)
+                        .collect();
+                    if matched.is_empty() {
+                        let mut cands: Vec<&str> = insts.iter().map(|i| i.name.as_str()).collect();
+                        cands.extend(self.decls.iter().map(|d| d.name.as_str()));
+                        cands.sort_unstable();
+                        cands.dedup();
+                        let hint = suggest(n.as_str(), cands, Candidates::Declared);
+                        self.d.push(
+                            Diagnostic::error("E0202", n.span, format!("unknown net `{n}`"))
+                                .label("no net or template of this name")
+                                .help(hint),
+                        );
+                    }
+                    ids.extend(matched.into_iter().map(|k| k as c::NetId));
+                }
+                ids.sort_unstable();
+                ids.dedup();
+                ids
+            });
+            if let Some(scope) = &nets {
+                // Every instance that names the place must be in its group.
+                for (k, inst) in insts.iter().enumerate() {
+                    if scope.contains(&(k as c::NetId)) {
+                        continue;
+                    }
+                    for &(used, span) in &templates[inst.decl].globals_used {
+                        if used as usize == g
+                            && self.reported.insert((span.file.0, span.start, "E0417"))
+                        {
+                            self.d.push(
+                                Diagnostic::error(
+                                    "E0417",
+                                    span,
+                                    format!("global place `{}` is not visible in net `{}`", decl.name, inst.name),
+                                )
+                                .label("outside the place's group of nets")
+                                .related(decl.name.span, "its group is declared here")
+                                .help(format!("add `{}` (or its template `{}`) to the place's `nets`, or use a place of its own", inst.name, self.decls[inst.decl].name)),
+                            );
+                        }
+                    }
+                }
+            }
+            out.push(c::GlobalPlace {
+                name: decl.name.text.clone(),
+                initial: decl.tokens > 0,
+                nets,
+            });
+        }
+        out
+    }
+
+    fn start(&mut self, project: &c::CompiledProject, root_inst: &[usize]) -> Vec<c::NetId> {
+        let mut start = Vec::new();
+        for s in &self.p.manifest.start {
+            match self.root_ids.get(s.as_str()).copied() {
+                Some(r) => {
+                    let id = root_inst[r] as c::NetId;
+                    if start.contains(&id) {
+                        self.d.push(
+                            Diagnostic::warning(
+                                "W0103",
+                                s.span,
+                                format!("net `{s}` is listed twice in `start`"),
+                            )
+                            .label("already listed")
+                            .help("remove the second entry"),
+                        );
+                        continue;
+                    }
+                    if !project.nets[id as usize].params.is_empty() {
+                        self.d.push(
+                            Diagnostic::error(
+                                "E0412",
+                                s.span,
+                                format!("net `{s}` takes arguments when it is activated: it cannot start the mission"),
+                            )
+                            .label("parameters bound at activation")
+                            .help(format!("activate it from a transition with its arguments (`activate {s}(...)`), or declare an instance with fixed arguments in the manifest's [instances] and start that")),
+                        );
+                        continue;
+                    }
+                    start.push(id);
+                }
+                None => self.not_a_root("E0202", s, None),
+            }
+        }
+        start
     }
 
     /// Resolves the places of an intended final marking, `NET.place` or `global.place`.
-    fn final_marking(&mut self, places: &[Name]) -> Vec<(u32, c::PlaceRef)> {
+    fn final_marking(
+        &mut self,
+        project: &c::CompiledProject,
+        places: &[Name],
+    ) -> Vec<(u32, c::PlaceRef)> {
         let mut out = Vec::new();
         for n in places {
-            let found = match n.text.split_once('.') {
-                Some(("global", g)) => self.globals.get(g).map(|&i| (0, c::PlaceRef::Global(i))),
-                Some((net, place)) => self.nets.get(net).and_then(|&ni| {
-                    let decl = self.p.nets().nth(ni as usize)?;
-                    decl.places()
-                        .position(|p| p.name.text == place)
-                        .map(|i| (ni, c::PlaceRef::Local(i as u32)))
-                }),
-                None => None,
-            };
-            match found {
+            match project.place_ref(&n.text) {
                 Some(f) => out.push(f),
                 None => self.d.push(
                     Diagnostic::error(
@@ -257,11 +845,68 @@ impl<'p> Checker<'p> {
                         format!("unknown place `{n}` in a final marking"),
                     )
                     .label("no such place")
-                    .help("write places of final markings as `NET.place` or `global.place`"),
+                    .help("write places of final markings as `NET.place` or `global.place` (an instance's name for a template's place: `R1.waiting`)"),
                 ),
             }
         }
         out
+    }
+
+    fn invariants(&mut self, project: &c::CompiledProject) -> Vec<c::Invariant> {
+        let decls = &self.p.manifest.invariants;
+        unique(&mut self.d, "invariant", "", decls.iter().map(|i| &i.name));
+        let mut out = Vec::new();
+        for inv in decls {
+            let Some(f) = &inv.formula else { continue };
+            if let Some(formula) = self.state_formula(project, f) {
+                out.push(c::Invariant {
+                    name: inv.name.text.clone(),
+                    formula,
+                });
+            }
+        }
+        out
+    }
+
+    /// A formula of the manifest resolved against the project's nets and places.
+    pub(crate) fn state_formula(
+        &mut self,
+        project: &c::CompiledProject,
+        f: &Formula,
+    ) -> Option<c::StateFormula> {
+        let mut bad = false;
+        let r = resolve_formula(project, f, &mut |n: &Name, what: &str| {
+            bad = true;
+            let mut cands: Vec<&str> = project.nets.iter().map(|n| n.name.as_str()).collect();
+            cands.sort_unstable();
+            let hint = if what == "place" {
+                "write `NET.place` (an instance's name for a template's place) or `global.place`"
+                    .to_string()
+            } else {
+                suggest(n.as_str(), cands, Candidates::Declared)
+            };
+            self.d.push(
+                Diagnostic::error(
+                    "E0211",
+                    n.span,
+                    format!("unknown {what} `{n}` in a formula"),
+                )
+                .label(format!("no {what} of this name"))
+                .help(hint),
+            );
+        });
+        if bad {
+            None
+        } else {
+            r
+        }
+    }
+
+    /// A declared or built-in event.
+    fn event_decl(&self, e: u32) -> &'p EventDecl {
+        let m = &self.p.manifest.events;
+        m.get(e as usize)
+            .unwrap_or_else(|| &builtin_events()[e as usize - m.len()])
     }
 
     fn unknown(&mut self, code: &'static str, what: &str, n: &Name, mut candidates: Vec<&str>) {
@@ -293,19 +938,79 @@ impl<'p> Checker<'p> {
         );
     }
 
-    fn net(&mut self, net: &'p NetDecl) -> c::Net {
+    /// `n` names no root net: say why (a template with instances, someone's child, unknown).
+    fn not_a_root(&mut self, code: &'static str, n: &Name, from: Option<&NetDecl>) {
+        if let Some(&k) = self.decl_ids.get(n.as_str()) {
+            if !self.parents_of[k].is_empty() {
+                let parents: Vec<String> = self.parents_of[k]
+                    .iter()
+                    .map(|&p| format!("`{}`", self.decls[p].name))
+                    .collect();
+                self.d.push(
+                    Diagnostic::error(
+                        "E0210",
+                        n.span,
+                        format!("net `{n}` is a child of {}: only its parent names it", parents.join(" and ")),
+                    )
+                    .label(match from {
+                        Some(f) => format!("not a child of `{}`", f.name),
+                        None => "a child net".to_string(),
+                    })
+                    .help(format!("declare it in this net's `children` line to run an instance of its own, or act on it from its parent {}", parents.join(" or "))),
+                );
+                return;
+            }
+            let instances: Vec<String> = self
+                .roots
+                .iter()
+                .filter(|r| r.decl == k && r.instance.is_some())
+                .map(|r| format!("`{}`", r.name))
+                .collect();
+            if !instances.is_empty() {
+                self.d.push(
+                    Diagnostic::error(
+                        "E0210",
+                        n.span,
+                        format!("net `{n}` is a template: name one of its instances"),
+                    )
+                    .label("a template with instances")
+                    .help(format!("its instances are {}", instances.join(", "))),
+                );
+                return;
+            }
+        }
+        let mut owned: Vec<String> = self.root_ids.keys().cloned().collect();
+        if let Some(f) = from {
+            owned.extend(f.children().map(|c| c.net.text.clone()));
+        }
+        self.unknown(code, "net", n, owned.iter().map(String::as_str).collect());
+    }
+
+    /// A net's body, checked once.
+    fn template(&mut self, i: usize) -> Template<'p> {
+        let net = self.decls[i];
         let scope = format!(" in net `{}`", net.name);
         // Places and transitions share one namespace: a name means one thing in a net.
         let names: Vec<&Name> = net
             .items
             .iter()
-            .map(|i| match &i.kind {
-                ItemKind::Place(p) => &p.name,
-                ItemKind::Transition(t) => &t.name,
+            .filter_map(|i| match &i.kind {
+                ItemKind::Place(p) => Some(&p.name),
+                ItemKind::Transition(t) => Some(&t.name),
+                ItemKind::Children(_) => None,
             })
             .collect();
         unique(&mut self.d, "name", &scope, names.into_iter());
-        let mut places: HashMap<&str, u32> = HashMap::new();
+        for p in &net.params {
+            if p.name.text == "self" {
+                self.d.push(
+                    Diagnostic::error("E0105", p.name.span, "`self` is not a parameter name")
+                        .label("reserved")
+                        .help("give the parameter another name"),
+                );
+            }
+        }
+        let mut places: HashMap<String, u32> = HashMap::new();
         let mut cplaces = Vec::new();
         for p in net.places() {
             if self.globals.contains_key(p.name.as_str()) {
@@ -331,40 +1036,239 @@ impl<'p> Checker<'p> {
                 );
             }
             places
-                .entry(p.name.as_str())
+                .entry(p.name.text.clone())
                 .or_insert(cplaces.len() as u32);
             cplaces.push(c::Place {
                 name: p.name.text.clone(),
                 initial: p.tokens > 0,
             });
         }
-        let transitions = net
-            .transitions()
-            .map(|t| self.transition(net, &places, t))
-            .collect();
-        c::Net {
-            name: net.name.text.clone(),
+        // Children, and their completion places after the net's own places.
+        let mut children = Vec::new();
+        for ch in net.children() {
+            let Some(&k) = self.decl_ids.get(ch.net.as_str()) else {
+                continue;
+            };
+            let child = self.decls[k];
+            let mode = match &ch.args {
+                _ if child.params.is_empty() => {
+                    if ch.args.as_ref().is_some_and(|a| !a.is_empty()) {
+                        self.arity(
+                            &format!("net `{}`", child.name),
+                            &[],
+                            ch.args.as_ref().map_or(0, Vec::len),
+                            ch.net.span,
+                        );
+                    }
+                    Mode::NoParams
+                }
+                None => Mode::AtActivation,
+                Some(args) => {
+                    self.child_args_typed(net, child, args, ch.net.span);
+                    Mode::Fixed
+                }
+            };
+            places.insert(format!("{}.done", ch.net), cplaces.len() as u32);
+            cplaces.push(c::Place {
+                name: format!("{}.done", ch.net),
+                initial: false,
+            });
+            children.push(ChildInfo {
+                decl: k,
+                args: ch.args.as_deref(),
+                mode,
+            });
+        }
+        let mut t = Template {
             places: cplaces,
-            transitions,
+            transitions: Vec::new(),
+            refs: Vec::new(),
+            children,
+            globals_used: Vec::new(),
+            finishes: None,
+        };
+        for tr in net.transitions() {
+            let compiled = self.transition(net, &places, tr, &mut t);
+            t.transitions.push(compiled);
+        }
+        if let (Some(span), true) = (t.finishes, self.parents_of[i].is_empty()) {
+            self.d.push(
+                Diagnostic::error(
+                    "E0413",
+                    span,
+                    format!(
+                        "net `{}` finishes, but no net declares it as a child",
+                        net.name
+                    ),
+                )
+                .label("no parent to tell")
+                .help(format!(
+                    "declare `{}` in its parent's `children` line, or use `deactivate self`",
+                    net.name
+                )),
+            );
+        }
+        t
+    }
+
+    /// The types of a `children X(args)` line: literals, or the parent's parameters.
+    fn child_args_typed(&mut self, parent: &NetDecl, child: &NetDecl, args: &[Expr], span: Span) {
+        let what = format!("net `{}`", child.name);
+        if child.params.len() != args.len() {
+            self.arity(&what, &child.params, args.len(), span);
+            return;
+        }
+        for (p, a) in child.params.iter().zip(args) {
+            match a {
+                Expr::SelfParam(n) => match parent.params.iter().find(|q| q.name.text == n.text) {
+                    None => self.unknown_param(parent, n),
+                    Some(q) if q.ty != p.ty && !(q.ty == Type::Int && p.ty == Type::Float) => {
+                        self.mismatch(&what, p, a.span(), &format!("`self.{n}` is {}", q.ty))
+                    }
+                    Some(_) => {}
+                },
+                Expr::Var(n) => {
+                    self.d.push(
+                        Diagnostic::error(
+                            "E0207",
+                            n.span,
+                            format!("`{n}` is not known in a `children` line"),
+                        )
+                        .label("no event binds names here")
+                        .help("a child's arguments are literals or `self.PARAM`"),
+                    );
+                }
+                _ => {
+                    if literal(a, p.ty).is_none() {
+                        self.mismatch(&what, p, a.span(), "this value");
+                    }
+                }
+            }
+        }
+    }
+
+    fn unknown_param(&mut self, net: &NetDecl, n: &Name) {
+        let hint = if net.params.is_empty() {
+            format!(
+                "net `{}` has no parameter: declare them as `net {}(name: type) {{`",
+                net.name, net.name
+            )
+        } else {
+            suggest(
+                n.as_str(),
+                net.params.iter().map(|p| p.name.as_str()),
+                Candidates::Declared,
+            )
+        };
+        self.d.push(
+            Diagnostic::error(
+                "E0209",
+                n.span,
+                format!("net `{}` has no parameter `{n}`", net.name),
+            )
+            .label("unknown parameter")
+            .help(hint),
+        );
+    }
+
+    /// A net name in a body: `self`, a child, or a root.
+    fn net_ref(
+        &mut self,
+        net: &NetDecl,
+        t: &mut Template<'p>,
+        n: &Name,
+        self_ok: bool,
+    ) -> Option<u32> {
+        let r = if n.text == "self" {
+            if !self_ok {
+                self.d.push(
+                    Diagnostic::error("E0202", n.span, "`self` cannot be activated")
+                        .label("the net that runs this action is already active")
+                        .help("write `deactivate self`, or name another net"),
+                );
+                return None;
+            }
+            NetRef::SelfNet
+        } else if let Some(k) = net.children().position(|c| c.net.text == n.text) {
+            // A child's instance of this net, if the child exists.
+            if !self.decl_ids.contains_key(n.as_str()) {
+                return None;
+            }
+            NetRef::Child(k)
+        } else if let Some(&r) = self.root_ids.get(n.as_str()) {
+            NetRef::Root(r)
+        } else {
+            self.not_a_root("E0202", n, Some(net));
+            return None;
+        };
+        let idx = match t.refs.iter().position(|x| *x == r) {
+            Some(i) => i,
+            None => {
+                t.refs.push(r);
+                t.refs.len() - 1
+            }
+        };
+        Some(idx as u32)
+    }
+
+    /// The parameters of a referenced net as an activation must give them, and how it is bound.
+    fn target_params(&self, t: &Template<'p>, r: u32) -> (Mode, &'p [Param], String) {
+        match t.refs[r as usize] {
+            NetRef::SelfNet => (Mode::NoParams, &[], "self".into()),
+            NetRef::Child(k) => {
+                let ch = &t.children[k];
+                let decl = self.decls[ch.decl];
+                (ch.mode, &decl.params, decl.name.text.clone())
+            }
+            NetRef::Root(k) => {
+                let root = &self.roots[k];
+                let decl = self.decls[root.decl];
+                (root.mode, &decl.params, root.name.clone())
+            }
         }
     }
 
     fn places(
         &mut self,
         net: &NetDecl,
-        locals: &HashMap<&str, u32>,
+        locals: &HashMap<String, u32>,
         t: &TransitionDecl,
         list: &[Name],
         side: &str,
+        tpl: &mut Template<'p>,
     ) -> Vec<c::PlaceRef> {
         let mut out = Vec::new();
         for n in list {
             let r = if let Some(&i) = locals.get(n.as_str()) {
+                if n.text.ends_with(".done") && side == "outputs" {
+                    self.d.push(
+                        Diagnostic::error(
+                            "E0414",
+                            n.span,
+                            format!("the completion place `{n}` cannot be an output"),
+                        )
+                        .label("only the child's `finish` marks it")
+                        .help("the child says it is done with `finish`; the parent only takes the token"),
+                    );
+                    continue;
+                }
                 c::PlaceRef::Local(i)
             } else if let Some(&g) = self.globals.get(n.as_str()) {
+                tpl.globals_used.push((g, n.span));
                 c::PlaceRef::Global(g)
+            } else if let Some(child) = n.text.strip_suffix(".done") {
+                self.d.push(
+                    Diagnostic::error(
+                        "E0414",
+                        n.span,
+                        format!("`{child}` is not a child of net `{}`", net.name),
+                    )
+                    .label("no completion place of this name")
+                    .help(format!("declare the child in the net: `children {child}`; its completion place is then `{child}.done`")),
+                );
+                continue;
             } else {
-                let mut cands: Vec<&str> = locals.keys().copied().collect();
+                let mut cands: Vec<&str> = locals.keys().map(String::as_str).collect();
                 cands.extend(self.globals.keys().copied());
                 cands.sort_unstable();
                 let hint = suggest(n.as_str(), cands, Candidates::Declared);
@@ -401,12 +1305,30 @@ impl<'p> Checker<'p> {
 
     fn transition(
         &mut self,
-        net: &NetDecl,
-        locals: &HashMap<&str, u32>,
-        t: &TransitionDecl,
+        net: &'p NetDecl,
+        locals: &HashMap<String, u32>,
+        t: &'p TransitionDecl,
+        tpl: &mut Template<'p>,
     ) -> c::Transition {
-        let inputs = self.places(net, locals, t, &t.inputs, "inputs");
-        let outputs = self.places(net, locals, t, &t.outputs, "outputs");
+        let inputs = self.places(net, locals, t, &t.inputs, "inputs", tpl);
+        let empty = self.places(net, locals, t, &t.empty, "places tested for emptiness", tpl);
+        for (n, r) in t.empty.iter().zip(&empty) {
+            if inputs.contains(r) {
+                self.d.push(
+                    Diagnostic::error(
+                        "E0416",
+                        n.span,
+                        format!(
+                            "transition `{}` takes a token from `{n}` and tests it for emptiness",
+                            t.name
+                        ),
+                    )
+                    .label("never enabled: the place cannot be marked and empty")
+                    .help(format!("keep `{n}` or `not {n}`, not both")),
+                );
+            }
+        }
+        let outputs = self.places(net, locals, t, &t.outputs, "outputs", tpl);
         // Names the event binds, with the parameter index and type.
         let mut bound: HashMap<&str, (u32, Type)> = HashMap::new();
         let mut event = None;
@@ -499,35 +1421,160 @@ impl<'p> Checker<'p> {
             },
         }
         let scope = Scope {
+            net,
             transition: t,
             bound: &bound,
         };
+        let guard = t.guard.as_ref().and_then(|g| self.guard(&scope, g));
         let actions = t
             .actions
             .iter()
-            .filter_map(|a| self.action(&scope, &a.action))
+            .filter_map(|a| self.action(&scope, &a.action, tpl))
             .collect();
         c::Transition {
             name: t.name.text.clone(),
             event,
+            guard,
             inputs,
+            empty,
             outputs,
             actions,
         }
     }
 
-    fn action(&mut self, s: &Scope, a: &Action) -> Option<c::Action> {
-        Some(match a {
-            Action::Activate(n) | Action::Deactivate(n) => {
-                let Some(&id) = self.nets.get(n.as_str()) else {
-                    self.unknown("E0202", "net", n, self.nets.keys().copied().collect());
+    /// An operand of a guard: its compiled form and type (ints and floats are numbers).
+    fn operand(&mut self, s: &Scope, e: &Expr) -> Option<(c::Arg, Type)> {
+        match e {
+            Expr::Var(n) => {
+                let (i, ty) = self.var(s, n)?;
+                Some((c::Arg::EventParam(i), ty))
+            }
+            Expr::SelfParam(n) => {
+                let Some(i) = s.net.params.iter().position(|p| p.name.text == n.text) else {
+                    self.unknown_param(s.net, n);
                     return None;
                 };
-                if matches!(a, Action::Activate(_)) {
-                    c::Action::Activate(id)
-                } else {
-                    c::Action::Deactivate(id)
+                Some((c::Arg::NetParam(i as u32), s.net.params[i].ty))
+            }
+            Expr::Int(v, _) => Some((c::Arg::Literal(c::Value::Int(*v)), Type::Int)),
+            Expr::Float(v, _) => Some((c::Arg::Literal(c::Value::Float(*v)), Type::Float)),
+            Expr::Bool(v, _) => Some((c::Arg::Literal(c::Value::Bool(*v)), Type::Bool)),
+            Expr::Text(v, _) => Some((c::Arg::Literal(c::Value::Text(v.clone())), Type::Text)),
+            Expr::List(..) => match literal(e, Type::FloatList) {
+                Some(v) => Some((c::Arg::Literal(v), Type::FloatList)),
+                None => {
+                    self.guard_type(
+                        e.span(),
+                        "this list is not a list of numbers",
+                        "write lists of numbers only",
+                    );
+                    None
                 }
+            },
+        }
+    }
+
+    fn guard_type(&mut self, span: Span, label: &str, help: &str) {
+        self.d.push(
+            Diagnostic::error("E0410", span, "this guard does not type-check")
+                .label(label.to_string())
+                .help(help.to_string()),
+        );
+    }
+
+    fn guard(&mut self, s: &Scope, g: &Guard) -> Option<c::Guard> {
+        Some(match g {
+            Guard::Or(a, b) => {
+                let (a, b) = (self.guard(s, a), self.guard(s, b));
+                c::Guard::Or(vec![a?, b?])
+            }
+            Guard::And(a, b) => {
+                let (a, b) = (self.guard(s, a), self.guard(s, b));
+                c::Guard::And(vec![a?, b?])
+            }
+            Guard::Not(a) => c::Guard::Not(Box::new(self.guard(s, a)?)),
+            Guard::Value(e) => {
+                let (arg, ty) = self.operand(s, e)?;
+                if ty != Type::Bool {
+                    self.guard_type(
+                        e.span(),
+                        &format!("this is {ty}, not bool"),
+                        "a value alone in a guard must be a bool; compare it: `x == 3`",
+                    );
+                    return None;
+                }
+                c::Guard::Value(arg)
+            }
+            Guard::Compare(op, a, b) => {
+                let (l, r) = (self.operand(s, a), self.operand(s, b));
+                let ((la, lt), (ra, rt)) = (l?, r?);
+                let numeric = |t: Type| matches!(t, Type::Int | Type::Float);
+                let ordering = !matches!(op, CmpOp::Eq | CmpOp::Ne);
+                if ordering && !(numeric(lt) && numeric(rt)) {
+                    self.guard_type(
+                        a.span().to(b.span()),
+                        &format!(
+                            "`{}` compares numbers; these are {lt} and {rt}",
+                            op.symbol()
+                        ),
+                        "order comparisons (`<`, `<=`, `>`, `>=`) take ints and floats",
+                    );
+                    return None;
+                }
+                if !ordering && lt != rt && !(numeric(lt) && numeric(rt)) {
+                    self.guard_type(
+                        a.span().to(b.span()),
+                        &format!("{lt} and {rt} cannot be equal"),
+                        "compare values of one type (an int and a float compare as numbers)",
+                    );
+                    return None;
+                }
+                c::Guard::Compare(*op, la, ra)
+            }
+        })
+    }
+
+    fn action(&mut self, s: &Scope, a: &Action, tpl: &mut Template<'p>) -> Option<c::Action> {
+        Some(match a {
+            Action::Activate { net, args, span } => {
+                let r = self.net_ref(s.net, tpl, net, false)?;
+                let (mode, params, target) = self.target_params(tpl, r);
+                let what = format!("the activation of net `{target}`");
+                match mode {
+                    Mode::AtActivation => {
+                        let args = self.args(s, &what, params, args, *span)?;
+                        c::Action::Activate { net: r, args }
+                    }
+                    _ => {
+                        if !args.is_empty() {
+                            self.d.push(
+                                Diagnostic::error(
+                                    "E0401",
+                                    *span,
+                                    format!(
+                                        "net `{target}` takes no argument when it is activated"
+                                    ),
+                                )
+                                .label(if mode == Mode::Fixed {
+                                    "its parameters are fixed by its instance".to_string()
+                                } else {
+                                    "it has no parameter".to_string()
+                                })
+                                .help(format!("write `activate {target}`")),
+                            );
+                            return None;
+                        }
+                        c::Action::Activate {
+                            net: r,
+                            args: Vec::new(),
+                        }
+                    }
+                }
+            }
+            Action::Deactivate(n) => c::Action::Deactivate(self.net_ref(s.net, tpl, n, true)?),
+            Action::Finish(span) => {
+                tpl.finishes.get_or_insert(*span);
+                c::Action::Finish
             }
             Action::CancelTimer(n) => c::Action::CancelTimer(self.timer(n)?),
             Action::StartTimer { timer, after } => {
@@ -552,18 +1599,23 @@ impl<'p> Checker<'p> {
                     DurationExpr::Seconds(n) => {
                         let (i, ty) = self.var(s, n)?;
                         if !matches!(ty, Type::Int | Type::Float) {
-                            self.d.push(
-                                Diagnostic::error(
-                                    "E0408",
-                                    n.span,
-                                    format!("`{n}` is {ty}; a timer duration in seconds must be int or float"),
-                                )
-                                .label("not a number of seconds")
-                                .help("pass an int or float event parameter, or write a literal such as `30s`"),
-                            );
+                            self.seconds_type(n, ty);
                             return None;
                         }
                         c::TimerDuration::EventParamSeconds(i)
+                    }
+                    DurationExpr::SelfSeconds(n) => {
+                        let Some(i) = s.net.params.iter().position(|p| p.name.text == n.text)
+                        else {
+                            self.unknown_param(s.net, n);
+                            return None;
+                        };
+                        let ty = s.net.params[i].ty;
+                        if !matches!(ty, Type::Int | Type::Float) {
+                            self.seconds_type(n, ty);
+                            return None;
+                        }
+                        c::TimerDuration::NetParamSeconds(i as u32)
                     }
                 };
                 c::Action::StartTimer {
@@ -617,7 +1669,12 @@ impl<'p> Checker<'p> {
                     args,
                 }
             }
-            Action::Emit { event, args, span } => {
+            Action::Emit {
+                event,
+                args,
+                to,
+                span,
+            } => {
                 let Some(&eid) = self.events.get(event.as_str()) else {
                     self.unknown(
                         "E0203",
@@ -627,12 +1684,32 @@ impl<'p> Checker<'p> {
                     );
                     return None;
                 };
+                let target = match to {
+                    Some(n) => Some(self.net_ref(s.net, tpl, n, true)?),
+                    None => None,
+                };
                 let params = &self.event_decl(eid).params;
                 let what = format!("event `{event}`");
                 let args = self.args(s, &what, params, args, *span)?;
-                c::Action::Emit { event: eid, args }
+                c::Action::Emit {
+                    event: eid,
+                    args,
+                    target,
+                }
             }
         })
+    }
+
+    fn seconds_type(&mut self, n: &Name, ty: Type) {
+        self.d.push(
+            Diagnostic::error(
+                "E0408",
+                n.span,
+                format!("`{n}` is {ty}; a timer duration in seconds must be int or float"),
+            )
+            .label("not a number of seconds")
+            .help("pass an int or float parameter, or write a literal such as `30s`"),
+        );
     }
 
     fn timer(&mut self, n: &Name) -> Option<u32> {
@@ -671,6 +1748,14 @@ impl<'p> Checker<'p> {
                 }
             }
         };
+        let help = if s.net.params.iter().any(|p| p.name.text == n.text) {
+            format!(
+                "`{n}` is a parameter of net `{}`: write `self.{n}`",
+                s.net.name
+            )
+        } else {
+            help
+        };
         self.d.push(
             Diagnostic::error(
                 "E0207",
@@ -692,24 +1777,7 @@ impl<'p> Checker<'p> {
         span: Span,
     ) -> Option<Vec<c::Arg>> {
         if params.len() != args.len() {
-            let sig = params
-                .iter()
-                .map(|p| format!("{}: {}", p.name, p.ty))
-                .collect::<Vec<_>>()
-                .join(", ");
-            self.d.push(
-                Diagnostic::error(
-                    "E0401",
-                    span,
-                    format!(
-                        "{what} takes {} argument(s), {} given",
-                        params.len(),
-                        args.len()
-                    ),
-                )
-                .label("wrong number of arguments")
-                .help(format!("its parameters are ({sig})")),
-            );
+            self.arity(what, params, args.len(), span);
             // Still type-check what lines up, to report everything in one run.
         }
         let mut out = Vec::new();
@@ -732,6 +1800,18 @@ impl<'p> Checker<'p> {
             }
             return Some(c::Arg::EventParam(i));
         }
+        if let Expr::SelfParam(n) = a {
+            let Some(i) = s.net.params.iter().position(|q| q.name.text == n.text) else {
+                self.unknown_param(s.net, n);
+                return None;
+            };
+            let ty = s.net.params[i].ty;
+            if ty != p.ty {
+                self.mismatch(what, p, a.span(), &format!("`self.{n}` is {ty}"));
+                return None;
+            }
+            return Some(c::Arg::NetParam(i as u32));
+        }
         match literal(a, p.ty) {
             Some(v) => Some(c::Arg::Literal(v)),
             None => {
@@ -741,7 +1821,7 @@ impl<'p> Checker<'p> {
                     Expr::Bool(..) => "a bool",
                     Expr::Text(..) => "a text",
                     Expr::List(..) => "a list that is not a list of numbers",
-                    Expr::Var(_) => unreachable!("handled above"),
+                    Expr::Var(_) | Expr::SelfParam(_) => "a name",
                 };
                 self.mismatch(what, p, a.span(), &format!("this is {found}"));
                 None
@@ -772,9 +1852,146 @@ impl<'p> Checker<'p> {
     }
 }
 
-struct Scope<'a> {
-    transition: &'a TransitionDecl,
-    bound: &'a HashMap<&'a str, (u32, Type)>,
+/// A value converted to type `ty` (an int where a float is declared).
+fn convert(v: &c::Value, ty: Type) -> Option<c::Value> {
+    match (v, ty) {
+        (c::Value::Int(i), Type::Float) => Some(c::Value::Float(*i as f64)),
+        (v, t) if v.ty() == t => Some(v.clone()),
+        _ => None,
+    }
+}
+
+/// A net parameter read as seconds, in milliseconds (negative or not a number: zero).
+fn seconds_to_millis(v: &c::Value) -> u64 {
+    let secs = match v {
+        c::Value::Int(i) => *i as f64,
+        c::Value::Float(f) => *f,
+        _ => 0.0,
+    };
+    if secs.is_finite() && secs > 0.0 {
+        (secs * 1e3).round().min(u64::MAX as f64) as u64
+    } else {
+        0
+    }
+}
+
+fn fold_arg(a: &mut c::Arg, fixed: Option<&[c::Value]>) {
+    if let (c::Arg::NetParam(i), Some(values)) = (&*a, fixed) {
+        *a = c::Arg::Literal(values[*i as usize].clone());
+    }
+}
+
+fn fold_args(args: &mut [c::Arg], fixed: Option<&[c::Value]>) {
+    for a in args {
+        fold_arg(a, fixed);
+    }
+}
+
+/// A guard with an instance's fixed parameters replaced by their values, and what is then
+/// constant computed.
+fn fold_guard(g: c::Guard, fixed: Option<&[c::Value]>) -> c::Guard {
+    use c::Guard as G;
+    match g {
+        G::Const(b) => G::Const(b),
+        G::Not(a) => match fold_guard(*a, fixed) {
+            G::Const(b) => G::Const(!b),
+            a => G::Not(Box::new(a)),
+        },
+        G::And(list) => {
+            let mut out = Vec::new();
+            for a in list {
+                match fold_guard(a, fixed) {
+                    G::Const(true) => {}
+                    G::Const(false) => return G::Const(false),
+                    a => out.push(a),
+                }
+            }
+            if out.is_empty() {
+                G::Const(true)
+            } else {
+                G::And(out)
+            }
+        }
+        G::Or(list) => {
+            let mut out = Vec::new();
+            for a in list {
+                match fold_guard(a, fixed) {
+                    G::Const(false) => {}
+                    G::Const(true) => return G::Const(true),
+                    a => out.push(a),
+                }
+            }
+            if out.is_empty() {
+                G::Const(false)
+            } else {
+                G::Or(out)
+            }
+        }
+        G::Compare(op, mut a, mut b) => {
+            fold_arg(&mut a, fixed);
+            fold_arg(&mut b, fixed);
+            match (&a, &b) {
+                (c::Arg::Literal(x), c::Arg::Literal(y)) => G::Const(c::compare(op, x, y)),
+                _ => G::Compare(op, a, b),
+            }
+        }
+        G::Value(mut a) => {
+            fold_arg(&mut a, fixed);
+            match a {
+                c::Arg::Literal(c::Value::Bool(b)) => G::Const(b),
+                a => G::Value(a),
+            }
+        }
+    }
+}
+
+/// Resolves a formula's names against a compiled project; `unknown` is told of each name that
+/// does not resolve (with "place" or "net"), and the result is then `None`.
+pub fn resolve_formula(
+    project: &c::CompiledProject,
+    f: &Formula,
+    unknown: &mut dyn FnMut(&Name, &str),
+) -> Option<c::StateFormula> {
+    use c::StateFormula as S;
+    Some(match f {
+        Formula::Const(b, _) => S::Const(*b),
+        Formula::Marked(n) => match project.place_ref(&n.text) {
+            Some((net, r)) => S::Marked(net, r),
+            None => {
+                unknown(n, "place");
+                return None;
+            }
+        },
+        Formula::Active(n) => match project.net_id(&n.text) {
+            Some(id) => S::Active(id),
+            None => {
+                unknown(n, "net");
+                return None;
+            }
+        },
+        Formula::Not(a) => S::Not(Box::new(resolve_formula(project, a, unknown)?)),
+        Formula::And(a, b) => {
+            let (a, b) = (
+                resolve_formula(project, a, unknown),
+                resolve_formula(project, b, unknown),
+            );
+            S::And(Box::new(a?), Box::new(b?))
+        }
+        Formula::Or(a, b) => {
+            let (a, b) = (
+                resolve_formula(project, a, unknown),
+                resolve_formula(project, b, unknown),
+            );
+            S::Or(Box::new(a?), Box::new(b?))
+        }
+        Formula::Implies(a, b) => {
+            let (a, b) = (
+                resolve_formula(project, a, unknown),
+                resolve_formula(project, b, unknown),
+            );
+            S::Implies(Box::new(a?), Box::new(b?))
+        }
+    })
 }
 
 /// A literal as a value of type `ty`; an int literal is accepted where a float is expected.
@@ -798,4 +2015,130 @@ pub fn literal(e: &Expr, ty: Type) -> Option<c::Value> {
         }
         _ => return None,
     })
+}
+
+/// The warnings an `@allow` stands for, and the `@allow`s that stand for nothing.
+///
+/// An `@allow(CODE)` before a transition or a place silences the warnings of that code whose
+/// location is the item's name; before a net, those located at the net's name or any of its
+/// items. The checker's pass (`final_pass` false) also reports an `@allow` of a code that is not
+/// a warning's (W0106); the last pass, once the verification's warnings are in too, reports an
+/// `@allow` that silenced nothing (W0105).
+pub fn apply_allows(project: &Project, d: &mut Diagnostics, final_pass: bool) {
+    let judged_all = final_pass;
+    struct Allowed<'a> {
+        allow: &'a Allow,
+        covers: Vec<Span>,
+        used: bool,
+    }
+    let mut allows: Vec<Allowed> = Vec::new();
+    for net in project.nets() {
+        let items: Vec<Span> = net
+            .items
+            .iter()
+            .filter_map(|i| match &i.kind {
+                ItemKind::Place(p) => Some(p.name.span),
+                ItemKind::Transition(t) => Some(t.name.span),
+                ItemKind::Children(_) => None,
+            })
+            .collect();
+        for a in &net.allows {
+            let mut covers = vec![net.name.span];
+            covers.extend(items.iter().copied());
+            allows.push(Allowed {
+                allow: a,
+                covers,
+                used: false,
+            });
+        }
+        for item in &net.items {
+            let span = match &item.kind {
+                ItemKind::Place(p) => p.name.span,
+                ItemKind::Transition(t) => t.name.span,
+                ItemKind::Children(_) => continue,
+            };
+            for a in &item.allows {
+                allows.push(Allowed {
+                    allow: a,
+                    covers: vec![span],
+                    used: false,
+                });
+            }
+        }
+    }
+    if allows.is_empty() {
+        return;
+    }
+    let same = |a: Span, b: Span| a.file == b.file && a.start == b.start && a.end == b.end;
+    let mut kept = Diagnostics::new();
+    for diag in std::mem::take(d).into_iter() {
+        let silenced = diag.severity == crate::diag::Severity::Warning
+            && diag.span.is_some_and(|s| {
+                let mut hit = false;
+                for a in allows.iter_mut() {
+                    if a.allow.code.text == diag.code && a.covers.iter().any(|c| same(*c, s)) {
+                        a.used = true;
+                        hit = true;
+                    }
+                }
+                hit
+            });
+        if !silenced {
+            kept.push(diag);
+        }
+    }
+    for a in &allows {
+        let code = a.allow.code.text.as_str();
+        let a_warning = code.starts_with('W')
+            && code.len() == 5
+            && code[1..].chars().all(|c| c.is_ascii_digit());
+        if !a_warning && !final_pass {
+            kept.push(
+                Diagnostic::warning("W0106", a.allow.code.span, format!("`{code}` is not the code of a warning"))
+                    .label("nothing to allow")
+                    .help("only warnings (codes Wxxxx, listed in docs/diagnostics.md) can be intended; errors must be fixed"),
+            );
+        } else if a_warning && judged_all && !a.used {
+            kept.push(
+                Diagnostic::warning(
+                    "W0105",
+                    a.allow.code.span,
+                    format!("`@allow({code})` silences nothing"),
+                )
+                .label("no such warning here")
+                .help("remove it: the construct no longer gives this warning"),
+            );
+        }
+    }
+    *d = kept;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn comparisons_follow_the_types() {
+        use c::compare;
+        use c::Value as V;
+        assert!(compare(CmpOp::Eq, &V::Int(3), &V::Float(3.0)));
+        assert!(compare(CmpOp::Lt, &V::Int(2), &V::Float(2.5)));
+        assert!(!compare(
+            CmpOp::Eq,
+            &V::Float(f64::NAN),
+            &V::Float(f64::NAN)
+        ));
+        assert!(compare(CmpOp::Ne, &V::Float(f64::NAN), &V::Float(f64::NAN)));
+        assert!(compare(
+            CmpOp::Eq,
+            &V::Text("r1".into()),
+            &V::Text("r1".into())
+        ));
+        assert!(!compare(
+            CmpOp::Lt,
+            &V::Text("a".into()),
+            &V::Text("b".into())
+        ));
+        assert!(compare(CmpOp::Gt, &V::Int(i64::MAX), &V::Int(i64::MAX - 1)));
+    }
 }

@@ -33,10 +33,124 @@ pub use petrel_value::Value;
 /// Where an argument's value comes from when the transition fires.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Arg {
-    /// A literal written in the net.
+    /// A literal written in the net (or a parameter of an instance, fixed when it was made).
     Literal(Value),
     /// Parameter number N of the event that fired the transition.
     EventParam(u32),
+    /// Parameter number N of the transition's net, bound when the net was activated.
+    NetParam(u32),
+}
+
+/// A comparison of a guard.
+pub use crate::model::CmpOp;
+
+/// A resolved guard. Parameters fixed by an instance are folded into literals; what remains
+/// refers to the triggering event's parameters and the net's activation arguments.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Guard {
+    /// A constant (a guard over fixed parameters only).
+    Const(bool),
+    /// Negation.
+    Not(Box<Guard>),
+    /// Every one holds.
+    And(Vec<Guard>),
+    /// Some one holds.
+    Or(Vec<Guard>),
+    /// A comparison; the checker proved the operands comparable with this operator.
+    Compare(CmpOp, Arg, Arg),
+    /// A bool operand standing alone.
+    Value(Arg),
+}
+
+/// A comparison of two values, as guards compare them (docs/semantics.md): ints and floats as
+/// numbers, NaN equal to nothing, other types by equality only.
+pub fn compare(op: CmpOp, x: &Value, y: &Value) -> bool {
+    use Value as V;
+    let num = |v: &V| match v {
+        V::Int(i) => Some(*i as f64),
+        V::Float(f) => Some(*f),
+        _ => None,
+    };
+    if let (V::Int(a), V::Int(b)) = (x, y) {
+        // Exact for every int, where f64 would round above 2^53.
+        return match op {
+            CmpOp::Eq => a == b,
+            CmpOp::Ne => a != b,
+            CmpOp::Lt => a < b,
+            CmpOp::Le => a <= b,
+            CmpOp::Gt => a > b,
+            CmpOp::Ge => a >= b,
+        };
+    }
+    if let (Some(a), Some(b)) = (num(x), num(y)) {
+        return match op {
+            CmpOp::Eq => a == b,
+            CmpOp::Ne => a != b,
+            CmpOp::Lt => a < b,
+            CmpOp::Le => a <= b,
+            CmpOp::Gt => a > b,
+            CmpOp::Ge => a >= b,
+        };
+    }
+    match op {
+        CmpOp::Eq => x == y,
+        CmpOp::Ne => x != y,
+        _ => false,
+    }
+}
+
+impl Guard {
+    /// Whether the guard holds for an event's parameters and its net's activation arguments
+    /// (the checker proved every index in range and every comparison well typed).
+    pub fn holds(&self, event: &[Value], net: &[Value]) -> bool {
+        // Borrowed, never cloned: the player evaluates guards with no allocation.
+        fn value<'a>(a: &'a Arg, event: &'a [Value], net: &'a [Value]) -> Option<&'a Value> {
+            match a {
+                Arg::Literal(v) => Some(v),
+                Arg::EventParam(i) => event.get(*i as usize),
+                Arg::NetParam(i) => net.get(*i as usize),
+            }
+        }
+        match self {
+            Guard::Const(b) => *b,
+            Guard::Not(a) => !a.holds(event, net),
+            Guard::And(list) => list.iter().all(|a| a.holds(event, net)),
+            Guard::Or(list) => list.iter().any(|a| a.holds(event, net)),
+            Guard::Value(a) => matches!(value(a, event, net), Some(Value::Bool(true))),
+            Guard::Compare(op, a, b) => match (value(a, event, net), value(b, event, net)) {
+                (Some(x), Some(y)) => compare(*op, x, y),
+                _ => false,
+            },
+        }
+    }
+}
+
+/// A resolved formula over the state: an invariant, or a script's `expect always`.
+#[derive(Clone, Debug, PartialEq)]
+pub enum StateFormula {
+    /// A constant.
+    Const(bool),
+    /// The place is marked (seen from the net: a global place from any net).
+    Marked(NetId, PlaceRef),
+    /// The net is active.
+    Active(NetId),
+    /// Negation.
+    Not(Box<StateFormula>),
+    /// Conjunction.
+    And(Box<StateFormula>, Box<StateFormula>),
+    /// Disjunction.
+    Or(Box<StateFormula>, Box<StateFormula>),
+    /// Implication.
+    Implies(Box<StateFormula>, Box<StateFormula>),
+}
+
+/// An invariant of the project.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Invariant {
+    /// Its name in the manifest.
+    pub name: String,
+    /// What must hold in every stable state.
+    pub formula: StateFormula,
 }
 
 /// How long a started timer runs.
@@ -46,15 +160,25 @@ pub enum TimerDuration {
     Millis(u64),
     /// Parameter number N (int or float) of the triggering event, in seconds.
     EventParamSeconds(u32),
+    /// Activation argument number N (int or float) of the net, in seconds.
+    NetParamSeconds(u32),
 }
 
 /// A resolved action.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Action {
-    /// Give a net its initial marking.
-    Activate(NetId),
-    /// Take a net's marking away.
+    /// Give a net its initial marking (and its activation arguments, one per parameter when
+    /// its parameters are bound at activation, else none).
+    Activate {
+        /// The net.
+        net: NetId,
+        /// Its arguments.
+        args: Vec<Arg>,
+    },
+    /// Take a net's marking away, and its subtree's (children first).
     Deactivate(NetId),
+    /// Mark the parent's completion place of the transition's net, then deactivate the net.
+    Finish,
     /// Start (or restart) a timer.
     StartTimer {
         /// The timer.
@@ -79,6 +203,8 @@ pub enum Action {
         event: EventId,
         /// One argument per declared parameter, types checked.
         args: Vec<Arg>,
+        /// The one net it is addressed to, if any.
+        target: Option<NetId>,
     },
 }
 
@@ -89,8 +215,12 @@ pub struct Transition {
     pub name: String,
     /// Triggering event; `None` for an immediate transition.
     pub event: Option<EventId>,
+    /// The guard; `None`: always true.
+    pub guard: Option<Guard>,
     /// Input places, no duplicates.
     pub inputs: Vec<PlaceRef>,
+    /// Places that must be empty (emptiness tests), no duplicates, none an input.
+    pub empty: Vec<PlaceRef>,
     /// Output places, no duplicates.
     pub outputs: Vec<PlaceRef>,
     /// Actions, in firing order.
@@ -106,15 +236,24 @@ pub struct Place {
     pub initial: bool,
 }
 
-/// A resolved net.
+/// A resolved net: a net of the project, or an instance of a template.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Net {
-    /// Net name.
+    /// Its name: the net's, an instance's (`R1`), or a child instance's (`PARENT/CHILD`).
     pub name: String,
-    /// Local places, in written order.
+    /// The net as written in its file (the template of an instance; else the same as `name`).
+    pub template: String,
+    /// Parameters bound when the net is activated (`activate NET(args)`); empty when it has
+    /// none or an instance fixed them.
+    pub params: Vec<(String, Type)>,
+    /// Local places, in written order, then one completion place (`CHILD.done`) per child.
     pub places: Vec<Place>,
     /// Transitions, in written order (the order in which they are offered an event).
     pub transitions: Vec<Transition>,
+    /// Its children, in declared order.
+    pub children: Vec<NetId>,
+    /// Its parent, and the index of its completion place among the parent's places.
+    pub parent: Option<(NetId, u32)>,
 }
 
 /// A global place.
@@ -124,6 +263,8 @@ pub struct GlobalPlace {
     pub name: String,
     /// Marked when the mission starts.
     pub initial: bool,
+    /// The nets that may use it; `None`: every net.
+    pub nets: Option<Vec<NetId>>,
 }
 
 /// A declared event.
@@ -184,6 +325,8 @@ pub struct CompiledProject {
     /// Intended final markings: each a set of places (with the net they are seen from; any net
     /// for a global place) that a planned end of the mission holds.
     pub finals: Vec<Vec<(NetId, PlaceRef)>>,
+    /// Invariants: what must hold in every stable state.
+    pub invariants: Vec<Invariant>,
 }
 
 impl CompiledProject {
@@ -193,6 +336,32 @@ impl CompiledProject {
             .iter()
             .position(|n| n.name == name)
             .map(|i| i as NetId)
+    }
+
+    /// The place named `NET.place` or `global.place` (a net's name may hold `/`, a completion
+    /// place's name `.`): the net it is seen from (0 for a global place) and the place.
+    pub fn place_ref(&self, qualified: &str) -> Option<(NetId, PlaceRef)> {
+        if let Some(g) = qualified.strip_prefix("global.") {
+            return self
+                .globals
+                .iter()
+                .position(|x| x.name == g)
+                .map(|i| (0, PlaceRef::Global(i as u32)));
+        }
+        // Every split at a `.`: the net's name holds no dot, the place's may (`T.done`).
+        for (i, _) in qualified.match_indices('.') {
+            let (net, place) = (&qualified[..i], &qualified[i + 1..]);
+            if let Some(n) = self.net_id(net) {
+                if let Some(p) = self.nets[n as usize]
+                    .places
+                    .iter()
+                    .position(|p| p.name == place)
+                {
+                    return Some((n, PlaceRef::Local(p as u32)));
+                }
+            }
+        }
+        None
     }
 
     /// The event named `name`.

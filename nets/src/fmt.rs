@@ -47,16 +47,64 @@ fn trailing(out: &mut String, c: &Option<String>) {
     }
 }
 
+/// `@allow(CODE, "reason")`.
+pub fn format_allow(a: &Allow) -> String {
+    match &a.reason {
+        Some(r) => format!("@allow({}, {})", a.code, quote(r)),
+        None => format!("@allow({})", a.code),
+    }
+}
+
+/// `net NAME` or `net NAME(p: type, ...)`, without the brace.
+pub fn format_net_header(net: &NetDecl) -> String {
+    if net.params.is_empty() {
+        format!("net {}", net.name)
+    } else {
+        let params: Vec<String> = net
+            .params
+            .iter()
+            .map(|p| format!("{}: {}", p.name, p.ty))
+            .collect();
+        format!("net {}({})", net.name, params.join(", "))
+    }
+}
+
+/// `children A, B(args)`.
+pub fn format_children(children: &[ChildDecl]) -> String {
+    let list: Vec<String> = children
+        .iter()
+        .map(|c| match &c.args {
+            Some(args) => format!("{}({})", c.net, format_args(args)),
+            None => c.net.text.clone(),
+        })
+        .collect();
+    format!("children {}", list.join(", "))
+}
+
 fn format_net(out: &mut String, net: &NetDecl) {
     comments(out, "", &net.trivia.comments);
-    let _ = writeln!(out, "net {} {{", net.name);
+    for a in &net.allows {
+        out.push_str(&format_allow(a));
+        out.push('\n');
+    }
+    let _ = writeln!(out, "{} {{", format_net_header(net));
     for (i, item) in net.items.iter().enumerate() {
         if i > 0 && item.trivia.blank_before {
             out.push('\n');
         }
         comments(out, INDENT, &item.trivia.comments);
+        for a in &item.allows {
+            out.push_str(INDENT);
+            out.push_str(&format_allow(a));
+            out.push('\n');
+        }
         out.push_str(INDENT);
         match &item.kind {
+            ItemKind::Children(c) => {
+                out.push_str(&format_children(c));
+                trailing(out, &item.trailing);
+                out.push('\n');
+            }
             ItemKind::Place(p) => {
                 out.push_str(&format_place(p));
                 trailing(out, &item.trailing);
@@ -102,17 +150,28 @@ pub fn format_place(p: &PlaceDecl) -> String {
     }
 }
 
-/// `transition NAME on EVENT(bindings): INPUTS -> OUTPUTS`, without the action block.
+/// `transition NAME on EVENT(bindings) if GUARD: INPUTS, not EMPTY -> OUTPUTS`, without the
+/// action block.
 pub fn format_transition_header(t: &TransitionDecl) -> String {
     let mut s = format!("transition {}", t.name);
     if let Some(trigger) = &t.trigger {
         s.push_str(" on ");
         s.push_str(&format_trigger(trigger));
     }
+    if let Some(g) = &t.guard {
+        s.push_str(" if ");
+        s.push_str(&format_guard(g));
+    }
     s.push(':');
-    if !t.inputs.is_empty() {
+    let inputs: Vec<String> = t
+        .inputs
+        .iter()
+        .map(|n| n.text.clone())
+        .chain(t.empty.iter().map(|n| format!("not {n}")))
+        .collect();
+    if !inputs.is_empty() {
         s.push(' ');
-        s.push_str(&join_names(&t.inputs));
+        s.push_str(&inputs.join(", "));
     }
     s.push_str(" ->");
     if !t.outputs.is_empty() {
@@ -120,6 +179,59 @@ pub fn format_transition_header(t: &TransitionDecl) -> String {
         s.push_str(&join_names(&t.outputs));
     }
     s
+}
+
+/// A guard, with the parentheses its precedence needs and no more (`not` binds tightest, then
+/// `and`, then `or`).
+pub fn format_guard(g: &Guard) -> String {
+    guard_at(g, 0)
+}
+
+/// `level`: 0 inside an `or`, 1 inside an `and`, 2 under a `not`.
+fn guard_at(g: &Guard, level: u8) -> String {
+    let (text, own) = match g {
+        Guard::Or(a, b) => (format!("{} or {}", guard_at(a, 0), guard_at(b, 1)), 0),
+        Guard::And(a, b) => (format!("{} and {}", guard_at(a, 1), guard_at(b, 2)), 1),
+        Guard::Not(a) => (format!("not {}", guard_at(a, 2)), 2),
+        Guard::Compare(op, a, b) => (
+            format!("{} {} {}", format_expr(a), op.symbol(), format_expr(b)),
+            3,
+        ),
+        Guard::Value(e) => (format_expr(e), 3),
+    };
+    if own < level {
+        format!("({text})")
+    } else {
+        text
+    }
+}
+
+/// A formula of an invariant or a script, with the parentheses its precedence needs (`not`,
+/// then `and`, then `or`, then `implies`, which groups to the right).
+pub fn format_formula(f: &Formula) -> String {
+    formula_at(f, 0)
+}
+
+/// `level`: 0 top or right of `implies`, 1 left of `implies` / inside `or`, 2 inside `and`,
+/// 3 under `not`.
+fn formula_at(f: &Formula, level: u8) -> String {
+    let (text, own) = match f {
+        Formula::Implies(a, b) => (
+            format!("{} implies {}", formula_at(a, 1), formula_at(b, 0)),
+            0,
+        ),
+        Formula::Or(a, b) => (format!("{} or {}", formula_at(a, 1), formula_at(b, 2)), 1),
+        Formula::And(a, b) => (format!("{} and {}", formula_at(a, 2), formula_at(b, 3)), 2),
+        Formula::Not(a) => (format!("not {}", formula_at(a, 3)), 3),
+        Formula::Marked(n) => (n.text.clone(), 4),
+        Formula::Active(n) => (format!("active {n}"), 4),
+        Formula::Const(b, _) => (b.to_string(), 4),
+    };
+    if own < level {
+        format!("({text})")
+    } else {
+        text
+    }
 }
 
 /// `EVENT` or `EVENT(a, b: text)`.
@@ -150,8 +262,15 @@ fn join_names(names: &[Name]) -> String {
 /// One action as written in a net, such as `call GUI.goto(x, 3.5)`.
 pub fn format_action(a: &Action) -> String {
     match a {
-        Action::Activate(n) => format!("activate {n}"),
+        Action::Activate { net, args, .. } => {
+            if args.is_empty() {
+                format!("activate {net}")
+            } else {
+                format!("activate {net}({})", format_args(args))
+            }
+        }
         Action::Deactivate(n) => format!("deactivate {n}"),
+        Action::Finish(_) => "finish".to_string(),
         Action::CancelTimer(n) => format!("cancel {n}"),
         Action::StartTimer { timer, after } => {
             format!("start {timer} after {}", format_duration(after))
@@ -162,12 +281,18 @@ pub fn format_action(a: &Action) -> String {
             args,
             ..
         } => format!("call {program}.{function}({})", format_args(args)),
-        Action::Emit { event, args, .. } => {
-            if args.is_empty() {
+        Action::Emit {
+            event, args, to, ..
+        } => {
+            let mut s = if args.is_empty() {
                 format!("emit {event}")
             } else {
                 format!("emit {event}({})", format_args(args))
+            };
+            if let Some(net) = to {
+                let _ = write!(s, " to {net}");
             }
+            s
         }
     }
 }
@@ -178,6 +303,7 @@ fn format_duration(d: &DurationExpr) -> String {
             format!("{}{}", format_number(*value), unit.suffix())
         }
         DurationExpr::Seconds(n) => n.text.clone(),
+        DurationExpr::SelfSeconds(n) => format!("self.{n}"),
     }
 }
 
@@ -205,6 +331,7 @@ pub fn format_expr(e: &Expr) -> String {
         Expr::Text(s, _) => quote(s),
         Expr::List(items, _) => format!("[{}]", format_args(items)),
         Expr::Var(n) => n.text.clone(),
+        Expr::SelfParam(n) => format!("self.{n}"),
     }
 }
 

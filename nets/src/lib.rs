@@ -10,6 +10,7 @@ pub mod diag;
 pub mod dot;
 pub mod duration;
 pub mod fmt;
+pub mod formula;
 pub mod manifest;
 pub mod model;
 pub mod names;

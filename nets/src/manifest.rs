@@ -66,7 +66,11 @@ impl<'de, V: Deserialize<'de>> Deserialize<'de> for Ordered<V> {
 struct RawManifest {
     project: RawProject,
     #[serde(default)]
-    globals: Ordered<Spanned<i64>>,
+    globals: Ordered<Spanned<toml::Value>>,
+    #[serde(default)]
+    instances: Ordered<RawInstance>,
+    #[serde(default)]
+    invariants: Ordered<Spanned<String>>,
     #[serde(default)]
     events: Ordered<RawEvent>,
     #[serde(default)]
@@ -115,6 +119,14 @@ struct RawProgram {
 #[serde(deny_unknown_fields)]
 struct RawTimer {
     event: Spanned<String>,
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawInstance {
+    net: Spanned<String>,
+    #[serde(default)]
+    args: Vec<Spanned<toml::Value>>,
 }
 
 struct Reader<'d> {
@@ -212,6 +224,55 @@ impl Reader<'_> {
     fn params(&mut self, list: &[Spanned<String>], text: &str) -> Vec<Param> {
         list.iter().filter_map(|p| self.param(p, text)).collect()
     }
+
+    /// A TOML value written as an argument (an instance's): the same literals as in a net.
+    fn expr(&mut self, v: &Spanned<toml::Value>) -> Option<Expr> {
+        let span = self.span(v.span());
+        Some(match v.get_ref() {
+            toml::Value::Integer(i) => Expr::Int(*i, span),
+            toml::Value::Float(f) if f.is_finite() => Expr::Float(*f, span),
+            toml::Value::Boolean(b) => Expr::Bool(*b, span),
+            toml::Value::String(t) => Expr::Text(t.clone(), span),
+            toml::Value::Array(items) => {
+                let mut out = Vec::new();
+                for i in items {
+                    match i {
+                        toml::Value::Integer(n) => out.push(Expr::Int(*n, span)),
+                        toml::Value::Float(f) if f.is_finite() => out.push(Expr::Float(*f, span)),
+                        _ => return self.bad_argument(span),
+                    }
+                }
+                Expr::List(out, span)
+            }
+            _ => return self.bad_argument(span),
+        })
+    }
+
+    fn bad_argument(&mut self, span: Span) -> Option<Expr> {
+        self.diags.push(
+            Diagnostic::error(
+                "E0101",
+                span,
+                "this argument is not a value of a net parameter",
+            )
+            .label("not an int, a finite float, a bool, a text or a list of numbers")
+            .help("write arguments as in a net: 3, 2.5, true, \"text\", [1.0, 2.0]"),
+        );
+        None
+    }
+}
+
+/// Where `needle` is quoted (`"needle"`) inside `range` of `text`, for names read from a TOML
+/// value whose own span covers more than the name.
+fn quoted_in(
+    text: &str,
+    range: std::ops::Range<usize>,
+    needle: &str,
+) -> Option<std::ops::Range<usize>> {
+    let hay = text.get(range.clone())?;
+    let quoted = format!("\"{needle}\"");
+    hay.find(&quoted)
+        .map(|i| range.start + i + 1..range.start + i + 1 + needle.len())
 }
 
 /// Where a TOML parse error is and what it says, on one line: for the manifest and for every
@@ -262,7 +323,72 @@ pub fn parse_manifest(file: FileId, text: &str, diags: &mut Diagnostics) -> Opti
     }
     for (k, v) in &raw.globals.0 {
         let name = r.name(k, "place", text);
-        let tokens = *v.get_ref();
+        // `x = 1`, or `x = { initial = 1, nets = ["A", "B"] }` for a group of nets.
+        let (tokens, nets) = match v.get_ref() {
+            toml::Value::Integer(t) => (*t, None),
+            toml::Value::Table(t) => {
+                let mut nets = Vec::new();
+                let mut ok = true;
+                for key in t.keys() {
+                    if key != "initial" && key != "nets" {
+                        ok = false;
+                        r.diags.push(
+                            Diagnostic::error("E0101", r.span(v.span()), format!("unknown key `{key}` in global place `{name}`"))
+                                .label("not `initial` or `nets`")
+                                .help("write `NAME = 0|1`, or `NAME = { initial = 0|1, nets = [\"NET\", ...] }`"),
+                        );
+                    }
+                }
+                let initial = match t.get("initial") {
+                    Some(toml::Value::Integer(i)) => *i,
+                    None => 0,
+                    Some(_) => {
+                        ok = false;
+                        0
+                    }
+                };
+                match t.get("nets") {
+                    Some(toml::Value::Array(list)) => {
+                        for item in list {
+                            match item {
+                                toml::Value::String(n) => {
+                                    let range = quoted_in(text, v.span(), n).unwrap_or(v.span());
+                                    nets.push(Name {
+                                        text: n.clone(),
+                                        span: r.span(range),
+                                    });
+                                }
+                                _ => ok = false,
+                            }
+                        }
+                    }
+                    None => ok = false,
+                    Some(_) => ok = false,
+                }
+                if !ok {
+                    r.diags.push(
+                        Diagnostic::error("E0101", r.span(v.span()), format!("global place `{name}` is not written as expected"))
+                            .label("expected `{ initial = 0|1, nets = [\"NET\", ...] }`")
+                            .help("`initial` is 0 or 1; `nets` lists the nets (or templates) that may use the place"),
+                    );
+                }
+                (initial, Some(nets))
+            }
+            _ => {
+                r.diags.push(
+                    Diagnostic::error(
+                        "E0101",
+                        r.span(v.span()),
+                        format!("global place `{name}` is not written as expected"),
+                    )
+                    .label("expected 0, 1, or a table")
+                    .help(
+                        "write `NAME = 0|1`, or `NAME = { initial = 0|1, nets = [\"NET\", ...] }`",
+                    ),
+                );
+                (0, None)
+            }
+        };
         if !(0..=1).contains(&tokens) {
             r.diags.push(
                 Diagnostic::error(
@@ -277,6 +403,42 @@ pub fn parse_manifest(file: FileId, text: &str, diags: &mut Diagnostics) -> Opti
         m.globals.push(GlobalPlaceDecl {
             name,
             tokens: tokens.clamp(0, u32::MAX as i64) as u32,
+            nets,
+        });
+    }
+    for (k, v) in &raw.instances.0 {
+        let name = r.name(k, "net", text);
+        let net = r.name(&v.net, "net", text);
+        let args = v.args.iter().filter_map(|a| r.expr(a)).collect();
+        m.instances.push(InstanceDecl { name, net, args });
+    }
+    for (k, v) in &raw.invariants.0 {
+        let name = r.name(k, "invariant", text);
+        let mut range = v.span();
+        let raw_text = &text[range.clone()];
+        // Positions inside the string are exact when it is a basic string without escapes.
+        let exact = raw_text.starts_with('"')
+            && !raw_text.starts_with("\"\"\"")
+            && !raw_text.contains('\\');
+        if exact {
+            range = range.start + 1..range.end.saturating_sub(1);
+        }
+        let formula = if exact {
+            crate::formula::parse_formula(file, range.start, v.get_ref(), "E0612", r.diags)
+        } else {
+            // Escapes move positions: report at the whole string.
+            let mut inner = Diagnostics::new();
+            let f = crate::formula::parse_formula(file, 0, v.get_ref(), "E0612", &mut inner);
+            for mut d in inner.into_iter() {
+                d.span = Some(r.span(v.span()));
+                r.diags.push(d);
+            }
+            f
+        };
+        m.invariants.push(InvariantDecl {
+            name,
+            text: v.get_ref().clone(),
+            formula,
         });
     }
     for (k, v) in &raw.events.0 {
@@ -361,6 +523,22 @@ fn toml_key(s: &str) -> String {
     }
 }
 
+/// An argument as TOML writes it (floats always with a point, so they read back as floats).
+fn toml_expr(e: &Expr) -> String {
+    match e {
+        Expr::Int(i, _) => i.to_string(),
+        Expr::Float(f, _) => crate::fmt::format_float(*f),
+        Expr::Bool(b, _) => b.to_string(),
+        Expr::Text(t, _) => toml_str(t),
+        Expr::List(items, _) => format!(
+            "[{}]",
+            items.iter().map(toml_expr).collect::<Vec<_>>().join(", ")
+        ),
+        // Names do not appear in the manifest's arguments.
+        Expr::Var(n) | Expr::SelfParam(n) => toml_str(&n.text),
+    }
+}
+
 fn param_list(params: &[Param]) -> String {
     let items: Vec<String> = params
         .iter()
@@ -383,7 +561,40 @@ pub fn format_manifest(m: &Manifest) -> String {
     if !m.globals.is_empty() {
         out.push_str("\n[globals]\n");
         for g in &m.globals {
-            let _ = writeln!(out, "{} = {}", toml_key(&g.name.text), g.tokens);
+            match &g.nets {
+                None => {
+                    let _ = writeln!(out, "{} = {}", toml_key(&g.name.text), g.tokens);
+                }
+                Some(nets) => {
+                    let nets: Vec<String> = nets.iter().map(|n| toml_str(&n.text)).collect();
+                    let _ = writeln!(
+                        out,
+                        "{} = {{ initial = {}, nets = [{}] }}",
+                        toml_key(&g.name.text),
+                        g.tokens,
+                        nets.join(", ")
+                    );
+                }
+            }
+        }
+    }
+    if !m.instances.is_empty() {
+        out.push_str("\n[instances]\n");
+        for i in &m.instances {
+            let args: Vec<String> = i.args.iter().map(toml_expr).collect();
+            let _ = writeln!(
+                out,
+                "{} = {{ net = {}, args = [{}] }}",
+                toml_key(&i.name.text),
+                toml_str(&i.net.text),
+                args.join(", ")
+            );
+        }
+    }
+    if !m.invariants.is_empty() {
+        out.push_str("\n[invariants]\n");
+        for i in &m.invariants {
+            let _ = writeln!(out, "{} = {}", toml_key(&i.name.text), toml_str(&i.text));
         }
     }
     if !m.events.is_empty() {
@@ -465,6 +676,12 @@ functions = { plan = ["n: int"], stop = [] }
 
 [timers]
 t1 = { event = "go" }
+
+[instances]
+R1 = { net = "ROBOT", args = ["r1", 0.5, 3, true, [1.0, 2]] }
+
+[invariants]
+mutex = "not (R1.in and R2.in)"
 "#;
 
     #[test]

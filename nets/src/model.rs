@@ -161,6 +161,12 @@ pub fn builtin_events() -> &'static [EventDecl] {
                 &[("sender", Type::Text), ("reason", Type::Text)],
                 "a message was refused: unknown event, wrong parameters, or undecodable",
             ),
+            ev(
+                "invariant_violated",
+                Category::Safety,
+                &[("name", Type::Text)],
+                "an invariant of the manifest stopped holding after a step",
+            ),
         ]
     })
 }
@@ -207,13 +213,57 @@ pub struct TimerDecl {
     pub event: Name,
 }
 
-/// A place shared by every net, with its initial marking.
+/// A place shared by nets, with its initial marking.
 #[derive(Clone, Debug, PartialEq)]
 pub struct GlobalPlaceDecl {
     /// Place name.
     pub name: Name,
     /// Initial tokens as written (more than one is an error).
     pub tokens: u32,
+    /// The nets (or templates: all their instances) that may use it; `None`: every net.
+    pub nets: Option<Vec<Name>>,
+}
+
+/// A named instance of a net template, declared in the manifest's `[instances]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct InstanceDecl {
+    /// The instance's name, a net name of the project.
+    pub name: Name,
+    /// The template.
+    pub net: Name,
+    /// Its arguments, one per parameter of the template, in order.
+    pub args: Vec<Expr>,
+}
+
+/// A formula over the state of the project: places, net activity, and logic. Invariants and
+/// scripts' `expect always` are written with it.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Formula {
+    /// `NET.place` or `global.place`: the place is marked.
+    Marked(Name),
+    /// `active NET`.
+    Active(Name),
+    /// `true` or `false`.
+    Const(bool, Span),
+    /// `not F`.
+    Not(Box<Formula>),
+    /// `F and G`.
+    And(Box<Formula>, Box<Formula>),
+    /// `F or G`.
+    Or(Box<Formula>, Box<Formula>),
+    /// `F implies G`.
+    Implies(Box<Formula>, Box<Formula>),
+}
+
+/// An invariant of the manifest's `[invariants]`: a formula every stable state must satisfy.
+#[derive(Clone, Debug, PartialEq)]
+pub struct InvariantDecl {
+    /// Its name.
+    pub name: Name,
+    /// The formula as written (kept for the manifest's round trip).
+    pub text: String,
+    /// The formula, when it reads.
+    pub formula: Option<Formula>,
 }
 
 /// A net file named by the manifest.
@@ -247,6 +297,10 @@ pub struct Manifest {
     /// Intended final markings: a dead state holding every place of one of these is the
     /// mission's planned end, not an error. Places are written `NET.place` or `global.place`.
     pub finals: Vec<Vec<Name>>,
+    /// Named instances of net templates.
+    pub instances: Vec<InstanceDecl>,
+    /// Invariants, in the order written.
+    pub invariants: Vec<InvariantDecl>,
 }
 
 /// Comments and spacing that belong before an item, kept so `petrel fmt` loses nothing.
@@ -273,6 +327,8 @@ pub enum Expr {
     List(Vec<Expr>, Span),
     /// A name bound by the triggering event.
     Var(Name),
+    /// `self.NAME`: a parameter of the net (the name, with the span of the whole `self.NAME`).
+    SelfParam(Name),
 }
 
 impl Expr {
@@ -284,7 +340,7 @@ impl Expr {
             | Expr::Bool(_, s)
             | Expr::Text(_, s)
             | Expr::List(_, s) => *s,
-            Expr::Var(n) => n.span,
+            Expr::Var(n) | Expr::SelfParam(n) => n.span,
         }
     }
 }
@@ -305,15 +361,28 @@ pub enum DurationExpr {
     },
     /// An event parameter (int or float) read as seconds.
     Seconds(Name),
+    /// `self.NAME`: a net parameter (int or float) read as seconds.
+    SelfSeconds(Name),
 }
 
 /// What a transition does when it fires.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Action {
-    /// `activate NET`: the net receives its initial marking.
-    Activate(Name),
-    /// `deactivate NET`: the net loses its marking.
+    /// `activate NET` or `activate NET(args)`: the net receives its initial marking (and, if
+    /// its parameters are bound at activation, the arguments).
+    Activate {
+        /// The net.
+        net: Name,
+        /// Arguments for its parameters; empty when written without parentheses.
+        args: Vec<Expr>,
+        /// The whole action, for diagnostics.
+        span: Span,
+    },
+    /// `deactivate NET` (or `deactivate self`): the net and its subtree lose their marking.
     Deactivate(Name),
+    /// `finish`: the parent's completion place of this net receives a token, and the net
+    /// deactivates itself.
+    Finish(Span),
     /// `start TIMER after DURATION`.
     StartTimer {
         /// The timer.
@@ -334,15 +403,93 @@ pub enum Action {
         /// The whole call, for diagnostics.
         span: Span,
     },
-    /// `emit EVENT(args)`.
+    /// `emit EVENT(args)` or `emit EVENT(args) to NET`.
     Emit {
         /// The event.
         event: Name,
         /// Arguments.
         args: Vec<Expr>,
+        /// The one net it is addressed to, if any.
+        to: Option<Name>,
         /// The whole emission, for diagnostics.
         span: Span,
     },
+}
+
+/// A comparison in a guard.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum CmpOp {
+    /// `==`
+    Eq,
+    /// `!=`
+    Ne,
+    /// `<`
+    Lt,
+    /// `<=`
+    Le,
+    /// `>`
+    Gt,
+    /// `>=`
+    Ge,
+}
+
+impl CmpOp {
+    /// The operator as written.
+    pub fn symbol(self) -> &'static str {
+        match self {
+            CmpOp::Eq => "==",
+            CmpOp::Ne => "!=",
+            CmpOp::Lt => "<",
+            CmpOp::Le => "<=",
+            CmpOp::Gt => ">",
+            CmpOp::Ge => ">=",
+        }
+    }
+}
+
+/// A guard: when a transition may take its event, over the event's and the net's parameters.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Guard {
+    /// `A or B`.
+    Or(Box<Guard>, Box<Guard>),
+    /// `A and B`.
+    And(Box<Guard>, Box<Guard>),
+    /// `not A`.
+    Not(Box<Guard>),
+    /// `x == y`, `x < y`...
+    Compare(CmpOp, Expr, Expr),
+    /// A bool value standing alone (a parameter, `self.flag`, `true`).
+    Value(Expr),
+}
+
+impl Guard {
+    /// Where the guard stands (from its first operand to its last).
+    pub fn span(&self) -> Span {
+        match self {
+            Guard::Or(a, b) | Guard::And(a, b) => a.span().to(b.span()),
+            Guard::Not(a) => a.span(),
+            Guard::Compare(_, a, b) => a.span().to(b.span()),
+            Guard::Value(e) => e.span(),
+        }
+    }
+}
+
+/// `@allow(CODE, "reason")`: a warning the author intends, written before what it is about.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Allow {
+    /// The warning's code, such as `W0602`.
+    pub code: Name,
+    /// Why it is intended.
+    pub reason: Option<String>,
+}
+
+/// A child of a net, as its `children` line declares it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChildDecl {
+    /// The child net (a net of the project, often a template).
+    pub net: Name,
+    /// Arguments fixing its parameters; `None` when written without parentheses.
+    pub args: Option<Vec<Expr>>,
 }
 
 /// An action with its comments.
@@ -399,8 +546,12 @@ pub struct TransitionDecl {
     pub name: Name,
     /// The triggering event; none makes the transition immediate.
     pub trigger: Option<Trigger>,
+    /// The guard (`if ...`), if any.
+    pub guard: Option<Guard>,
     /// Input places (one token taken from each).
     pub inputs: Vec<Name>,
+    /// Places that must be empty (`not p` among the inputs); no token moves.
+    pub empty: Vec<Name>,
     /// Output places (one token put in each).
     pub outputs: Vec<Name>,
     /// Actions run in order when it fires.
@@ -411,11 +562,14 @@ pub struct TransitionDecl {
 
 /// A declaration inside a net.
 #[derive(Clone, Debug, PartialEq)]
+#[allow(clippy::large_enum_variant)] // Transitions are most items: boxing them would cost more.
 pub enum ItemKind {
     /// `place NAME [= N]`.
     Place(PlaceDecl),
-    /// `transition NAME [on EVENT(...)]: INPUTS -> OUTPUTS [{ ACTIONS }]`.
+    /// `transition NAME [on EVENT(...)] [if GUARD]: INPUTS -> OUTPUTS [{ ACTIONS }]`.
     Transition(TransitionDecl),
+    /// `children A, B(args)`.
+    Children(Vec<ChildDecl>),
 }
 
 /// A declaration with its comments.
@@ -423,6 +577,8 @@ pub enum ItemKind {
 pub struct Item {
     /// Comments and spacing before it.
     pub trivia: Trivia,
+    /// Warnings intended for it (`@allow` lines before it).
+    pub allows: Vec<Allow>,
     /// The declaration.
     pub kind: ItemKind,
     /// A comment at the end of its first line.
@@ -434,8 +590,12 @@ pub struct Item {
 pub struct NetDecl {
     /// Comments and spacing before it.
     pub trivia: Trivia,
+    /// Warnings intended for the whole net (`@allow` lines before it).
+    pub allows: Vec<Allow>,
     /// Net name.
     pub name: Name,
+    /// Parameters: a net with parameters is a template.
+    pub params: Vec<Param>,
     /// Places and transitions in written order (the order is the firing priority).
     pub items: Vec<Item>,
     /// Comments before the closing brace.
@@ -456,6 +616,14 @@ impl NetDecl {
         self.items.iter().filter_map(|i| match &i.kind {
             ItemKind::Transition(t) => Some(t),
             _ => None,
+        })
+    }
+
+    /// The declared children, in written order (over every `children` line).
+    pub fn children(&self) -> impl Iterator<Item = &ChildDecl> {
+        self.items.iter().flat_map(|i| match &i.kind {
+            ItemKind::Children(c) => c.as_slice(),
+            _ => &[],
         })
     }
 }

@@ -7,8 +7,8 @@
 //! allocates nothing once a [`Scratch`] has warmed up.
 
 use crate::compiled::{
-    Action, Arg, CompiledProject, EventId, FunctionId, NetId, PlaceRef, ProgramId, TimerDuration,
-    TimerId,
+    Action, Arg, CompiledProject, EventId, FunctionId, NetId, PlaceRef, ProgramId, StateFormula,
+    TimerDuration, TimerId,
 };
 use crate::model::Category;
 
@@ -79,6 +79,12 @@ pub struct FiringRule {
     pub transition: u32,
     /// Bits that must be set for it to be enabled: its input places and its net's active bit.
     enable: Bits,
+    /// Bits that must be clear for it to be enabled: the places it tests for emptiness.
+    inhibit: Bits,
+    /// It has a guard, which the [`Effects`] evaluate.
+    pub guarded: bool,
+    /// The parent's completion place it marks by `finish`, and the parent's active bit.
+    finish: Option<(u32, u32)>,
     /// Input places: tokens taken.
     consume: Bits,
     /// Output places that are not inputs: tokens put, and where a second token would go.
@@ -112,6 +118,8 @@ pub struct Layout {
     pub immediate: Vec<u32>,
     /// Index in `rules` of each net's first transition.
     pub net_first_rule: Vec<u32>,
+    /// Each net's descendants, deepest first (what `deactivate` takes down before the net).
+    pub subtree: Vec<Vec<NetId>>,
 }
 
 impl Layout {
@@ -151,6 +159,16 @@ impl Layout {
             for (ti, t) in n.transitions.iter().enumerate() {
                 let inputs: Vec<u32> = t.inputs.iter().map(|&r| bit(ni, r)).collect();
                 let outputs: Vec<u32> = t.outputs.iter().map(|&r| bit(ni, r)).collect();
+                let finish = if t.actions.iter().any(|a| matches!(a, Action::Finish)) {
+                    n.parent.map(|(parent, place)| {
+                        (
+                            net_base[parent as usize] + place,
+                            net_active[parent as usize],
+                        )
+                    })
+                } else {
+                    None
+                };
                 let idx = rules.len() as u32;
                 match t.event {
                     Some(e) => by_event[e as usize].push(idx),
@@ -160,6 +178,9 @@ impl Layout {
                     net: ni as NetId,
                     transition: ti as u32,
                     enable: Bits::from_bits(inputs.iter().copied().chain([net_active[ni]])),
+                    inhibit: Bits::from_bits(t.empty.iter().map(|&r| bit(ni, r))),
+                    guarded: t.guard.is_some(),
+                    finish,
                     consume: Bits::from_bits(inputs.iter().copied()),
                     produce_new: Bits::from_bits(
                         outputs.iter().copied().filter(|o| !inputs.contains(o)),
@@ -190,7 +211,14 @@ impl Layout {
                 )
             })
             .collect();
+        let mut subtree = Vec::new();
+        for n in 0..p.nets.len() {
+            let mut out = Vec::new();
+            descendants(p, n as NetId, &mut out, &mut vec![false; p.nets.len()]);
+            subtree.push(out);
+        }
         Layout {
+            subtree,
             words,
             net_active,
             net_base,
@@ -250,10 +278,25 @@ impl Layout {
         Self::bit(s, self.catastrophic)
     }
 
-    /// True if rule `r` is enabled in `s`.
+    /// True if rule `r` is enabled in `s` (its guard aside): its net active, its inputs marked,
+    /// the places it tests for emptiness empty.
     #[inline]
     pub fn enabled(&self, s: &[u64], r: u32) -> bool {
-        self.rules[r as usize].enable.all_in(s)
+        let rule = &self.rules[r as usize];
+        rule.enable.all_in(s) && !rule.inhibit.any_in(s)
+    }
+
+    /// Whether `f` holds in `s`.
+    pub fn holds(&self, f: &StateFormula, s: &[u64]) -> bool {
+        match f {
+            StateFormula::Const(b) => *b,
+            StateFormula::Marked(n, r) => self.is_marked(s, *n, *r),
+            StateFormula::Active(n) => self.is_active(s, *n),
+            StateFormula::Not(a) => !self.holds(a, s),
+            StateFormula::And(a, b) => self.holds(a, s) && self.holds(b, s),
+            StateFormula::Or(a, b) => self.holds(a, s) || self.holds(b, s),
+            StateFormula::Implies(a, b) => !self.holds(a, s) || self.holds(b, s),
+        }
     }
 
     /// True if rules `a` and `b` take a token from a common place (they conflict when both are
@@ -339,6 +382,16 @@ impl Layout {
     }
 }
 
+/// The descendants of `n` by its declared children, deepest first, each once.
+fn descendants(p: &CompiledProject, n: NetId, out: &mut Vec<NetId>, seen: &mut Vec<bool>) {
+    for &c in &p.nets[n as usize].children {
+        if !std::mem::replace(&mut seen[c as usize], true) {
+            descendants(p, c, out, seen);
+            out.push(c);
+        }
+    }
+}
+
 /// A notice about a step that changes no state but must not pass unseen.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Notice {
@@ -346,6 +399,8 @@ pub enum Notice {
     AlreadyActive(NetId),
     /// `deactivate` of a net that was not active: nothing changed.
     AlreadyInactive(NetId),
+    /// `finish` in a net whose parent is not active: no completion place was marked.
+    ParentInactive(NetId),
 }
 
 /// What firing does outside the state. Every method has a default that ignores it, so an
@@ -361,16 +416,24 @@ pub trait Effects {
     /// `call PROGRAM.FUNCTION(args)`; `Arg::EventParam` refers to the triggering event, which
     /// the caller of [`Semantics::process_event`] holds.
     fn call(&mut self, _program: ProgramId, _function: FunctionId, _args: &[Arg]) {}
-    /// `emit EVENT(args)`.
-    fn emit(&mut self, _event: EventId, _args: &[Arg]) {}
+    /// `emit EVENT(args)`, addressed to `target` if it is `Some`.
+    fn emit(&mut self, _event: EventId, _args: &[Arg], _target: Option<NetId>) {}
     /// `start TIMER after D`.
     fn start_timer(&mut self, _timer: TimerId, _after: &TimerDuration) {}
     /// `cancel TIMER`.
     fn cancel_timer(&mut self, _timer: TimerId) {}
     /// A notice (activation of an active net...).
     fn notice(&mut self, _notice: Notice) {}
-    /// Net `net` was activated (it received its initial marking).
-    fn activated(&mut self, _net: NetId) {}
+    /// Net `net` was activated (it received its initial marking), with `args` for its
+    /// parameters bound at activation (empty otherwise; [`Arg::EventParam`] and
+    /// [`Arg::NetParam`] refer to the triggering event and the net that fired).
+    fn activated(&mut self, _net: NetId, _args: &[Arg]) {}
+    /// Whether the guard of rule `rule` holds now, on the current event's parameters and the
+    /// parameters of the rule's net. Asked only of rules that have a guard: once per candidate
+    /// on the snapshot of the step, and for an immediate transition when it is enabled.
+    fn guard(&mut self, _rule: u32) -> bool {
+        true
+    }
     /// Net `net` was deactivated (it lost its marking).
     fn deactivated(&mut self, _net: NetId) {}
     /// An immediate transition fired during a fixpoint, leading to `state`. Return `false` to
@@ -434,13 +497,13 @@ impl<'p> Semantics<'p> {
             }
         }
         for &n in &self.project.start {
-            self.activate(&mut s, n, fx);
+            self.activate(&mut s, n, &[], fx);
         }
         self.fixpoint(&mut s, fx, scratch);
         s
     }
 
-    fn activate(&self, s: &mut [u64], n: NetId, fx: &mut impl Effects) {
+    fn activate(&self, s: &mut [u64], n: NetId, args: &[Arg], fx: &mut impl Effects) {
         let l = &self.layout;
         if l.is_active(s, n) {
             fx.notice(Notice::AlreadyActive(n));
@@ -448,14 +511,22 @@ impl<'p> Semantics<'p> {
         }
         Layout::set(s, l.net_active[n as usize]);
         l.net_initial[n as usize].set(s);
-        fx.activated(n);
+        fx.activated(n, args);
     }
 
+    /// Deactivates `n`'s active descendants, deepest first, then `n`.
     fn deactivate(&self, s: &mut [u64], n: NetId, fx: &mut impl Effects) {
         let l = &self.layout;
         if !l.is_active(s, n) {
             fx.notice(Notice::AlreadyInactive(n));
             return;
+        }
+        for &d in &l.subtree[n as usize] {
+            if l.is_active(s, d) {
+                Layout::clear(s, l.net_active[d as usize]);
+                l.net_places[d as usize].clear(s);
+                fx.deactivated(d);
+            }
         }
         Layout::clear(s, l.net_active[n as usize]);
         l.net_places[n as usize].clear(s);
@@ -465,7 +536,7 @@ impl<'p> Semantics<'p> {
     /// Fires rule `r` if it is enabled and safe; returns whether it fired.
     fn fire(&self, s: &mut [u64], r: u32, fx: &mut impl Effects) -> bool {
         let rule = &self.layout.rules[r as usize];
-        if !rule.enable.all_in(s) {
+        if !self.layout.enabled(s, r) {
             return false;
         }
         // Refuse a second token: checked on the marking after the inputs are taken, which is
@@ -479,6 +550,13 @@ impl<'p> Semantics<'p> {
             fx.refused(r, place);
             return false;
         }
+        // `finish` is an output arc to the parent's completion place (when the parent runs).
+        if let Some((done, parent_active)) = rule.finish {
+            if Layout::bit(s, parent_active) && Layout::bit(s, done) {
+                fx.refused(r, done);
+                return false;
+            }
+        }
         rule.consume.clear(s);
         rule.produce_new.set(s);
         rule.produce_back.set(s);
@@ -486,8 +564,19 @@ impl<'p> Semantics<'p> {
         let t = &self.project.nets[rule.net as usize].transitions[rule.transition as usize];
         for a in &t.actions {
             match a {
-                Action::Activate(n) => self.activate(s, *n, fx),
+                Action::Activate { net, args } => self.activate(s, *net, args, fx),
                 Action::Deactivate(n) => self.deactivate(s, *n, fx),
+                Action::Finish => {
+                    match rule.finish {
+                        Some((done, parent_active)) if Layout::bit(s, parent_active) => {
+                            Layout::set(s, done)
+                        }
+                        _ => fx.notice(Notice::ParentInactive(rule.net)),
+                    }
+                    if self.layout.is_active(s, rule.net) {
+                        self.deactivate(s, rule.net, fx);
+                    }
+                }
                 Action::StartTimer { timer, after } => {
                     Layout::set(s, self.layout.timer_base + timer);
                     fx.start_timer(*timer, after);
@@ -501,7 +590,11 @@ impl<'p> Semantics<'p> {
                     function,
                     args,
                 } => fx.call(*program, *function, args),
-                Action::Emit { event, args } => fx.emit(*event, args),
+                Action::Emit {
+                    event,
+                    args,
+                    target,
+                } => fx.emit(*event, args, *target),
             }
         }
         true
@@ -512,12 +605,37 @@ impl<'p> Semantics<'p> {
         Layout::clear(s, self.layout.timer_base + t);
     }
 
-    /// Processes one event on a stable state: candidates from the snapshot, fired in dispatch
-    /// order, then the immediate fixpoint.
+    /// The candidates for `event` (addressed to `target`, if any) in `s`: triggered, enabled,
+    /// guard holding, in dispatch order.
+    pub fn candidates(
+        &self,
+        s: &[u64],
+        event: EventId,
+        target: Option<NetId>,
+        fx: &mut impl Effects,
+        out: &mut Vec<u32>,
+    ) {
+        let l = &self.layout;
+        out.clear();
+        for &r in &l.by_event[event as usize] {
+            let rule = &l.rules[r as usize];
+            if target.is_some_and(|t| t != rule.net) || !l.enabled(s, r) {
+                continue;
+            }
+            if rule.guarded && !fx.guard(r) {
+                continue;
+            }
+            out.push(r);
+        }
+    }
+
+    /// Processes one event on a stable state: candidates from the snapshot (in the target net
+    /// only, for an addressed event), fired in dispatch order, then the immediate fixpoint.
     pub fn process_event(
         &self,
         s: &mut [u64],
         event: EventId,
+        target: Option<NetId>,
         fx: &mut impl Effects,
         scratch: &mut Scratch,
     ) -> StepOutcome {
@@ -525,12 +643,9 @@ impl<'p> Semantics<'p> {
         if l.is_over(s) {
             return StepOutcome::RefusedAfterCatastrophic;
         }
-        scratch.candidates.clear();
-        for &r in &l.by_event[event as usize] {
-            if l.enabled(s, r) {
-                scratch.candidates.push(r);
-            }
-        }
+        let mut candidates = std::mem::take(&mut scratch.candidates);
+        self.candidates(s, event, target, fx, &mut candidates);
+        scratch.candidates = candidates;
         let outcome = if scratch.candidates.is_empty() {
             StepOutcome::Unused
         } else {
@@ -559,6 +674,9 @@ impl<'p> Semantics<'p> {
         'search: loop {
             for &r in &l.immediate {
                 if !l.enabled(s, r) || scratch.refused_immediate.contains(&r) {
+                    continue;
+                }
+                if l.rules[r as usize].guarded && !fx.guard(r) {
                     continue;
                 }
                 if self.fire(s, r, fx) {

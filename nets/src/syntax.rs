@@ -10,7 +10,7 @@ use crate::source::{FileId, Span};
 
 /// Words that cannot be used as names anywhere.
 pub fn is_keyword(s: &str) -> bool {
-    matches!(s, "true" | "false")
+    matches!(s, "true" | "false" | "self")
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -32,6 +32,13 @@ enum Tok {
     Dot,
     Arrow,
     Equals,
+    EqEq,
+    NotEq,
+    Lt,
+    Le,
+    Gt,
+    Ge,
+    At,
     Eof,
 }
 
@@ -55,6 +62,13 @@ impl Tok {
             Tok::Dot => "`.`".into(),
             Tok::Arrow => "`->`".into(),
             Tok::Equals => "`=`".into(),
+            Tok::EqEq => "`==`".into(),
+            Tok::NotEq => "`!=`".into(),
+            Tok::Lt => "`<`".into(),
+            Tok::Le => "`<=`".into(),
+            Tok::Gt => "`>`".into(),
+            Tok::Ge => "`>=`".into(),
+            Tok::At => "`@`".into(),
             Tok::Eof => "the end of the file".into(),
         }
     }
@@ -255,7 +269,26 @@ fn lex(file: FileId, text: &str, diags: &mut Diagnostics) -> Vec<Token> {
                 b',' => Tok::Comma,
                 b':' => Tok::Colon,
                 b'.' => Tok::Dot,
+                b'=' if bytes.get(i) == Some(&b'=') => {
+                    i += 1;
+                    Tok::EqEq
+                }
                 b'=' => Tok::Equals,
+                b'!' if bytes.get(i) == Some(&b'=') => {
+                    i += 1;
+                    Tok::NotEq
+                }
+                b'<' if bytes.get(i) == Some(&b'=') => {
+                    i += 1;
+                    Tok::Le
+                }
+                b'<' => Tok::Lt,
+                b'>' if bytes.get(i) == Some(&b'=') => {
+                    i += 1;
+                    Tok::Ge
+                }
+                b'>' => Tok::Gt,
+                b'@' => Tok::At,
                 b'-' if bytes.get(i) == Some(&b'>') => {
                     i += 1;
                     Tok::Arrow
@@ -302,7 +335,15 @@ struct Parser<'d> {
     /// End-of-line comments that have no item of their own (after `net X {` or a closing
     /// brace): they become leading comments of whatever follows, so none is lost.
     pending: Vec<String>,
+    /// Nesting of guards being parsed: bounded, so no text can exhaust the stack.
+    depth: usize,
 }
+
+/// Deepest nesting of parentheses in a guard.
+const MAX_GUARD_DEPTH: usize = 64;
+
+/// Words that start an item of a net.
+const ITEM_WORDS: [&str; 4] = ["place", "transition", "children", "net"];
 
 impl Parser<'_> {
     fn peek(&self) -> &Token {
@@ -386,11 +427,67 @@ impl Parser<'_> {
         }
     }
 
-    /// At `place`, `transition` or `net` starting a line: where an item may begin.
+    /// At `place`, `transition`, `children`, `net` or `@` starting a line: where an item may
+    /// begin.
     fn at_item_start(&self) -> bool {
         let t = self.peek();
         t.line_start
-            && matches!(&t.tok, Tok::Ident(s) if s == "place" || s == "transition" || s == "net")
+            && (t.tok == Tok::At
+                || matches!(&t.tok, Tok::Ident(s) if ITEM_WORDS.contains(&s.as_str())))
+    }
+
+    /// `@allow(CODE, "reason")` lines.
+    fn allows(&mut self) -> PResult<Vec<Allow>> {
+        const HELP: &str = "write `@allow(W0602, \"why it is intended\")` on the line before the net, place or transition";
+        let mut out = Vec::new();
+        while self.at(&Tok::At) {
+            self.bump();
+            if !self.at_ident("allow") {
+                return Err(self.error("`allow`", HELP));
+            }
+            self.bump();
+            self.expect(Tok::LParen, HELP)?;
+            let code = self.name("a warning code such as `W0602`", HELP)?;
+            let reason = if self.at(&Tok::Comma) {
+                self.bump();
+                match self.peek().tok.clone() {
+                    Tok::Text(t) => {
+                        self.bump();
+                        Some(t)
+                    }
+                    _ => return Err(self.error("a reason in quotes", HELP)),
+                }
+            } else {
+                None
+            };
+            self.expect(Tok::RParen, HELP)?;
+            self.stash_trailing();
+            // Comments between the allow and its item stay with the item.
+            while let Tok::Comment(c) = &self.peek().tok {
+                self.pending.push(c.clone());
+                self.bump();
+            }
+            out.push(Allow { code, reason });
+        }
+        Ok(out)
+    }
+
+    /// `(name: type, ...)` after a net's name.
+    fn params(&mut self) -> PResult<Vec<Param>> {
+        const HELP: &str = "a net's parameters are written `net NAME(robot: text, speed: float) {`";
+        let mut out = Vec::new();
+        self.expect(Tok::LParen, HELP)?;
+        while !self.at(&Tok::RParen) {
+            let name = self.name("a parameter name", HELP)?;
+            self.expect(Tok::Colon, HELP)?;
+            let (ty, _) = self.ty()?;
+            out.push(Param { name, ty });
+            if !self.at(&Tok::RParen) {
+                self.expect(Tok::Comma, "separate parameters with `,`")?;
+            }
+        }
+        self.bump();
+        Ok(out)
     }
 
     /// Keeps an end-of-line comment that belongs to no item for what follows.
@@ -423,11 +520,20 @@ impl Parser<'_> {
                 };
             }
             // Nets are always one blank line apart: that is layout, not content.
-            let trivia = Trivia {
+            let mut trivia = Trivia {
                 blank_before: false,
                 ..trivia
             };
-            match self.net(trivia) {
+            let allows = match self.allows() {
+                Ok(a) => a,
+                Err(Recover) => {
+                    self.bump();
+                    self.skip_until(|t| matches!(t, Tok::Ident(s) if s == "net"));
+                    continue;
+                }
+            };
+            trivia.comments.append(&mut self.pending);
+            match self.net(trivia, allows) {
                 Ok(n) => nets.push(n),
                 Err(Recover) => {
                     self.bump();
@@ -437,7 +543,7 @@ impl Parser<'_> {
         }
     }
 
-    fn net(&mut self, outer: Trivia) -> PResult<NetDecl> {
+    fn net(&mut self, outer: Trivia, allows: Vec<Allow>) -> PResult<NetDecl> {
         if !self.at_ident("net") {
             return Err(self.error(
                 "`net`",
@@ -446,6 +552,11 @@ impl Parser<'_> {
         }
         self.bump();
         let name = self.name("a net name", "write `net NAME {`")?;
+        let params = if self.at(&Tok::LParen) {
+            self.params()?
+        } else {
+            Vec::new()
+        };
         self.expect(
             Tok::LBrace,
             "the net's places and transitions go between `{` and `}`",
@@ -459,7 +570,9 @@ impl Parser<'_> {
                 self.stash_trailing();
                 return Ok(NetDecl {
                     trivia: outer,
+                    allows,
                     name,
+                    params,
                     items,
                     end_comments: trivia.comments,
                 });
@@ -477,7 +590,9 @@ impl Parser<'_> {
                     if self.at_ident("net") {
                         return Ok(NetDecl {
                             trivia: outer,
+                            allows,
                             name,
+                            params,
                             items,
                             end_comments: Vec::new(),
                         });
@@ -497,13 +612,10 @@ impl Parser<'_> {
             let t = self.peek();
             match &t.tok {
                 Tok::Eof => return,
-                Tok::Ident(s)
-                    if depth == 0
-                        && t.line_start
-                        && (s == "place" || s == "transition" || s == "net") =>
-                {
+                Tok::Ident(s) if depth == 0 && t.line_start && ITEM_WORDS.contains(&s.as_str()) => {
                     return
                 }
+                Tok::At if depth == 0 && t.line_start => return,
                 Tok::LBrace => depth += 1,
                 Tok::RBrace if depth == 0 => return,
                 Tok::RBrace => depth -= 1,
@@ -513,7 +625,36 @@ impl Parser<'_> {
         }
     }
 
-    fn item(&mut self, trivia: Trivia) -> PResult<Item> {
+    fn item(&mut self, mut trivia: Trivia) -> PResult<Item> {
+        let allows = self.allows()?;
+        trivia.comments.append(&mut self.pending);
+        if self.at_ident("children") {
+            const HELP: &str =
+                "write `children NET, OTHER(args)`: the nets this net runs, each its own instance";
+            self.bump();
+            let mut children = Vec::new();
+            loop {
+                let net = self.name("a net name", HELP)?;
+                let args = if self.at(&Tok::LParen) {
+                    self.bump();
+                    Some(self.args(Tok::RParen)?.0)
+                } else {
+                    None
+                };
+                children.push(ChildDecl { net, args });
+                if !self.at(&Tok::Comma) {
+                    break;
+                }
+                self.bump();
+            }
+            let trailing = self.trailing();
+            return Ok(Item {
+                trivia,
+                allows,
+                kind: ItemKind::Children(children),
+                trailing,
+            });
+        }
         if self.at_ident("place") {
             self.bump();
             let name = self.name("a place name", "write `place NAME` or `place NAME = 1`")?;
@@ -537,6 +678,7 @@ impl Parser<'_> {
             let trailing = self.trailing();
             return Ok(Item {
                 trivia,
+                allows,
                 kind: ItemKind::Place(PlaceDecl {
                     name,
                     tokens,
@@ -550,19 +692,20 @@ impl Parser<'_> {
             let t = self.transition()?;
             return Ok(Item {
                 trivia,
+                allows,
                 kind: ItemKind::Transition(t.0),
                 trailing: t.1,
             });
         }
         Err(self.error(
-            "`place`, `transition` or `}`",
-            "a net holds `place NAME [= 1]` and `transition NAME [on EVENT]: INPUTS -> OUTPUTS [{ ACTIONS }]`",
+            "`place`, `transition`, `children` or `}`",
+            "a net holds `place NAME [= 1]`, `transition NAME [on EVENT] [if GUARD]: INPUTS -> OUTPUTS [{ ACTIONS }]` and `children NET, ...`",
         ))
     }
 
     fn transition(&mut self) -> PResult<(TransitionDecl, Option<String>)> {
         const SHAPE: &str =
-            "a transition reads `transition NAME [on EVENT(params)]: INPUTS -> OUTPUTS [{ ACTIONS }]`";
+            "a transition reads `transition NAME [on EVENT(params)] [if GUARD]: INPUTS -> OUTPUTS [{ ACTIONS }]`";
         let name = self.name("a transition name", SHAPE)?;
         let trigger = if self.at_ident("on") {
             self.bump();
@@ -592,8 +735,14 @@ impl Parser<'_> {
         } else {
             None
         };
+        let guard = if self.at_ident("if") {
+            self.bump();
+            Some(self.guard()?)
+        } else {
+            None
+        };
         self.expect(Tok::Colon, SHAPE)?;
-        let inputs = self.place_list()?;
+        let (inputs, empty) = self.input_list()?;
         self.expect(Tok::Arrow, SHAPE)?;
         let outputs = self.place_list()?;
         let mut actions = Vec::new();
@@ -638,9 +787,9 @@ impl Parser<'_> {
                             self.bump();
                         }
                         self.skip_until(|t| {
-                            matches!(t, Tok::RBrace)
+                            matches!(t, Tok::RBrace | Tok::At)
                                 || matches!(t, Tok::Ident(s) if ACTION_WORDS.contains(&s.as_str())
-                                    || s == "place" || s == "transition" || s == "net")
+                                    || ITEM_WORDS.contains(&s.as_str()))
                         });
                     }
                 }
@@ -653,7 +802,9 @@ impl Parser<'_> {
             TransitionDecl {
                 name,
                 trigger,
+                guard,
                 inputs,
+                empty,
                 outputs,
                 actions,
                 end_comments,
@@ -669,12 +820,129 @@ impl Parser<'_> {
             return Ok(out);
         }
         loop {
-            out.push(self.name("a place name", "list places separated by `,`: `a, b -> c`")?);
+            out.push(self.place_ref()?);
             if !self.at(&Tok::Comma) {
                 return Ok(out);
             }
             self.bump();
         }
+    }
+
+    /// The inputs of a transition: places to take a token from, and `not p`, places that must
+    /// be empty.
+    fn input_list(&mut self) -> PResult<(Vec<Name>, Vec<Name>)> {
+        let (mut inputs, mut empty) = (Vec::new(), Vec::new());
+        if !matches!(self.peek().tok, Tok::Ident(_)) || self.at_item_start() {
+            return Ok((inputs, empty));
+        }
+        loop {
+            // `not p` tests p for emptiness; a place named `not` still reads as a place.
+            let negated = self.at_ident("not")
+                && matches!(
+                    self.toks.get(self.pos + 1).map(|t| &t.tok),
+                    Some(Tok::Ident(_))
+                );
+            if negated {
+                self.bump();
+                empty.push(self.place_ref()?);
+            } else {
+                inputs.push(self.place_ref()?);
+            }
+            if !self.at(&Tok::Comma) {
+                return Ok((inputs, empty));
+            }
+            self.bump();
+        }
+    }
+
+    /// A place in an arc: `NAME`, or `CHILD.done`, a child's completion place.
+    fn place_ref(&mut self) -> PResult<Name> {
+        const HELP: &str =
+            "list places separated by `,`: `a, b -> c`; a child's completion place is `CHILD.done`";
+        let mut name = self.name("a place name", HELP)?;
+        if self.at(&Tok::Dot) {
+            self.bump();
+            let done = self.name("`done`", HELP)?;
+            if done.text != "done" {
+                self.diags.push(
+                    Diagnostic::error("E0001", done.span, format!("`{name}.{done}` is not a place"))
+                        .label("expected `done`")
+                        .help("a net names another net's place only as a child's completion place, `CHILD.done`"),
+                );
+                return Err(Recover);
+            }
+            name = Name {
+                text: format!("{}.done", name.text),
+                span: name.span.to(done.span),
+            };
+        }
+        Ok(name)
+    }
+
+    /// A guard: `or` of `and` of `not` of comparisons.
+    fn guard(&mut self) -> PResult<Guard> {
+        self.depth += 1;
+        if self.depth > MAX_GUARD_DEPTH {
+            self.depth = 0;
+            return Err(self.error(
+                "a simpler guard",
+                &format!("guards nest at most {MAX_GUARD_DEPTH} levels deep"),
+            ));
+        }
+        let mut g = self.guard_and()?;
+        while self.at_ident("or") {
+            self.bump();
+            let rhs = self.guard_and()?;
+            g = Guard::Or(Box::new(g), Box::new(rhs));
+        }
+        self.depth -= 1;
+        Ok(g)
+    }
+
+    fn guard_and(&mut self) -> PResult<Guard> {
+        let mut g = self.guard_not()?;
+        while self.at_ident("and") {
+            self.bump();
+            let rhs = self.guard_not()?;
+            g = Guard::And(Box::new(g), Box::new(rhs));
+        }
+        Ok(g)
+    }
+
+    fn guard_not(&mut self) -> PResult<Guard> {
+        if self.at_ident("not") {
+            self.bump();
+            self.depth += 1;
+            if self.depth > MAX_GUARD_DEPTH {
+                self.depth = 0;
+                return Err(self.error(
+                    "a simpler guard",
+                    &format!("guards nest at most {MAX_GUARD_DEPTH} levels deep"),
+                ));
+            }
+            let inner = self.guard_not()?;
+            self.depth -= 1;
+            return Ok(Guard::Not(Box::new(inner)));
+        }
+        if self.at(&Tok::LParen) {
+            self.bump();
+            let g = self.guard()?;
+            self.expect(Tok::RParen, "close the parenthesis of the guard")?;
+            return Ok(g);
+        }
+        let lhs = self.expr()?;
+        let op = match self.peek().tok {
+            Tok::EqEq => CmpOp::Eq,
+            Tok::NotEq => CmpOp::Ne,
+            Tok::Lt => CmpOp::Lt,
+            Tok::Le => CmpOp::Le,
+            Tok::Gt => CmpOp::Gt,
+            Tok::Ge => CmpOp::Ge,
+            _ => return Ok(Guard::Value(lhs)),
+        };
+        self.bump();
+        let rhs = self.expr()?;
+        Ok(Guard::Compare(op, lhs, rhs))
     }
 
     fn ty(&mut self) -> PResult<(Type, Span)> {
@@ -714,14 +982,37 @@ impl Parser<'_> {
             _ => {
                 return Err(self.error(
                     "an action",
-                    "the actions are `activate NET`, `deactivate NET`, `start TIMER after 30s`, `cancel TIMER`, `call PROGRAM.FUNCTION(args)` and `emit EVENT(args)`",
+                    "the actions are `activate NET`, `deactivate NET`, `finish`, `start TIMER after 30s`, `cancel TIMER`, `call PROGRAM.FUNCTION(args)` and `emit EVENT(args) [to NET]`",
                 ))
             }
         };
         let start = self.bump().span;
         Ok(match word.as_str() {
-            "activate" => Action::Activate(self.name("a net name", "write `activate NET`")?),
-            "deactivate" => Action::Deactivate(self.name("a net name", "write `deactivate NET`")?),
+            "activate" => {
+                let net =
+                    self.name("a net name", "write `activate NET` or `activate NET(args)`")?;
+                let mut span = start.to(net.span);
+                let args = if self.at(&Tok::LParen) {
+                    self.bump();
+                    let (args, end) = self.args(Tok::RParen)?;
+                    span = span.to(end);
+                    args
+                } else {
+                    Vec::new()
+                };
+                Action::Activate { net, args, span }
+            }
+            "deactivate" if self.at_ident("self") => {
+                let t = self.bump();
+                Action::Deactivate(Name {
+                    text: "self".into(),
+                    span: t.span,
+                })
+            }
+            "deactivate" => Action::Deactivate(
+                self.name("a net name", "write `deactivate NET` or `deactivate self`")?,
+            ),
+            "finish" => Action::Finish(start),
             "cancel" => Action::CancelTimer(self.name("a timer name", "write `cancel TIMER`")?),
             "start" => {
                 const HELP: &str = "write `start TIMER after 30s`, or `after NAME` with an event parameter in seconds";
@@ -740,6 +1031,10 @@ impl Parser<'_> {
                             span: t.span,
                         }
                     }
+                    Tok::Ident(ref w) if w == "self" => match self.expr()? {
+                        Expr::SelfParam(n) => DurationExpr::SelfSeconds(n),
+                        _ => return Err(self.error("`self.NAME`", HELP)),
+                    },
                     Tok::Ident(_) => DurationExpr::Seconds(self.name("a duration", HELP)?),
                     _ => return Err(self.error("a duration such as `30s`", HELP)),
                 };
@@ -773,7 +1068,20 @@ impl Parser<'_> {
                 } else {
                     Vec::new()
                 };
-                Action::Emit { event, args, span }
+                let to = if self.at_ident("to") {
+                    self.bump();
+                    let net = self.name("a net name", "write `emit EVENT(args) to NET`")?;
+                    span = span.to(net.span);
+                    Some(net)
+                } else {
+                    None
+                };
+                Action::Emit {
+                    event,
+                    args,
+                    to,
+                    span,
+                }
             }
             _ => unreachable!("ACTION_WORDS lists exactly the words matched above"),
         })
@@ -801,6 +1109,18 @@ impl Parser<'_> {
             Tok::Text(s) => Expr::Text(s, t.span),
             Tok::Ident(ref s) if s == "true" => Expr::Bool(true, t.span),
             Tok::Ident(ref s) if s == "false" => Expr::Bool(false, t.span),
+            Tok::Ident(ref s)
+                if s == "self"
+                    && matches!(self.toks.get(self.pos + 1).map(|t| &t.tok), Some(Tok::Dot)) =>
+            {
+                self.bump();
+                self.bump();
+                let n = self.name("a parameter name", "write `self.PARAMETER`")?;
+                return Ok(Expr::SelfParam(Name {
+                    text: n.text,
+                    span: t.span.to(n.span),
+                }));
+            }
             Tok::Ident(_) => return Ok(Expr::Var(self.name("a value", "")?)),
             Tok::LBracket => {
                 self.bump();
@@ -819,7 +1139,15 @@ impl Parser<'_> {
     }
 }
 
-const ACTION_WORDS: [&str; 6] = ["activate", "deactivate", "start", "cancel", "call", "emit"];
+const ACTION_WORDS: [&str; 7] = [
+    "activate",
+    "deactivate",
+    "finish",
+    "start",
+    "cancel",
+    "call",
+    "emit",
+];
 
 /// Parses one net file. Syntax errors go to `diags`; the returned file holds every net and item
 /// that could be read, so later checks still run on the rest.
@@ -830,6 +1158,7 @@ pub fn parse_file(file: FileId, path: &str, text: &str, diags: &mut Diagnostics)
         pos: 0,
         diags,
         pending: Vec::new(),
+        depth: 0,
     };
     p.file(path)
 }
@@ -842,6 +1171,7 @@ pub fn parse_action(file: FileId, text: &str, diags: &mut Diagnostics) -> Option
         pos: 0,
         diags,
         pending: Vec::new(),
+        depth: 0,
     };
     let action = p.action().ok()?;
     if !p.at(&Tok::Eof) {

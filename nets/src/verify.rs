@@ -8,10 +8,15 @@
 //! arrive (events emitted by nets and timer expiries included, at any later point). That
 //! over-approximates what the vehicle can do, so a property proved here holds in flight.
 
-use crate::compiled::{CompiledProject, EventId, NetId, PlaceRef};
+use crate::compiled::{Arg, CompiledProject, EventId, Guard, NetId, PlaceRef, Value};
 use crate::semantics::{Effects, Layout, Scratch, Semantics, State};
+use petrel_value::Type;
 use std::collections::HashMap;
 use std::time::Instant;
+
+/// Most runs of one event delivery in one state, over the outcomes of the guards the verifier
+/// cannot decide (see [`Oracle`]): beyond it the verification stops with an error.
+const MAX_GUARD_RUNS: usize = 4096;
 
 /// What to explore and how far.
 #[derive(Default)]
@@ -35,6 +40,11 @@ pub enum VerifyError {
     },
     /// `--net` named no net.
     UnknownNet(String),
+    /// Too many guards that the verifier cannot decide in one step (each doubles the runs).
+    TooManyUndecidedGuards {
+        /// The event delivered.
+        event: String,
+    },
 }
 
 impl std::fmt::Display for VerifyError {
@@ -45,6 +55,10 @@ impl std::fmt::Display for VerifyError {
                 "stopped after {limit} states (--max-states): the project has more reachable states; raise the limit, or verify one net with --net"
             ),
             VerifyError::UnknownNet(n) => write!(f, "no net named `{n}` in the project"),
+            VerifyError::TooManyUndecidedGuards { event } => write!(
+                f,
+                "event `{event}` meets more than {MAX_GUARD_RUNS} combinations of guards the verifier cannot decide (comparisons of two parameters, or of parameters bound at activation): compare parameters with constants or with fixed instance parameters"
+            ),
         }
     }
 }
@@ -101,6 +115,17 @@ pub struct ConflictFinding {
     pub trace: Trace,
 }
 
+/// A reachable stable state that breaks an invariant of the manifest.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct InvariantFinding {
+    /// The invariant's name.
+    pub invariant: String,
+    /// The state: active nets with their marked places, global places, running timers.
+    pub marking: Vec<String>,
+    /// The shortest sequence of events that gets there.
+    pub trace: Trace,
+}
+
 /// A loop of stable states that needs outside events to go round (the waypoint loop, say).
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct LoopFinding {
@@ -136,6 +161,10 @@ pub struct Report {
     pub dead_markings: Vec<DeadFinding>,
     /// Cycles of immediate transitions.
     pub livelocks: Vec<LivelockFinding>,
+    /// Invariants checked in every reachable stable state.
+    pub invariants: Vec<String>,
+    /// Invariants broken, each with the shortest trace to a state that breaks it.
+    pub invariant_violations: Vec<InvariantFinding>,
     /// Loops that need outside events (information).
     pub event_loops: Vec<LoopFinding>,
     /// Conflicts between transitions enabled by one event.
@@ -148,18 +177,126 @@ pub struct Report {
     pub unused_events: Vec<String>,
     /// Seconds spent.
     pub seconds: f64,
+    /// Each net's template (its declaration in the net files), for locating findings.
+    #[serde(skip)]
+    pub templates: HashMap<String, String>,
 }
 
 impl Report {
-    /// True when nothing needs fixing: safe, no unintended dead marking, no livelock.
+    /// True when nothing needs fixing: safe, no unintended dead marking, no livelock, every
+    /// invariant holding.
     pub fn is_clean(&self) -> bool {
-        self.safe && !self.deadlock && self.livelocks.is_empty()
+        self.safe
+            && !self.deadlock
+            && self.livelocks.is_empty()
+            && self.invariant_violations.is_empty()
+    }
+}
+
+/// A truth value of a guard the verifier evaluates on representative parameters: known, or
+/// not decidable without data it does not track.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Truth {
+    True,
+    False,
+    Unknown,
+}
+
+impl Truth {
+    fn of(b: bool) -> Truth {
+        if b {
+            Truth::True
+        } else {
+            Truth::False
+        }
+    }
+    fn not(self) -> Truth {
+        match self {
+            Truth::True => Truth::False,
+            Truth::False => Truth::True,
+            Truth::Unknown => Truth::Unknown,
+        }
+    }
+}
+
+/// The outcomes of undecidable guards for one run of a delivery: the first ones replayed from
+/// `prefix`, the rest taken false (and counted, so that the caller explores them true too).
+#[derive(Default)]
+struct Oracle {
+    prefix: Vec<bool>,
+    used: usize,
+}
+
+impl Oracle {
+    fn choose(&mut self) -> bool {
+        let c = self.prefix.get(self.used).copied().unwrap_or(false);
+        self.used += 1;
+        c
+    }
+}
+
+/// Evaluates a guard on the event's representative parameters. Comparisons of a parameter with
+/// a constant are decided; what involves data the verifier does not track (two parameters of
+/// the event, a parameter bound at activation) is unknown.
+fn truth(g: &Guard, params: &[Value]) -> Truth {
+    match g {
+        Guard::Const(b) => Truth::of(*b),
+        Guard::Not(a) => truth(a, params).not(),
+        Guard::And(list) => {
+            let mut out = Truth::True;
+            for a in list {
+                match truth(a, params) {
+                    Truth::False => return Truth::False,
+                    Truth::Unknown => out = Truth::Unknown,
+                    Truth::True => {}
+                }
+            }
+            out
+        }
+        Guard::Or(list) => {
+            let mut out = Truth::False;
+            for a in list {
+                match truth(a, params) {
+                    Truth::True => return Truth::True,
+                    Truth::Unknown => out = Truth::Unknown,
+                    Truth::False => {}
+                }
+            }
+            out
+        }
+        Guard::Value(a) => match a {
+            Arg::Literal(Value::Bool(b)) => Truth::of(*b),
+            Arg::EventParam(i) => match params.get(*i as usize) {
+                Some(Value::Bool(b)) => Truth::of(*b),
+                _ => Truth::Unknown,
+            },
+            _ => Truth::Unknown,
+        },
+        Guard::Compare(op, a, b) => {
+            let known = |x: &Arg| -> Option<(Value, bool)> {
+                match x {
+                    Arg::Literal(v) => Some((v.clone(), false)),
+                    Arg::EventParam(i) => params.get(*i as usize).map(|v| (v.clone(), true)),
+                    Arg::NetParam(_) => None,
+                }
+            };
+            match (known(a), known(b)) {
+                // Two parameters of the event: representatives do not cover their relations.
+                (Some((_, true)), Some((_, true))) => Truth::Unknown,
+                (Some((x, _)), Some((y, _))) => Truth::of(crate::compiled::compare(*op, &x, &y)),
+                _ => Truth::Unknown,
+            }
+        }
     }
 }
 
 /// Collects what one event step did, for the exploration.
 #[derive(Default)]
 struct Recorder {
+    /// The guards of the rules, and the parameters of the event being delivered.
+    guards: Vec<Option<Guard>>,
+    params: Vec<Value>,
+    oracle: Oracle,
     fired: Vec<u32>,
     refused: Vec<(u32, u32)>,
     /// States seen during the current fixpoint (with the number of immediate firings before
@@ -203,10 +340,21 @@ impl Effects for Recorder {
             self.livelock = Some(self.fixpoint_rules.clone());
         }
     }
+    fn guard(&mut self, rule: u32) -> bool {
+        let Some(Some(g)) = self.guards.get(rule as usize) else {
+            return true;
+        };
+        match truth(g, &self.params) {
+            Truth::True => true,
+            Truth::False => false,
+            Truth::Unknown => self.oracle.choose(),
+        }
+    }
 }
 
 impl Recorder {
     fn reset(&mut self) {
+        self.oracle.used = 0;
         self.fired.clear();
         self.refused.clear();
         self.fixpoint_states.clear();
@@ -219,9 +367,257 @@ impl Recorder {
 #[derive(Clone, Copy)]
 enum Via {
     Start,
-    Event(u32, EventId),
+    /// By a delivery, named by its label (an index in the labels of the run).
+    Event(u32, u32),
     /// Single-net mode: the environment set (true) or cleared a global place.
     Global(u32, u32, bool),
+}
+
+/// One way the environment can deliver an event: to every net or to one, with representative
+/// parameters (docs/semantics.md, "What the verifier explores").
+struct Delivery {
+    event: EventId,
+    target: Option<NetId>,
+    params: Vec<Value>,
+    /// `event`, `event(args)`, `event to NET`, for traces.
+    label: String,
+}
+
+/// The values a guard can tell apart for one parameter: each constant it is compared with,
+/// the intervals between them for numbers (and NaN for floats), and one other value.
+fn domain(ty: Type, comparands: &[Value], used: bool) -> Vec<Value> {
+    if !used && comparands.is_empty() {
+        return vec![ty.neutral()];
+    }
+    match ty {
+        Type::Bool => vec![Value::Bool(false), Value::Bool(true)],
+        Type::Text => {
+            let mut out: Vec<Value> = Vec::new();
+            for c in comparands {
+                if let Value::Text(_) = c {
+                    if !out.contains(c) {
+                        out.push(c.clone());
+                    }
+                }
+            }
+            let mut other = String::from("other");
+            while out.contains(&Value::Text(other.clone())) {
+                other.push('_');
+            }
+            out.push(Value::Text(other));
+            out
+        }
+        Type::FloatList => {
+            let mut out: Vec<Value> = Vec::new();
+            for c in comparands {
+                if let Value::FloatList(_) = c {
+                    if !out.contains(c) {
+                        out.push(c.clone());
+                    }
+                }
+            }
+            let mut other = Vec::new();
+            while out.contains(&Value::FloatList(other.clone())) {
+                other.push(0.5);
+            }
+            out.push(Value::FloatList(other));
+            out
+        }
+        Type::Int | Type::Float => {
+            let mut t: Vec<f64> = comparands
+                .iter()
+                .filter_map(|c| match c {
+                    Value::Int(i) => Some(*i as f64),
+                    Value::Float(f) if f.is_finite() => Some(*f),
+                    _ => None,
+                })
+                .collect();
+            t.sort_by(f64::total_cmp);
+            t.dedup();
+            if ty == Type::Float {
+                let mut out = Vec::new();
+                match (t.first(), t.last()) {
+                    (Some(&lo), Some(&hi)) => {
+                        out.push(lo - 1.0);
+                        for (k, &x) in t.iter().enumerate() {
+                            out.push(x);
+                            if let Some(&y) = t.get(k + 1) {
+                                out.push(x + (y - x) / 2.0);
+                            }
+                        }
+                        out.push(hi + 1.0);
+                    }
+                    _ => out.push(0.0),
+                }
+                let mut out: Vec<Value> = out.into_iter().map(Value::Float).collect();
+                out.push(Value::Float(f64::NAN));
+                out
+            } else {
+                let mut out: Vec<i64> = Vec::new();
+                match (t.first(), t.last()) {
+                    (Some(&lo), Some(&hi)) => {
+                        out.push((lo.ceil() as i64).saturating_sub(1));
+                        for (k, &x) in t.iter().enumerate() {
+                            if x.fract() == 0.0 {
+                                out.push(x as i64);
+                            }
+                            if let Some(&y) = t.get(k + 1) {
+                                let between = (x.floor() as i64).saturating_add(1);
+                                if (between as f64) < y && (between as f64) > x {
+                                    out.push(between);
+                                }
+                            }
+                        }
+                        out.push((hi.floor() as i64).saturating_add(1));
+                    }
+                    _ => out.push(0),
+                }
+                out.sort_unstable();
+                out.dedup();
+                out.into_iter().map(Value::Int).collect()
+            }
+        }
+    }
+}
+
+/// What the guards of an event's transitions compare each of its parameters with.
+fn comparands(g: &Guard, out: &mut [(Vec<Value>, bool)]) {
+    match g {
+        Guard::Const(_) => {}
+        Guard::Not(a) => comparands(a, out),
+        Guard::And(list) | Guard::Or(list) => list.iter().for_each(|a| comparands(a, out)),
+        Guard::Value(Arg::EventParam(i)) => {
+            if let Some(slot) = out.get_mut(*i as usize) {
+                slot.1 = true;
+            }
+        }
+        Guard::Value(_) => {}
+        Guard::Compare(_, a, b) => {
+            for (x, y) in [(a, b), (b, a)] {
+                if let Arg::EventParam(i) = x {
+                    if let Some(slot) = out.get_mut(*i as usize) {
+                        slot.1 = true;
+                        if let Arg::Literal(v) = y {
+                            slot.0.push(v.clone());
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Every delivery the environment may make: each awaited event, to every net and to each net
+/// some `emit ... to` addresses it to, with each combination of its parameters' classes.
+fn deliveries(p: &CompiledProject, l: &Layout) -> Result<Vec<Delivery>, VerifyError> {
+    use crate::compiled::Action;
+    let mut out = Vec::new();
+    for e in 0..p.events.len() as EventId {
+        if l.by_event[e as usize].is_empty() {
+            continue;
+        }
+        let decl = &p.events[e as usize];
+        let mut targets: Vec<Option<NetId>> = vec![None];
+        for net in &p.nets {
+            for t in &net.transitions {
+                for a in &t.actions {
+                    if let Action::Emit {
+                        event,
+                        target: Some(n),
+                        ..
+                    } = a
+                    {
+                        if *event == e && !targets.contains(&Some(*n)) {
+                            targets.push(Some(*n));
+                        }
+                    }
+                }
+            }
+        }
+        let mut slots: Vec<(Vec<Value>, bool)> = vec![(Vec::new(), false); decl.params.len()];
+        for &r in &l.by_event[e as usize] {
+            let rule = &l.rules[r as usize];
+            if let Some(g) = &p.nets[rule.net as usize].transitions[rule.transition as usize].guard
+            {
+                comparands(g, &mut slots);
+            }
+        }
+        let domains: Vec<Vec<Value>> = decl
+            .params
+            .iter()
+            .zip(&slots)
+            .map(|((_, ty), (c, used))| domain(*ty, c, *used))
+            .collect();
+        let combinations: usize = domains.iter().map(Vec::len).product();
+        if combinations > MAX_GUARD_RUNS {
+            return Err(VerifyError::TooManyUndecidedGuards {
+                event: decl.name.clone(),
+            });
+        }
+        let shown = domains.iter().any(|d| d.len() > 1);
+        let mut tuple = vec![0usize; domains.len()];
+        loop {
+            let params: Vec<Value> = tuple
+                .iter()
+                .zip(&domains)
+                .map(|(&k, d)| d[k].clone())
+                .collect();
+            for &target in &targets {
+                let mut label = decl.name.clone();
+                if shown {
+                    label = format!(
+                        "{label}({})",
+                        params
+                            .iter()
+                            .map(Value::literal)
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    );
+                }
+                if let Some(n) = target {
+                    label = format!("{label} to {}", p.nets[n as usize].name);
+                }
+                out.push(Delivery {
+                    event: e,
+                    target,
+                    params: params.clone(),
+                    label,
+                });
+            }
+            // The next combination, odometer-wise.
+            let mut k = 0;
+            loop {
+                if k == tuple.len() {
+                    break;
+                }
+                tuple[k] += 1;
+                if tuple[k] < domains[k].len() {
+                    break;
+                }
+                tuple[k] = 0;
+                k += 1;
+            }
+            if k == tuple.len() {
+                break;
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Answers "may this guard hold?" for the conflict check: true unless it is decided false.
+struct MayHold<'a> {
+    guards: &'a [Option<Guard>],
+    params: &'a [Value],
+}
+
+impl Effects for MayHold<'_> {
+    fn guard(&mut self, rule: u32) -> bool {
+        match self.guards.get(rule as usize) {
+            Some(Some(g)) => truth(g, self.params) != Truth::False,
+            _ => true,
+        }
+    }
 }
 
 /// Verifies a compiled project.
@@ -241,9 +637,22 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
     let sem = Semantics::new(p);
     let l = &sem.layout;
     let mut scratch = Scratch::default();
-    let mut rec = Recorder::default();
+    let guards: Vec<Option<Guard>> = l
+        .rules
+        .iter()
+        .map(|r| {
+            p.nets[r.net as usize].transitions[r.transition as usize]
+                .guard
+                .clone()
+        })
+        .collect();
+    let mut rec = Recorder {
+        guards: guards.clone(),
+        ..Recorder::default()
+    };
     let mut report = Report {
         safe: true,
+        invariants: p.invariants.iter().map(|i| i.name.clone()).collect(),
         ..Report::default()
     };
     let name_of = |r: u32| {
@@ -254,32 +663,42 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
             net.name, net.transitions[rule.transition as usize].name
         )
     };
+    let deliveries = deliveries(p, l)?;
+    let mut labels: Vec<String> = Vec::new();
+    let mut label_ids: HashMap<String, u32> = HashMap::new();
+    let label_of = |labels: &mut Vec<String>, text: String| -> u32 {
+        *label_ids.entry(text.clone()).or_insert_with(|| {
+            labels.push(text);
+            (labels.len() - 1) as u32
+        })
+    };
+    let mut label_of = label_of;
 
-    let initial = sem.initial(&mut rec, &mut scratch);
     let mut ever_fired = vec![false; l.rules.len()];
     let mut ever_active = vec![false; p.nets.len()];
-    let mut states: Vec<State> = vec![initial.clone()];
-    let mut via: Vec<Via> = vec![Via::Start];
+    let mut states: Vec<State> = Vec::new();
+    let mut via: Vec<Via> = Vec::new();
     let mut index: HashMap<State, u32> = HashMap::new();
-    index.insert(initial, 0);
     let mut edges: Vec<(u32, u32, EventId)> = Vec::new();
     let mut unsafe_seen: HashMap<(u32, u32), ()> = HashMap::new();
     let mut conflict_seen: HashMap<(u32, u32), ()> = HashMap::new();
     let mut livelock_seen: HashMap<Vec<u32>, ()> = HashMap::new();
+    let mut invariant_seen = vec![false; p.invariants.len()];
     let mut record_step = |rec: &Recorder,
-                           from: Option<(u32, EventId)>,
+                           from: Option<(u32, u32)>,
                            report: &mut Report,
                            ever_fired: &mut Vec<bool>,
                            via: &[Via],
-                           trace_of: &dyn Fn(&[Via], u32) -> Trace| {
+                           trace_of: &dyn Fn(&[Via], u32) -> Trace,
+                           label: &dyn Fn(u32) -> String| {
         for &r in &rec.fired {
             ever_fired[r as usize] = true;
         }
         let trace = || match from {
             None => Vec::new(),
-            Some((s, e)) => {
+            Some((s, d)) => {
                 let mut t = trace_of(via, s);
-                t.push(p.events[e as usize].name.clone());
+                t.push(label(d));
                 t
             }
         };
@@ -304,13 +723,51 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
             }
         }
     };
-    let trace_of = |via: &[Via], mut s: u32| -> Trace {
+
+    // The initial states: one per outcome of the guards the start cannot decide.
+    let mut prefixes: Vec<Vec<bool>> = vec![Vec::new()];
+    let mut runs = 0usize;
+    while let Some(prefix) = prefixes.pop() {
+        runs += 1;
+        if runs > MAX_GUARD_RUNS {
+            return Err(VerifyError::TooManyUndecidedGuards {
+                event: "(start)".into(),
+            });
+        }
+        rec.reset();
+        rec.params.clear();
+        rec.oracle.prefix = prefix.clone();
+        let initial = sem.initial(&mut rec, &mut scratch);
+        let labels_now = labels.clone();
+        record_step(
+            &rec,
+            None,
+            &mut report,
+            &mut ever_fired,
+            &via,
+            &|_, _| Vec::new(),
+            &|d| labels_now[d as usize].clone(),
+        );
+        for k in prefix.len()..rec.oracle.used {
+            let mut next = prefix.clone();
+            next.resize(k, false);
+            next.push(true);
+            prefixes.push(next);
+        }
+        if !index.contains_key(&initial) {
+            index.insert(initial.clone(), states.len() as u32);
+            states.push(initial);
+            via.push(Via::Start);
+        }
+    }
+
+    let trace_of = |via: &[Via], mut s: u32, labels: &[String]| -> Trace {
         let mut out = Vec::new();
         loop {
             match via[s as usize] {
                 Via::Start => break,
-                Via::Event(prev, e) => {
-                    out.push(p.events[e as usize].name.clone());
+                Via::Event(prev, d) => {
+                    out.push(labels[d as usize].clone());
                     s = prev;
                 }
                 Via::Global(prev, g, set) => {
@@ -327,11 +784,7 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
         out.reverse();
         out
     };
-    record_step(&rec, None, &mut report, &mut ever_fired, &via, &trace_of);
 
-    let awaited: Vec<EventId> = (0..p.events.len() as u32)
-        .filter(|&e| !l.by_event[e as usize].is_empty())
-        .collect();
     let mut last_progress = Instant::now();
     let mut next = 0usize;
     let mut candidates = Vec::new();
@@ -350,16 +803,30 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
             *seen |= l.is_active(&s, n as NetId);
         }
         report.max_tokens_per_marking = report.max_tokens_per_marking.max(l.tokens(&s) as u64);
-        let mut successors: Vec<(State, Via)> = Vec::new();
+        for (k, inv) in p.invariants.iter().enumerate() {
+            if !invariant_seen[k] && !l.holds(&inv.formula, &s) {
+                invariant_seen[k] = true;
+                report.invariant_violations.push(InvariantFinding {
+                    invariant: inv.name.clone(),
+                    marking: l.describe_state(p, &s),
+                    trace: trace_of(&via, i, &labels),
+                });
+            }
+        }
+        let mut successors: Vec<(State, Via, Option<EventId>)> = Vec::new();
         let mut any_enabled = false;
         if !l.is_over(&s) {
-            for &e in &awaited {
-                candidates.clear();
-                candidates.extend(
-                    l.by_event[e as usize]
-                        .iter()
-                        .copied()
-                        .filter(|&r| l.enabled(&s, r)),
+            for d in &deliveries {
+                let e = d.event;
+                sem.candidates(
+                    &s,
+                    e,
+                    d.target,
+                    &mut MayHold {
+                        guards: &guards,
+                        params: &d.params,
+                    },
+                    &mut candidates,
                 );
                 if candidates.is_empty() {
                     continue;
@@ -368,8 +835,8 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
                 for (a, &ra) in candidates.iter().enumerate() {
                     for &rb in &candidates[a + 1..] {
                         if l.share_input(ra, rb) && conflict_seen.insert((ra, rb), ()).is_none() {
-                            let mut trace = trace_of(&via, i);
-                            trace.push(p.events[e as usize].name.clone());
+                            let mut trace = trace_of(&via, i, &labels);
+                            trace.push(d.label.clone());
                             report.conflicts.push(ConflictFinding {
                                 event: p.events[e as usize].name.clone(),
                                 winner: name_of(ra),
@@ -379,24 +846,61 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
                         }
                     }
                 }
-                let mut t = s.clone();
-                // A timer's event arriving is that timer expiring: it no longer runs.
-                for (k, timer) in p.timers.iter().enumerate() {
-                    if timer.event == e {
-                        sem.timer_expired(&mut t, k as u32);
+                // Every outcome of the guards this delivery cannot decide.
+                let mut prefixes: Vec<Vec<bool>> = vec![Vec::new()];
+                let mut runs = 0usize;
+                while let Some(prefix) = prefixes.pop() {
+                    runs += 1;
+                    if runs > MAX_GUARD_RUNS {
+                        return Err(VerifyError::TooManyUndecidedGuards {
+                            event: p.events[e as usize].name.clone(),
+                        });
                     }
+                    let mut t = s.clone();
+                    // A timer's event arriving is that timer expiring: it no longer runs.
+                    for (k, timer) in p.timers.iter().enumerate() {
+                        if timer.event == e {
+                            sem.timer_expired(&mut t, k as u32);
+                        }
+                    }
+                    rec.reset();
+                    rec.params.clone_from(&d.params);
+                    rec.oracle.prefix = prefix.clone();
+                    sem.process_event(&mut t, e, d.target, &mut rec, &mut scratch);
+                    let decided = rec.oracle.used == 0;
+                    for k in prefix.len()..rec.oracle.used {
+                        let mut next = prefix.clone();
+                        next.resize(k, false);
+                        next.push(true);
+                        prefixes.push(next);
+                    }
+                    let text = if decided {
+                        d.label.clone()
+                    } else {
+                        let taken: Vec<&str> = (0..rec.oracle.used)
+                            .map(|k| {
+                                if prefix.get(k).copied().unwrap_or(false) {
+                                    "true"
+                                } else {
+                                    "false"
+                                }
+                            })
+                            .collect();
+                        format!("{} (undecided guards taken {})", d.label, taken.join(", "))
+                    };
+                    let lid = label_of(&mut labels, text);
+                    let labels_now = &labels;
+                    record_step(
+                        &rec,
+                        Some((i, lid)),
+                        &mut report,
+                        &mut ever_fired,
+                        &via,
+                        &|v, s| trace_of(v, s, labels_now),
+                        &|x| labels_now[x as usize].clone(),
+                    );
+                    successors.push((t, Via::Event(i, lid), Some(e)));
                 }
-                rec.reset();
-                sem.process_event(&mut t, e, &mut rec, &mut scratch);
-                record_step(
-                    &rec,
-                    Some((i, e)),
-                    &mut report,
-                    &mut ever_fired,
-                    &via,
-                    &trace_of,
-                );
-                successors.push((t, Via::Event(i, e)));
             }
         }
         if free_globals {
@@ -407,12 +911,23 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
                 t[(bit / 64) as usize] ^= 1 << (bit % 64);
                 // The environment's change may enable immediate transitions.
                 rec.reset();
+                rec.params.clear();
+                rec.oracle.prefix.clear();
                 sem.fixpoint(&mut t, &mut rec, &mut scratch);
-                record_step(&rec, None, &mut report, &mut ever_fired, &via, &trace_of);
-                successors.push((t, Via::Global(i, g, set)));
+                let labels_now = &labels;
+                record_step(
+                    &rec,
+                    None,
+                    &mut report,
+                    &mut ever_fired,
+                    &via,
+                    &|v, s| trace_of(v, s, labels_now),
+                    &|x| labels_now[x as usize].clone(),
+                );
+                successors.push((t, Via::Global(i, g, set), None));
             }
         }
-        for (t, how) in successors {
+        for (t, how, event) in successors {
             let j = match index.get(&t) {
                 Some(&j) => j,
                 None => {
@@ -428,7 +943,7 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
                     j
                 }
             };
-            if let Via::Event(_, e) = how {
+            if let Some(e) = event {
                 edges.push((i, j, e));
             }
         }
@@ -448,7 +963,7 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
                 marking,
                 intended,
                 after_catastrophic,
-                trace: trace_of(&via, i),
+                trace: trace_of(&via, i, &labels),
             });
         }
     }
@@ -484,6 +999,11 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
         .filter(|&e| l.by_event[e].is_empty() && !builtin(&p.events[e].name))
         .map(|e| p.events[e].name.clone())
         .collect();
+    report.templates = p
+        .nets
+        .iter()
+        .map(|n| (n.name.clone(), n.template.clone()))
+        .collect();
     report.seconds = started.elapsed().as_secs_f64();
     Ok(report)
 }
@@ -492,14 +1012,21 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
 fn only_net(p: &CompiledProject, id: NetId) -> CompiledProject {
     use crate::compiled::Action;
     let mut net = p.nets[id as usize].clone();
+    // Alone: no parent, no children (its completion places stay, never marked).
+    net.parent = None;
+    net.children.clear();
     for t in &mut net.transitions {
         t.actions.retain(|a| match a {
-            Action::Activate(n) | Action::Deactivate(n) => *n == id,
+            Action::Activate { net, .. } | Action::Deactivate(net) => *net == id,
             _ => true,
         });
         for a in &mut t.actions {
-            if let Action::Activate(n) | Action::Deactivate(n) = a {
-                *n = 0;
+            match a {
+                Action::Activate { net, .. } | Action::Deactivate(net) => *net = 0,
+                Action::Emit { target, .. } => {
+                    *target = target.filter(|&n| n == id).map(|_| 0);
+                }
+                _ => {}
             }
         }
     }
@@ -520,6 +1047,8 @@ fn only_net(p: &CompiledProject, id: NetId) -> CompiledProject {
             })
             .map(|f| f.iter().map(|&(_, r)| (0, r)).collect())
             .collect(),
+        // The invariants speak of the whole project.
+        invariants: Vec::new(),
     }
 }
 
@@ -744,6 +1273,27 @@ pub fn render_human(project_name: &str, r: &Report) -> String {
             trace_text(&l.trace)
         );
     }
+    if !r.invariants.is_empty() {
+        let _ = writeln!(
+            o,
+            "invariants: {} checked, {} broken",
+            r.invariants.len(),
+            r.invariant_violations.len()
+        );
+        for v in &r.invariant_violations {
+            let _ = writeln!(
+                o,
+                "  error: invariant `{}` is broken in {}, {}",
+                v.invariant,
+                if v.marking.is_empty() {
+                    "a state with nothing marked".to_string()
+                } else {
+                    v.marking.join(" ")
+                },
+                trace_text(&v.trace)
+            );
+        }
+    }
     let _ = writeln!(
         o,
         "loops that need outside events (expected): {}",
@@ -780,7 +1330,8 @@ pub fn render_human(project_name: &str, r: &Report) -> String {
     list(&mut o, "transitions that never fire", &r.never_fired);
     list(&mut o, "nets never activated", &r.never_activated);
     list(&mut o, "events no transition waits for", &r.unused_events);
-    let errors = r.unsafe_places.len() + unintended + r.livelocks.len();
+    let errors =
+        r.unsafe_places.len() + unintended + r.livelocks.len() + r.invariant_violations.len();
     if errors == 0 {
         let _ = writeln!(o, "result: verified, no error");
     } else {
@@ -800,20 +1351,38 @@ pub fn to_json(r: &Report) -> serde_json::Value {
 pub fn diagnostics(project: &crate::model::Project, r: &Report) -> crate::diag::Diagnostics {
     use crate::diag::{Diagnostic, Diagnostics};
     let mut d = Diagnostics::new();
+    let at = |span: Option<crate::source::Span>, diag: Diagnostic| Diagnostic { span, ..diag };
+    // An instance's findings point at its template's text.
+    let decl_of = |net: &str| {
+        let template = r.templates.get(net).map(String::as_str).unwrap_or(net);
+        project.nets().find(|n| n.name.text == template)
+    };
     let transition_span = |qualified: &str| {
-        let (net, t) = qualified.split_once('.')?;
-        let decl = project.nets().find(|n| n.name.text == net)?;
-        decl.transitions()
+        let (net, t) = qualified.rsplit_once('.')?;
+        decl_of(net)?
+            .transitions()
             .find(|x| x.name.text == t)
             .map(|x| x.name.span)
     };
-    let net_span = |net: &str| {
-        project
-            .nets()
-            .find(|n| n.name.text == net)
-            .map(|n| n.name.span)
-    };
-    let at = |span: Option<crate::source::Span>, diag: Diagnostic| Diagnostic { span, ..diag };
+    let net_span = |net: &str| decl_of(net).map(|n| n.name.span);
+    for v in &r.invariant_violations {
+        let span = project
+            .manifest
+            .invariants
+            .iter()
+            .find(|i| i.name.text == v.invariant)
+            .map(|i| i.name.span);
+        d.push(at(
+            span,
+            Diagnostic::error(
+                "E0604",
+                Default::default(),
+                format!("invariant `{}` is broken: {}", v.invariant, v.marking.join(" ")),
+            )
+            .label(format!("broken {}", trace_text(&v.trace)))
+            .help("the nets can reach a stable state where the formula is false: follow the trace, and fix the nets (or the invariant)"),
+        ));
+    }
     for u in &r.unsafe_places {
         d.push(at(
             transition_span(&u.transition),

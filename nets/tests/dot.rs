@@ -33,6 +33,7 @@ fn place(n: &str, tokens: u32) -> Item {
 
 fn item(kind: ItemKind) -> Item {
     Item {
+        allows: Vec::new(),
         trivia: Trivia::default(),
         kind,
         trailing: None,
@@ -47,6 +48,8 @@ fn transition(
     actions: Vec<Action>,
 ) -> Item {
     item(ItemKind::Transition(TransitionDecl {
+        guard: None,
+        empty: Vec::new(),
         name: name(n),
         trigger,
         inputs: names(inputs),
@@ -78,6 +81,8 @@ fn trigger(event: &str, bindings: &[(&str, Option<Type>)]) -> Option<Trigger> {
 
 fn net(n: &str, items: Vec<Item>) -> NetDecl {
     NetDecl {
+        allows: Vec::new(),
+        params: Vec::new(),
         trivia: Trivia::default(),
         name: name(n),
         items,
@@ -87,6 +92,7 @@ fn net(n: &str, items: Vec<Item>) -> NetDecl {
 
 fn global(n: &str, tokens: u32) -> GlobalPlaceDecl {
     GlobalPlaceDecl {
+        nets: None,
         name: name(n),
         tokens,
     }
@@ -148,7 +154,11 @@ fn survey() -> Project {
                             span: Span::default(),
                         },
                     },
-                    Action::Activate(name("Payload")),
+                    Action::Activate {
+                        net: name("Payload"),
+                        args: Vec::new(),
+                        span: Default::default(),
+                    },
                 ],
             ),
             transition(
@@ -171,6 +181,7 @@ fn survey() -> Project {
                 &["ready", "link"],
                 &["busy"],
                 vec![Action::Emit {
+                    to: None,
                     event: name("done"),
                     args: vec![],
                     span: Span::default(),

@@ -141,6 +141,19 @@ fn name() -> impl Strategy<Value = Name> {
     ident().prop_map(Name::synthetic)
 }
 
+/// A name that is not a word of guards or formulas (`and`, `or`, `not`...), for places where
+/// the language reads those words as operators.
+fn plain_name() -> impl Strategy<Value = Name> {
+    ident()
+        .prop_filter("not an operator word", |s| {
+            !matches!(
+                s.as_str(),
+                "and" | "or" | "not" | "if" | "to" | "implies" | "active"
+            )
+        })
+        .prop_map(Name::synthetic)
+}
+
 fn comment_text() -> impl Strategy<Value = String> {
     "[a-zA-Z0-9 ,.!?()-]{0,16}".prop_map(|s| s.trim_end().to_string())
 }
@@ -163,18 +176,64 @@ fn expr() -> impl Strategy<Value = Expr> {
             .prop_map(move |v| Expr::Float(v, sp)),
         any::<bool>().prop_map(move |v| Expr::Bool(v, sp)),
         any::<String>().prop_map(move |v| Expr::Text(v.replace('\r', ""), sp)),
-        name().prop_map(Expr::Var),
+        plain_name().prop_map(Expr::Var),
+        plain_name().prop_map(Expr::SelfParam),
     ];
     leaf.prop_recursive(2, 8, 4, move |inner| {
         prop::collection::vec(inner, 0..4).prop_map(move |v| Expr::List(v, sp))
     })
 }
 
+fn guard() -> impl Strategy<Value = Guard> {
+    let ops = prop::sample::select(vec![
+        CmpOp::Eq,
+        CmpOp::Ne,
+        CmpOp::Lt,
+        CmpOp::Le,
+        CmpOp::Gt,
+        CmpOp::Ge,
+    ]);
+    let leaf = prop_oneof![
+        expr().prop_map(Guard::Value),
+        (ops, expr(), expr()).prop_map(|(op, a, b)| Guard::Compare(op, a, b)),
+    ];
+    leaf.prop_recursive(3, 12, 2, |inner| {
+        prop_oneof![
+            (inner.clone(), inner.clone()).prop_map(|(a, b)| Guard::Or(Box::new(a), Box::new(b))),
+            (inner.clone(), inner.clone()).prop_map(|(a, b)| Guard::And(Box::new(a), Box::new(b))),
+            inner.prop_map(|a| Guard::Not(Box::new(a))),
+        ]
+    })
+}
+
+fn allow() -> impl Strategy<Value = Allow> {
+    (0u32..1000, prop::option::of(comment_text())).prop_map(|(n, reason)| Allow {
+        code: Name::synthetic(format!("W{n:04}")),
+        reason,
+    })
+}
+
+/// A place in an arc: a name, or a child's completion place.
+fn place_ref() -> impl Strategy<Value = Name> {
+    prop_oneof![
+        4 => name(),
+        1 => name().prop_map(|n| Name::synthetic(format!("{}.done", n.text))),
+    ]
+}
+
 fn action() -> impl Strategy<Value = Action> {
     let sp = petrel_nets::source::Span::default();
     prop_oneof![
-        name().prop_map(Action::Activate),
+        (name(), prop::collection::vec(expr(), 0..3)).prop_map(move |(net, args)| {
+            Action::Activate {
+                net,
+                args,
+                span: sp,
+            }
+        }),
         name().prop_map(Action::Deactivate),
+        Just(Action::Deactivate(Name::synthetic("self"))),
+        Just(Action::Finish(sp)),
         name().prop_map(Action::CancelTimer),
         (name(), 0u32..100_000, 0usize..4).prop_map(move |(timer, v, u)| Action::StartTimer {
             timer,
@@ -188,6 +247,10 @@ fn action() -> impl Strategy<Value = Action> {
             timer,
             after: DurationExpr::Seconds(n)
         }),
+        (name(), name()).prop_map(|(timer, n)| Action::StartTimer {
+            timer,
+            after: DurationExpr::SelfSeconds(n)
+        }),
         (name(), name(), prop::collection::vec(expr(), 0..4)).prop_map(
             move |(program, function, args)| {
                 Action::Call {
@@ -198,11 +261,17 @@ fn action() -> impl Strategy<Value = Action> {
                 }
             }
         ),
-        (name(), prop::collection::vec(expr(), 0..3)).prop_map(move |(event, args)| Action::Emit {
-            event,
-            args,
-            span: sp
-        }),
+        (
+            name(),
+            prop::collection::vec(expr(), 0..3),
+            prop::option::of(name())
+        )
+            .prop_map(move |(event, args, to)| Action::Emit {
+                event,
+                args,
+                to,
+                span: sp
+            }),
     ]
 }
 
@@ -234,46 +303,70 @@ fn item() -> impl Strategy<Value = Item> {
     let transition = (
         name(),
         prop::option::of(trigger),
-        prop::collection::vec(name(), 0..3),
-        prop::collection::vec(name(), 0..3),
+        prop::option::of(guard()),
+        (
+            prop::collection::vec(place_ref(), 0..3),
+            prop::collection::vec(place_ref(), 0..2),
+        ),
+        prop::collection::vec(place_ref(), 0..3),
         prop::collection::vec(action_item, 0..4),
         prop::collection::vec(comment_text(), 0..2),
     )
-        .prop_map(|(name, trigger, inputs, outputs, actions, end_comments)| {
-            ItemKind::Transition(TransitionDecl {
-                name,
-                trigger,
-                inputs,
-                outputs,
-                actions,
-                end_comments,
-            })
-        });
+        .prop_map(
+            |(name, trigger, guard, (inputs, empty), outputs, actions, end_comments)| {
+                ItemKind::Transition(TransitionDecl {
+                    name,
+                    trigger,
+                    guard,
+                    inputs,
+                    empty,
+                    outputs,
+                    actions,
+                    end_comments,
+                })
+            },
+        );
+    let child = (
+        name(),
+        prop::option::of(prop::collection::vec(expr(), 0..3)),
+    )
+        .prop_map(|(net, args)| ChildDecl { net, args });
+    let children = prop::collection::vec(child, 1..3).prop_map(ItemKind::Children);
     (
         trivia(),
-        prop_oneof![place, transition],
+        prop::collection::vec(allow(), 0..2),
+        prop_oneof![3 => place, 3 => transition, 1 => children],
         prop::option::of(comment_text()),
     )
-        .prop_map(|(trivia, kind, trailing)| Item {
+        .prop_map(|(trivia, allows, kind, trailing)| Item {
             trivia,
+            allows,
             kind,
             trailing,
         })
 }
 
 fn net_file() -> impl Strategy<Value = NetFile> {
+    let param = (plain_name(), prop::sample::select(Type::ALL.to_vec()))
+        .prop_map(|(name, ty)| Param { name, ty });
     let net = (
         trivia(),
+        prop::collection::vec(allow(), 0..2),
         name(),
+        prop::collection::vec(param, 0..3),
         prop::collection::vec(item(), 0..6),
         prop::collection::vec(comment_text(), 0..2),
     )
-        .prop_map(|(trivia, name, items, end_comments)| NetDecl {
-            trivia,
-            name,
-            items,
-            end_comments,
-        });
+        .prop_map(
+            |(trivia, allows, name, params, items, end_comments)| NetDecl {
+                trivia,
+                allows,
+                name,
+                params,
+                items,
+                end_comments,
+            },
+        );
     (
         prop::collection::vec(net, 0..3),
         prop::collection::vec(comment_text(), 0..2),
@@ -336,7 +429,7 @@ proptest! {
     /// fixpoint.
     #[test]
     fn any_text_parses_without_panic_and_formats_idempotently(
-        text in r#"(net|place|transition|on|->|:|,|\{|\}|\(|\)|\[|\]|=|1|0|2\.5|30s|"t"|//c|\n| |a|b|call|emit|P\.f|start|after|cancel|activate|deactivate|\$)*"#
+        text in r#"(net|place|transition|children|on|if|not|and|or|==|<=|>|!=|->|:|,|\{|\}|\(|\)|\[|\]|=|1|0|2\.5|30s|"t"|//c|\n| |a|b|call|emit|to|finish|self|self\.a|a\.done|@allow\(W0602\)|P\.f|start|after|cancel|activate|deactivate|\$)*"#
     ) {
         let (f, d) = parse(&text);
         if d.is_empty() {

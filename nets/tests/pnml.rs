@@ -231,6 +231,7 @@ fn every_mcc_net_imports_or_fails_with_e0504_e0505_only() {
                     let name = match &item.kind {
                         ItemKind::Place(p) => &p.name,
                         ItemKind::Transition(t) => &t.name,
+                        ItemKind::Children(_) => panic!("{}: an import made children", a.file),
                     };
                     assert!(is_identifier(name.as_str()), "{}: {name}", a.file);
                     assert!(names.insert(name.text.clone()), "{}: {name} twice", a.file);
@@ -411,6 +412,7 @@ fn plain_pnml_imports_as_named_immediate_transitions() {
         comments: c.iter().map(|s| s.to_string()).collect(),
     };
     let place = |n: &str, tokens: u32, c: &[&str]| Item {
+        allows: Vec::new(),
         trivia: trivia(c),
         kind: ItemKind::Place(PlaceDecl {
             name: name(n),
@@ -420,8 +422,11 @@ fn plain_pnml_imports_as_named_immediate_transitions() {
         trailing: None,
     };
     let transition = |n: &str, i: &[&str], o: &[&str], c: &[&str]| Item {
+        allows: Vec::new(),
         trivia: trivia(c),
         kind: ItemKind::Transition(TransitionDecl {
+            guard: None,
+            empty: Vec::new(),
             name: name(n),
             trigger: None,
             inputs: i.iter().map(|s| name(s)).collect(),
@@ -451,6 +456,8 @@ fn plain_pnml_imports_as_named_immediate_transitions() {
             NetFile {
                 path: "my_net.pn".into(),
                 nets: vec![NetDecl {
+                    allows: Vec::new(),
+                    params: Vec::new(),
                     trivia: trivia(&["PNML id \"my-net\""]),
                     name: name("my_net"),
                     items: vec![
@@ -468,6 +475,8 @@ fn plain_pnml_imports_as_named_immediate_transitions() {
             NetFile {
                 path: "second.pn".into(),
                 nets: vec![NetDecl {
+                    allows: Vec::new(),
+                    params: Vec::new(),
                     trivia: trivia(&[]),
                     name: name("second"),
                     items: vec![place("only", 0, &[])],
@@ -709,6 +718,7 @@ fn param(name: &str, ty: Type) -> Param {
 
 fn place_item(t: Trivia, name: &str, tokens: u32, written: bool, trailing: Option<&str>) -> Item {
     Item {
+        allows: Vec::new(),
         trivia: t,
         kind: ItemKind::Place(PlaceDecl {
             name: n(name),
@@ -747,6 +757,8 @@ fn sample_project() -> Project {
         }])
         .collect();
     let manifest = Manifest {
+        instances: Vec::new(),
+        invariants: Vec::new(),
         name: "uav mission <&> \"quoted\"".into(),
         description: Some("  leading spaces\r\nand CRLF\ttab ]]> end  ".into()),
         files: vec![
@@ -766,10 +778,12 @@ fn sample_project() -> Project {
         start: vec![n("nav"), n("monitor")],
         globals: vec![
             GlobalPlaceDecl {
+                nets: None,
                 name: n("ready"),
                 tokens: 1,
             },
             GlobalPlaceDecl {
+                nets: None,
                 name: n("link_up"),
                 tokens: 0,
             },
@@ -811,6 +825,8 @@ fn sample_project() -> Project {
     };
 
     let nav_go = TransitionDecl {
+        guard: None,
+        empty: Vec::new(),
         name: n("go"),
         trigger: Some(Trigger {
             event: n("ev_safety"),
@@ -872,6 +888,7 @@ fn sample_project() -> Project {
             action(
                 trivia(false, &["", "two comments, one empty"]),
                 Action::Emit {
+                    to: None,
                     event: n("ev_nominal"),
                     args: vec![
                         Expr::Var(n("speed")),
@@ -886,13 +903,22 @@ fn sample_project() -> Project {
             action(
                 trivia(false, &[]),
                 Action::Emit {
+                    to: None,
                     event: n("tick"),
                     args: vec![],
                     span: sp(),
                 },
                 None,
             ),
-            action(trivia(false, &[]), Action::Activate(n("monitor")), None),
+            action(
+                trivia(false, &[]),
+                Action::Activate {
+                    net: n("monitor"),
+                    args: Vec::new(),
+                    span: Default::default(),
+                },
+                None,
+            ),
             action(trivia(false, &[]), Action::Deactivate(n("nav")), None),
             action(
                 trivia(false, &[]),
@@ -921,6 +947,8 @@ fn sample_project() -> Project {
         end_comments: vec!["before the brace -- with dashes --> and <!-- markup".into()],
     };
     let nav_back = TransitionDecl {
+        guard: None,
+        empty: Vec::new(),
         name: n("back"),
         trigger: Some(Trigger {
             event: n("tick"),
@@ -933,6 +961,8 @@ fn sample_project() -> Project {
         end_comments: vec![],
     };
     let nav_spin = TransitionDecl {
+        guard: None,
+        empty: Vec::new(),
         name: n("spin"),
         trigger: Some(Trigger {
             event: n("ev_mission"),
@@ -962,17 +992,21 @@ fn sample_project() -> Project {
         end_comments: vec!["only a comment in the block".into()],
     };
     let nav = NetDecl {
+        allows: Vec::new(),
+        params: Vec::new(),
         trivia: trivia(false, &["The navigation net.", "  indented comment  "]),
         name: n("nav"),
         items: vec![
             place_item(trivia(false, &[]), "idle", 1, true, Some("starts here")),
             Item {
+                allows: Vec::new(),
                 trivia: trivia(true, &["go when ready"]),
                 kind: ItemKind::Transition(nav_go),
                 trailing: Some("end of header".into()),
             },
             place_item(trivia(true, &[]), "moving", 0, false, None),
             Item {
+                allows: Vec::new(),
                 trivia: trivia(false, &[]),
                 kind: ItemKind::Transition(nav_back),
                 trailing: None,
@@ -980,6 +1014,7 @@ fn sample_project() -> Project {
             // Written `place ready = 0`: shadows the global of the same name.
             place_item(trivia(false, &["local ready"]), "ready", 0, true, None),
             Item {
+                allows: Vec::new(),
                 trivia: trivia(false, &[]),
                 kind: ItemKind::Transition(nav_spin),
                 trailing: None,
@@ -988,13 +1023,18 @@ fn sample_project() -> Project {
         end_comments: vec!["end of nav".into()],
     };
     let monitor = NetDecl {
+        allows: Vec::new(),
+        params: Vec::new(),
         trivia: trivia(true, &[]),
         name: n("monitor"),
         items: vec![
             place_item(trivia(false, &[]), "watching", 1, true, None),
             Item {
+                allows: Vec::new(),
                 trivia: trivia(false, &[]),
                 kind: ItemKind::Transition(TransitionDecl {
+                    guard: None,
+                    empty: Vec::new(),
                     name: n("alarm"),
                     trigger: Some(Trigger {
                         event: n("ev_catastrophic"),
@@ -1009,6 +1049,7 @@ fn sample_project() -> Project {
                     actions: vec![action(
                         trivia(false, &[]),
                         Action::Emit {
+                            to: None,
                             event: n("ev_communication"),
                             args: vec![Expr::Text(String::new(), sp()), Expr::Var(n("code"))],
                             span: sp(),
@@ -1024,12 +1065,17 @@ fn sample_project() -> Project {
     };
     // Not started: its marked place is exported with no token.
     let spare = NetDecl {
+        allows: Vec::new(),
+        params: Vec::new(),
         trivia: trivia(false, &[]),
         name: n("spare"),
         items: vec![
             Item {
+                allows: Vec::new(),
                 trivia: trivia(false, &[]),
                 kind: ItemKind::Transition(TransitionDecl {
+                    guard: None,
+                    empty: Vec::new(),
                     name: n("wake"),
                     trigger: None,
                     inputs: vec![n("sleeping")],
@@ -1277,6 +1323,7 @@ mod properties {
             project.files[0].nets[0].items[0].trailing = Some(comment.clone());
             if let ItemKind::Transition(t) = &mut project.files[1].nets[0].items[1].kind {
                 t.actions[0].action = Action::Emit {
+                    to: None,
                     event: n("ev_communication"),
                     args: vec![Expr::Text(literal, sp()), Expr::Var(n("code"))],
                     span: sp(),

@@ -51,7 +51,7 @@ impl Effects for Record {
     fn call(&mut self, program: u32, function: u32, args: &[Arg]) {
         self.log.push(format!("call {program}.{function} {args:?}"));
     }
-    fn emit(&mut self, event: EventId, _args: &[Arg]) {
+    fn emit(&mut self, event: EventId, _args: &[Arg], _target: Option<u32>) {
         self.log.push(format!("emit {event}"));
     }
     fn start_timer(&mut self, timer: u32, after: &TimerDuration) {
@@ -92,7 +92,7 @@ impl<'p> Run<'p> {
     fn event(&mut self, name: &str) -> StepOutcome {
         let e = self.sem.project.event_id(name).unwrap();
         self.sem
-            .process_event(&mut self.state, e, &mut self.fx, &mut self.scratch)
+            .process_event(&mut self.state, e, None, &mut self.fx, &mut self.scratch)
     }
 
     /// The marked places, as `NET.place` and `global.place`, and the active nets.
@@ -279,7 +279,13 @@ fn a_livelock_of_immediate_transitions_stops_at_the_bound() {
     let mut scratch = Scratch::default();
     let mut fx = Record::default();
     let mut s = sem.initial(&mut fx, &mut scratch);
-    sem.process_event(&mut s, p.event_id("go").unwrap(), &mut fx, &mut scratch);
+    sem.process_event(
+        &mut s,
+        p.event_id("go").unwrap(),
+        None,
+        &mut fx,
+        &mut scratch,
+    );
     assert_eq!(fx.log.iter().filter(|l| l.starts_with("fired")).count(), 52);
     assert_eq!(fx.log.last().unwrap(), "livelock");
 }

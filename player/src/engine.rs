@@ -62,6 +62,8 @@ impl<'a> ArgValue<'a> {
 pub struct Args<'a> {
     args: &'a [Arg],
     params: &'a [Value],
+    /// The activation arguments of the net whose transition fired.
+    net_params: &'a [Value],
 }
 
 impl<'a> Args<'a> {
@@ -81,6 +83,8 @@ impl<'a> Args<'a> {
             Arg::Literal(v) => ArgValue::of(v),
             // The checker proved the index is in range for the triggering event.
             Arg::EventParam(p) => ArgValue::of(&self.params[*p as usize]),
+            // ... and for the net's parameters bound at activation.
+            Arg::NetParam(p) => ArgValue::of(&self.net_params[*p as usize]),
         }
     }
 
@@ -118,6 +122,9 @@ pub trait Sink {
     fn deactivated(&mut self, _net: NetId) {}
     /// The immediate fixpoint did not settle and was stopped; a `livelock` event is queued.
     fn livelock(&mut self) {}
+    /// Invariant `name` of the manifest stopped holding after the step; an
+    /// `invariant_violated` event is queued.
+    fn invariant_violated(&mut self, _name: &str) {}
 }
 
 /// A sink that ignores everything.
@@ -194,6 +201,8 @@ pub struct Stats {
 struct Queued {
     event: EventId,
     params: Vec<Value>,
+    /// The one net it is addressed to, if any.
+    target: Option<NetId>,
 }
 
 /// What one step did.
@@ -222,6 +231,13 @@ pub struct Engine<'p> {
     /// Ids of the built-in events the engine raises itself.
     safety_violation: Option<EventId>,
     livelock: Option<EventId>,
+    invariant_violated: Option<EventId>,
+    /// Each net's activation arguments (empty for nets whose parameters are not bound at
+    /// activation), kept while it is active.
+    net_args: Vec<Vec<Value>>,
+    /// Each invariant held after the previous step: a violation is raised once, when it stops
+    /// holding.
+    invariant_held: Vec<bool>,
 }
 
 fn category_index(c: Category) -> usize {
@@ -252,6 +268,13 @@ impl<'p> Engine<'p> {
             started: false,
             safety_violation: project.event_id("safety_violation"),
             livelock: project.event_id("livelock"),
+            invariant_violated: project.event_id("invariant_violated"),
+            net_args: project
+                .nets
+                .iter()
+                .map(|n| Vec::with_capacity(n.params.len()))
+                .collect(),
+            invariant_held: vec![true; project.invariants.len()],
         }
     }
 
@@ -277,6 +300,7 @@ impl<'p> Engine<'p> {
             now,
             emitted: &mut self.emitted,
             pool: &mut self.pool,
+            net_args: &mut self.net_args,
             violations: Vec::new(),
             livelock: None,
             last_fired: None,
@@ -284,7 +308,7 @@ impl<'p> Engine<'p> {
         self.state = self.sem.initial(&mut fx, &mut self.scratch);
         let violations = std::mem::take(&mut fx.violations);
         let livelock = fx.livelock;
-        self.after_step(violations, livelock);
+        self.after_step(violations, livelock, sink);
         self.started = true;
     }
 
@@ -397,7 +421,11 @@ impl<'p> Engine<'p> {
             }
         }
         self.stats.received += 1;
-        self.queues[category_index(decl.category)].push_back(Queued { event, params });
+        self.queues[category_index(decl.category)].push_back(Queued {
+            event,
+            params,
+            target: None,
+        });
         Ok(())
     }
 
@@ -491,7 +519,11 @@ impl<'p> Engine<'p> {
     /// queue is empty.
     pub fn step(&mut self, sink: &mut impl Sink) -> Option<Step> {
         let q = self.queues.iter_mut().find(|q| !q.is_empty())?;
-        let Queued { event, params } = q.pop_front()?;
+        let Queued {
+            event,
+            params,
+            target,
+        } = q.pop_front()?;
         sink.taken(event, &params);
         if self.is_over() {
             self.stats.refused += 1;
@@ -509,13 +541,14 @@ impl<'p> Engine<'p> {
             now: self.now,
             emitted: &mut self.emitted,
             pool: &mut self.pool,
+            net_args: &mut self.net_args,
             violations: Vec::new(),
             livelock: None,
             last_fired: None,
         };
-        let outcome = self
-            .sem
-            .process_event(&mut self.state, event, &mut fx, &mut self.scratch);
+        let outcome =
+            self.sem
+                .process_event(&mut self.state, event, target, &mut fx, &mut self.scratch);
         let violations = std::mem::take(&mut fx.violations);
         let livelock = fx.livelock;
         match outcome {
@@ -524,20 +557,44 @@ impl<'p> Engine<'p> {
             StepOutcome::RefusedAfterCatastrophic => self.stats.refused += 1,
         }
         self.recycle(params);
-        self.after_step(violations, livelock);
+        self.after_step(violations, livelock, sink);
         Some(Step { event, outcome })
     }
 
-    /// Queues what the step produced: emitted events, then built-in reports.
+    /// Queues what the step produced: emitted events, then built-in reports; then checks the
+    /// invariants on the stable state the step reached.
     fn after_step(
         &mut self,
         violations: Vec<(NetId, u32, String)>,
         livelock: Option<(NetId, u32)>,
+        sink: &mut impl Sink,
     ) {
-        let emitted = std::mem::take(&mut self.emitted);
-        for q in emitted {
+        let mut emitted = std::mem::take(&mut self.emitted);
+        for q in emitted.drain(..) {
             // Types were checked statically; only a catastrophic end can refuse (counted).
-            let _ = self.submit(q.event, q.params);
+            let target = q.target;
+            if self.submit(q.event, q.params).is_ok() && target.is_some() {
+                // `submit` queued it for every net: address it now.
+                let cat = category_index(self.sem.project.events[q.event as usize].category);
+                if let Some(last) = self.queues[cat].back_mut() {
+                    last.target = target;
+                }
+            }
+        }
+        // The buffer goes back for the next step: no allocation in the steady state.
+        self.emitted = emitted;
+        let p = self.sem.project;
+        for (k, inv) in p.invariants.iter().enumerate() {
+            let holds = self.sem.layout.holds(&inv.formula, &self.state);
+            if !holds && self.invariant_held[k] {
+                sink.invariant_violated(&inv.name);
+                if let Some(e) = self.invariant_violated {
+                    let mut params = self.param_buffer();
+                    params.push(Value::Text(inv.name.clone()));
+                    let _ = self.submit(e, params);
+                }
+            }
+            self.invariant_held[k] = holds;
         }
         let p = self.sem.project;
         for (net, t, place) in violations {
@@ -561,6 +618,17 @@ impl<'p> Engine<'p> {
         }
     }
 
+    /// Whether each invariant of the manifest holds in the current state.
+    pub fn invariants_holding(&self) -> &[bool] {
+        &self.invariant_held
+    }
+
+    /// The activation arguments of net `n` (empty unless its parameters are bound at
+    /// activation and it was activated).
+    pub fn net_args(&self, n: NetId) -> &[Value] {
+        &self.net_args[n as usize]
+    }
+
     /// Processes events until the queue is empty; returns how many were taken.
     pub fn run_until_idle(&mut self, sink: &mut impl Sink) -> u64 {
         let mut n = 0;
@@ -580,6 +648,7 @@ struct Adapter<'a, 'p, S: Sink> {
     now: Micros,
     emitted: &'a mut Vec<Queued>,
     pool: &'a mut Vec<Vec<Value>>,
+    net_args: &'a mut Vec<Vec<Value>>,
     violations: Vec<(NetId, u32, String)>,
     /// The last transition fired when the fixpoint was stopped.
     livelock: Option<(NetId, u32)>,
@@ -606,32 +675,55 @@ impl<S: Sink> Effects for Adapter<'_, '_, S> {
     }
 
     fn call(&mut self, program: ProgramId, function: FunctionId, args: &[Arg]) {
+        let net = self.last_fired.map_or(0, |(n, _)| n) as usize;
         self.sink.call(
             program,
             function,
             Args {
                 args,
                 params: self.params,
+                net_params: &self.net_args[net],
             },
         );
     }
 
-    fn emit(&mut self, event: EventId, args: &[Arg]) {
+    fn emit(&mut self, event: EventId, args: &[Arg], target: Option<NetId>) {
         let mut params = self.pool.pop().unwrap_or_default();
+        let net = self.last_fired.map_or(0, |(n, _)| n) as usize;
         let a = Args {
             args,
             params: self.params,
+            net_params: &self.net_args[net],
         };
         params.extend(a.iter().map(ArgValue::to_value));
-        self.emitted.push(Queued { event, params });
+        self.emitted.push(Queued {
+            event,
+            params,
+            target,
+        });
         self.sink.emitted(event);
     }
 
+    fn guard(&mut self, rule: u32) -> bool {
+        let r = &self.sem.layout.rules[rule as usize];
+        let t = &self.sem.project.nets[r.net as usize].transitions[r.transition as usize];
+        match &t.guard {
+            Some(g) => g.holds(self.params, &self.net_args[r.net as usize]),
+            None => true,
+        }
+    }
+
     fn start_timer(&mut self, timer: TimerId, after: &TimerDuration) {
+        let net = self.last_fired.map_or(0, |(n, _)| n) as usize;
         let micros = match after {
             TimerDuration::Millis(ms) => ms.saturating_mul(1000),
-            TimerDuration::EventParamSeconds(i) => {
-                let secs = match self.params.get(*i as usize) {
+            TimerDuration::EventParamSeconds(_) | TimerDuration::NetParamSeconds(_) => {
+                let value = match after {
+                    TimerDuration::EventParamSeconds(i) => self.params.get(*i as usize),
+                    TimerDuration::NetParamSeconds(i) => self.net_args[net].get(*i as usize),
+                    TimerDuration::Millis(_) => None,
+                };
+                let secs = match value {
                     Some(Value::Int(v)) => *v as f64,
                     Some(Value::Float(v)) => *v,
                     _ => 0.0,
@@ -658,7 +750,23 @@ impl<S: Sink> Effects for Adapter<'_, '_, S> {
         self.sink.notice(notice);
     }
 
-    fn activated(&mut self, net: NetId) {
+    fn activated(&mut self, net: NetId, args: &[Arg]) {
+        if !args.is_empty() {
+            // The arguments are read in the firing net's context, then kept for `net`; the
+            // vector is reused, so a steady mission allocates only for text arguments.
+            let from = self.last_fired.map_or(0, |(n, _)| n) as usize;
+            let mut values = std::mem::take(&mut self.net_args[net as usize]);
+            values.clear();
+            {
+                let a = Args {
+                    args,
+                    params: self.params,
+                    net_params: &self.net_args[from],
+                };
+                values.extend(a.iter().map(ArgValue::to_value));
+            }
+            self.net_args[net as usize] = values;
+        }
         self.sink.activated(net);
     }
 

@@ -159,6 +159,10 @@ impl Sink for StepRecord<'_> {
                 "deactivate {}: already inactive",
                 self.project.nets[n as usize].name
             ),
+            Notice::ParentInactive(n) => format!(
+                "finish {}: its parent is not active",
+                self.project.nets[n as usize].name
+            ),
         };
         self.actions.push(text);
     }
@@ -177,6 +181,9 @@ impl Sink for StepRecord<'_> {
     fn livelock(&mut self) {
         self.actions
             .push("livelock: immediate transitions did not settle".into());
+    }
+    fn invariant_violated(&mut self, name: &str) {
+        self.actions.push(format!("invariant {name} broken"));
     }
 }
 

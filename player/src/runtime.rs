@@ -192,6 +192,14 @@ impl Sink for RuntimeSink<'_, '_> {
         warn!("immediate transitions did not settle: fixpoint stopped, raising livelock");
         self.record.livelock();
     }
+
+    fn invariant_violated(&mut self, name: &str) {
+        error!(
+            invariant = name,
+            "an invariant of the manifest stopped holding: raising invariant_violated"
+        );
+        self.record.invariant_violated(name);
+    }
 }
 
 /// The ports of the player on the vehicle's services.

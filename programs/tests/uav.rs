@@ -31,18 +31,12 @@ fn gui_answers_roll_with_rotation_speed() {
     let _gui = Proc::spawn("uav_gui", &["--vehicle", v.name()]);
     let mut player = FakePlayer::join(&v.vehicle);
     player.call("GUI", "roll", vec![]);
-    let start = Instant::now();
+    // 8 simulated seconds at x600 (13 ms): no timing is asserted, machines are shared.
     let event = player.next();
     assert_eq!(event.msg.name, "rotation_speed");
     assert!(event.msg.params.is_empty());
     assert_eq!(event.origin.as_str(), "program/GUI");
     assert_eq!((event.seq, event.missed), (1, 0));
-    // 8 simulated seconds at x600: 13 ms.
-    assert!(
-        start.elapsed() < Duration::from_secs(2),
-        "{:?}",
-        start.elapsed()
-    );
 }
 
 #[test]

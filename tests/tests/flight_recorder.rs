@@ -214,26 +214,57 @@ fn a_shadow_follows_the_vehicle_and_raises_an_alarm_on_divergence() {
         );
         std::fs::write(dir.path().join(f), text).unwrap();
     }
+    // Each shadow's standard error, read as it comes: the events are sent once both follow.
     let spawn_shadow = |project: &Path| {
-        Command::new(petrel_bin())
+        use std::io::BufRead;
+        let mut child = Command::new(petrel_bin())
             .arg("play")
             .arg(project)
-            .args(["--vehicle", &vehicle, "--shadow", "--run-for", "3"])
+            .args(["--vehicle", &vehicle, "--shadow", "--run-for", "8"])
             .stderr(std::process::Stdio::piped())
             .spawn()
-            .unwrap()
+            .unwrap();
+        let stderr = child.stderr.take().unwrap();
+        let (tx, rx) = std::sync::mpsc::channel::<String>();
+        let reader = std::thread::spawn(move || {
+            let mut all = String::new();
+            for line in std::io::BufReader::new(stderr)
+                .lines()
+                .map_while(Result::ok)
+            {
+                let _ = tx.send(line.clone());
+                all.push_str(&line);
+                all.push('\n');
+            }
+            all
+        });
+        (child, rx, reader)
     };
-    let same = spawn_shadow(&uav());
-    let different = spawn_shadow(dir.path());
-    std::thread::sleep(std::time::Duration::from_millis(500));
+    let started = |rx: &std::sync::mpsc::Receiver<String>| {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+        while std::time::Instant::now() < deadline {
+            if let Ok(line) = rx.recv_timeout(std::time::Duration::from_millis(100)) {
+                if line.contains("shadow started") {
+                    return true;
+                }
+            }
+        }
+        false
+    };
+    let (mut same, same_rx, same_log) = spawn_shadow(&uav());
+    let (mut different, different_rx, different_log) = spawn_shadow(dir.path());
+    assert!(
+        started(&same_rx) && started(&different_rx),
+        "the shadows did not start"
+    );
     send_all(&player, &EVENTS[..4]);
-    let same = same.wait_with_output().unwrap();
-    let different = different.wait_with_output().unwrap();
-    let same_err = String::from_utf8_lossy(&same.stderr);
-    let diff_err = String::from_utf8_lossy(&different.stderr);
-    assert_eq!(same.status.code(), Some(0), "{same_err}");
+    let same_status = same.wait().unwrap();
+    let different_status = different.wait().unwrap();
+    let same_err = same_log.join().unwrap();
+    let diff_err = different_log.join().unwrap();
+    assert_eq!(same_status.code(), Some(0), "{same_err}");
     assert!(same_err.contains("0 divergence alarm"), "{same_err}");
-    assert_eq!(different.status.code(), Some(1), "{diff_err}");
+    assert_eq!(different_status.code(), Some(1), "{diff_err}");
     assert!(
         diff_err.contains("ALARM step")
             && diff_err.contains("(event airborne)")

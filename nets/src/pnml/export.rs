@@ -128,6 +128,8 @@ pub fn export_pnml(project: &Project) -> String {
                 let name = match &item.kind {
                     ItemKind::Place(p) => &p.name,
                     ItemKind::Transition(t) => &t.name,
+                    // Not a P/T element: it travels in the net's Petrel block.
+                    ItemKind::Children(_) => return String::new(),
                 };
                 ids.take(&format!("{}.{}", net.name, name), "-")
             })
@@ -198,6 +200,7 @@ pub fn export_pnml(project: &Project) -> String {
                     write_transition_block(&mut w, item, t);
                     w.close("transition");
                 }
+                ItemKind::Children(_) => {}
             }
         }
     }

@@ -155,6 +155,7 @@ fn plain_project(raws: &[RawNet], diags: &mut Diagnostics) -> Project {
         let mut items = Vec::new();
         for (p, name) in pt.places.iter().zip(&place_names) {
             items.push(Item {
+                allows: Vec::new(),
                 trivia: Trivia {
                     blank_before: false,
                     comments: origin(&p.id, name),
@@ -194,11 +195,14 @@ fn plain_project(raws: &[RawNet], diags: &mut Diagnostics) -> Project {
         for ((t, ins), outs) in pt.transitions.iter().zip(inputs).zip(outputs) {
             let name = names.take(&sanitize(&t.id), "_");
             items.push(Item {
+                allows: Vec::new(),
                 trivia: Trivia {
                     blank_before: false,
                     comments: origin(&t.id, &name),
                 },
                 kind: ItemKind::Transition(TransitionDecl {
+                    guard: None,
+                    empty: Vec::new(),
                     name: Name {
                         text: name,
                         span: t.span,
@@ -224,6 +228,8 @@ fn plain_project(raws: &[RawNet], diags: &mut Diagnostics) -> Project {
         files.push(NetFile {
             path,
             nets: vec![NetDecl {
+                allows: Vec::new(),
+                params: Vec::new(),
                 trivia: Trivia {
                     blank_before: false,
                     comments: origin(&pt.id, &net_name),
@@ -362,6 +368,7 @@ impl Rebuild<'_, '_> {
         }
         for g in n.children("global") {
             m.globals.push(GlobalPlaceDecl {
+                nets: None,
                 name: self.name(g, "name"),
                 tokens: self.number(g, "tokens"),
             });
@@ -436,6 +443,7 @@ impl Rebuild<'_, '_> {
         let tokens = self.number(n, "tokens");
         let tokens_span = self.flag(n, "marking-written").then_some(n.span);
         Item {
+            allows: Vec::new(),
             trivia: self.trivia(n),
             kind: ItemKind::Place(PlaceDecl {
                 name: self.name(n, "name"),
@@ -467,8 +475,11 @@ impl Rebuild<'_, '_> {
             .filter_map(|a| self.action(a))
             .collect();
         Item {
+            allows: Vec::new(),
             trivia: self.trivia(n),
             kind: ItemKind::Transition(TransitionDecl {
+                guard: None,
+                empty: Vec::new(),
                 name: self.name(n, "name"),
                 trigger,
                 inputs,
@@ -596,6 +607,8 @@ impl Rebuild<'_, '_> {
                 }
                 layout.nets.push(ids);
                 nets.push(NetDecl {
+                    allows: Vec::new(),
+                    params: Vec::new(),
                     trivia: self.trivia(n),
                     name: self.name(n, "name"),
                     items,
@@ -737,8 +750,13 @@ fn texts(n: &Node, name: &str) -> Vec<String> {
 fn respan_action(a: Action, span: Span) -> Action {
     let name = |n: Name| Name { text: n.text, span };
     match a {
-        Action::Activate(n) => Action::Activate(name(n)),
+        Action::Activate { net, args, .. } => Action::Activate {
+            net: name(net),
+            args: args.into_iter().map(|e| respan_expr(e, span)).collect(),
+            span,
+        },
         Action::Deactivate(n) => Action::Deactivate(name(n)),
+        Action::Finish(_) => Action::Finish(span),
         Action::CancelTimer(n) => Action::CancelTimer(name(n)),
         Action::StartTimer { timer, after } => Action::StartTimer {
             timer: name(timer),
@@ -747,6 +765,7 @@ fn respan_action(a: Action, span: Span) -> Action {
                     DurationExpr::Literal { value, unit, span }
                 }
                 DurationExpr::Seconds(n) => DurationExpr::Seconds(name(n)),
+                DurationExpr::SelfSeconds(n) => DurationExpr::SelfSeconds(name(n)),
             },
         },
         Action::Call {
@@ -760,9 +779,12 @@ fn respan_action(a: Action, span: Span) -> Action {
             args: args.into_iter().map(|e| respan_expr(e, span)).collect(),
             span,
         },
-        Action::Emit { event, args, .. } => Action::Emit {
+        Action::Emit {
+            event, args, to, ..
+        } => Action::Emit {
             event: name(event),
             args: args.into_iter().map(|e| respan_expr(e, span)).collect(),
+            to: to.map(name),
             span,
         },
     }
@@ -780,5 +802,6 @@ fn respan_expr(e: Expr, span: Span) -> Expr {
             span,
         ),
         Expr::Var(n) => Expr::Var(Name { text: n.text, span }),
+        Expr::SelfParam(n) => Expr::SelfParam(Name { text: n.text, span }),
     }
 }
