@@ -30,8 +30,10 @@ use serde::de::{Deserialize, Deserializer, MapAccess, Visitor};
 use std::fmt::Write as _;
 use toml::Spanned;
 
-/// A TOML table read in document order (the order of nets and events is meaningful).
-struct Ordered<V>(Vec<(Spanned<String>, V)>);
+/// A TOML table read in document order, each key with its span: serde's maps forget the order
+/// (meaningful for nets, events, rules...) and the keys' places (where diagnostics point).
+/// `can.toml`'s reader uses it too.
+pub struct Ordered<V>(pub Vec<(Spanned<String>, V)>);
 
 impl<V> Default for Ordered<V> {
     fn default() -> Self {
