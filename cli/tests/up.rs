@@ -120,7 +120,7 @@ impl Up {
             .find_map(|l| {
                 let words: Vec<&str> = l.split_whitespace().collect();
                 let i = words.iter().position(|w| *w == "pid")?;
-                (words.get(i - 2) == Some(&name)).then_some(())?;
+                (words.get(i.checked_sub(2)?) == Some(&name)).then_some(())?;
                 words.get(i + 1)?.parse().ok()
             })
             .unwrap_or_else(|| panic!("no pid for `{name}`:\n{}", self.stdout()))

@@ -370,12 +370,14 @@ fn plan(a: UpArgs) -> Result<Plan, Outcome> {
         .map_err(Outcome::Usage)?;
     let timeout = match a.timeout {
         None => None,
-        Some(s) if s.is_finite() && s > 0.0 => Some(Duration::from_secs_f64(s)),
-        Some(s) => {
-            return Err(Outcome::Usage(format!(
-                "--timeout takes a positive number of seconds, not {s}"
-            )))
-        }
+        Some(s) => match Duration::try_from_secs_f64(s) {
+            Ok(d) if s > 0.0 => Some(d),
+            _ => {
+                return Err(Outcome::Usage(format!(
+                    "--timeout takes a positive number of seconds, not {s:?}"
+                )))
+            }
+        },
     };
     let project_dir = absolute(&a.dir)?;
     let run_dir = run_directory(&a, &file, &project_dir, vehicle.name())?;

@@ -968,7 +968,10 @@ impl Supervisor {
                 ));
             }
         }
-        crate::common::out(&text);
+        // Not `common::out`, which ends the process quietly on a closed pipe: the exit code
+        // must still say whether a process failed.
+        let _ = std::io::stdout().lock().write_all(text.as_bytes());
+        let _ = std::io::stdout().flush();
         if ok {
             return Outcome::Clean;
         }
