@@ -1,6 +1,6 @@
 //! `petrel up` with real processes over real iceoryx2: the UAV mission's vehicle.toml (player,
-//! uav_gui, uav_dec, a timed start), crashes and restarts, timeouts, SIGTERM, computers, and
-//! vehicle files with errors. Each test has its own vehicle and run directory, and leaves
+//! uav_gui, uav_dec, a timed start), the AUV's (with the CAN data server), crashes and
+//! restarts, timeouts, SIGTERM, computers, and vehicle files with errors. Each test has its own vehicle and run directory, and leaves
 //! nothing in /tmp or /dev/shm, pass or fail.
 
 use petrel_tests::{example_bin, repo, unique_vehicle, Workdir};
@@ -247,6 +247,40 @@ fn up_flies_the_uav_mission_until_landed_and_its_journal_replays() {
         "{replay}"
     );
     assert!(replay.contains("MISSION{landed}"), "{replay}");
+}
+
+#[test]
+fn the_auv_survey_comes_up_with_its_can_data_server_and_ends_at_its_final_marking() {
+    example_bin("auv_gui");
+    let work = Workdir::new();
+    let vehicle = unique_vehicle("upauv");
+    let mut up = Up::start(
+        &work,
+        &repo().join("missions/auv"),
+        &vehicle,
+        &["--timeout", "120"],
+    );
+    let status = up.wait(150);
+    let out = up.stdout();
+    assert_eq!(status.code(), Some(0), "{out}\n{}", up.stderr());
+    // The bridge is ready on its heartbeat; GUI comes after it.
+    let (can, gui) = (
+        out.find("`can` ready").expect("can ready"),
+        out.find("`gui` ready").expect("gui ready"),
+    );
+    assert!(can < gui, "{out}");
+    assert!(
+        out.contains("the mission reached its final marking [PHASES.surfaced]"),
+        "{out}"
+    );
+    for p in ["player", "can", "gui"] {
+        assert!(summary_line(&out, p).contains("exited(0)"), "{p}: {out}");
+    }
+    // The data server left in good order: the player had acknowledged all it sent.
+    let can_log = std::fs::read_to_string(up.run.join("can.log")).unwrap();
+    assert!(can_log.contains("unacknowledged: false"), "{can_log}");
+    assert!(up.run.join("bus.log").exists());
+    assert_vehicle_left_clean(&vehicle);
 }
 
 /// The UAV vehicle with DEC crashing (exit 3) after its first answer, and `dec_extra` lines
