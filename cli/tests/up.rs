@@ -517,6 +517,24 @@ fn sigterm_stops_every_process_cleanly_in_reverse_order() {
     let pids = up.child_pids();
     assert_eq!(pids.len(), 3, "{}", up.stdout());
     assert!(pids.iter().all(|&p| alive(p)), "{pids:?}");
+    // A second `petrel up` of the same vehicle is refused, before it starts anything.
+    let second = work.path().join("second");
+    let o = run_petrel(&[
+        "up",
+        &repo().join("missions/uav").display().to_string(),
+        "--vehicle",
+        &vehicle,
+        "--logs",
+        &second.display().to_string(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    let player = up.pid_of("player");
+    assert!(
+        err.contains(&format!("is already running `player` (pid {player})")),
+        "{err}"
+    );
+    assert!(!second.exists());
     let started = Instant::now();
     let killed = Command::new("kill")
         .args(["-TERM", &up.pid().to_string()])

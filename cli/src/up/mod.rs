@@ -253,6 +253,44 @@ fn resolve_executable(text: &str, project_dir: &Path, process: &str) -> Result<P
         .ok_or_else(|| format!("process `{process}`: `{text}` is not found in PATH"))
 }
 
+/// Refuses to start a process whose node already lives on the vehicle (a player, a bridge or
+/// a program of another run): the second would fail to join, or steal the first one's calls.
+fn refuse_running(vehicle: &petrel_ipc::Vehicle, processes: &[ProcessSpec]) -> Result<(), Outcome> {
+    let nodes = petrel_ipc::list_nodes(vehicle).map_err(|e| Outcome::Usage(e.to_string()))?;
+    let mut clashes = Vec::new();
+    for p in processes {
+        let names: Vec<String> = match p.kind {
+            Kind::Player => vec![petrel_ipc::Role::Player.node_name()],
+            Kind::Bridge => vec![petrel_ipc::Role::CanBridge.node_name()],
+            Kind::Program => p
+                .programs
+                .iter()
+                .map(|x| petrel_ipc::naming::program_node_name(x))
+                .collect(),
+            Kind::Command => vec![],
+        };
+        for n in nodes
+            .iter()
+            .filter(|n| n.status == petrel_ipc::NodeStatus::Alive && names.contains(&n.name))
+        {
+            clashes.push(format!(
+                "`{}` (pid {}) for process `{}`",
+                n.name,
+                n.pid.map(|p| p.to_string()).unwrap_or_else(|| "?".into()),
+                p.name
+            ));
+        }
+    }
+    if clashes.is_empty() {
+        return Ok(());
+    }
+    Err(Outcome::Usage(format!(
+        "vehicle `{}` is already running {}: stop it first, or bring up another vehicle with --vehicle",
+        vehicle.name(),
+        clashes.join(", ")
+    )))
+}
+
 /// The processes in dependency order (file order among equals).
 fn order(selected: &[ProcessSpec]) -> Vec<usize> {
     let mut done: Vec<bool> = vec![false; selected.len()];
@@ -379,6 +417,8 @@ fn plan(a: UpArgs) -> Result<Plan, Outcome> {
             }
         },
     };
+    // Before the run directory is made: a refused run leaves nothing behind.
+    refuse_running(&vehicle, &selected)?;
     let project_dir = absolute(&a.dir)?;
     let run_dir = run_directory(&a, &file, &project_dir, vehicle.name())?;
     let petrel = std::env::current_exe()

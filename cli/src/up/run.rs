@@ -130,7 +130,9 @@ enum End {
     PlayerExited,
     /// `--timeout`.
     Timeout(Duration),
-    /// The vehicle cannot go on.
+    /// A process failed in a way that stops the vehicle (it is listed with its failure).
+    ProcessFailed(String),
+    /// The scenario cannot go on (a timed send not received or not acknowledged).
     Failure(String),
 }
 
@@ -169,9 +171,6 @@ pub fn run(plan: Plan, t0: Instant) -> Outcome {
         Ok(s) => s,
         Err(e) => return Outcome::Usage(format!("cannot watch signals: {e}")),
     };
-    if let Err(o) = refuse_running(&plan) {
-        return o;
-    }
     let role = match petrel_ipc::Role::tool(&format!("up{}", std::process::id())) {
         Ok(r) => r,
         Err(e) => return Outcome::Usage(e.to_string()),
@@ -262,45 +261,6 @@ pub fn run(plan: Plan, t0: Instant) -> Outcome {
         eprintln!("warning: {e}");
     }
     sup.summary(end)
-}
-
-/// Refuses to start a process whose node already lives on the vehicle (a player, a bridge or
-/// a program of another run): the second would fail to join, or steal the first one's calls.
-fn refuse_running(plan: &Plan) -> Result<(), Outcome> {
-    let nodes = petrel_ipc::list_nodes(&plan.vehicle).map_err(|e| Outcome::Usage(e.to_string()))?;
-    let mut clashes = Vec::new();
-    for p in &plan.processes {
-        let names: Vec<String> = match p.spec.kind {
-            Kind::Player => vec![petrel_ipc::Role::Player.node_name()],
-            Kind::Bridge => vec![petrel_ipc::Role::CanBridge.node_name()],
-            Kind::Program => p
-                .spec
-                .programs
-                .iter()
-                .map(|x| petrel_ipc::naming::program_node_name(x))
-                .collect(),
-            Kind::Command => vec![],
-        };
-        for n in nodes
-            .iter()
-            .filter(|n| n.status == petrel_ipc::NodeStatus::Alive && names.contains(&n.name))
-        {
-            clashes.push(format!(
-                "`{}` (pid {}) for process `{}`",
-                n.name,
-                n.pid.map(|p| p.to_string()).unwrap_or_else(|| "?".into()),
-                p.spec.name
-            ));
-        }
-    }
-    if clashes.is_empty() {
-        return Ok(());
-    }
-    Err(Outcome::Usage(format!(
-        "vehicle `{}` is already running {}: stop it first, or bring up another vehicle with --vehicle",
-        plan.vehicle.name(),
-        clashes.join(", ")
-    )))
 }
 
 impl Supervisor {
@@ -532,7 +492,9 @@ impl Supervisor {
                 } else {
                     format!("process `{name}`")
                 };
-                fatal = fatal.or(Some(End::Failure(format!("{what} failed: {failure}"))));
+                fatal = fatal.or(Some(End::ProcessFailed(format!(
+                    "{what} failed: {failure}"
+                ))));
             }
         }
         fatal
@@ -807,7 +769,7 @@ impl Supervisor {
             // A process stopped for not being ready in time gets its grace period too.
             self.escalate(None);
             if let Some(why) = self.start_and_check_ready() {
-                return End::Failure(why);
+                return End::ProcessFailed(why);
             }
             if self.up_at.is_none() && self.procs.iter().all(Proc::satisfies) {
                 self.up_at = Some(Instant::now());
@@ -924,7 +886,7 @@ impl Supervisor {
                 format!("timed out after {:.1} s (--timeout)", t.as_secs_f64()),
                 false,
             ),
-            End::Failure(why) => (why.clone(), false),
+            End::ProcessFailed(why) | End::Failure(why) => (why.clone(), false),
         };
         let failed: Vec<&Proc> = self.procs.iter().filter(|p| p.failure.is_some()).collect();
         ok &= failed.is_empty();
@@ -975,7 +937,8 @@ impl Supervisor {
         if ok {
             return Outcome::Clean;
         }
-        if let End::Timeout(_) | End::Failure(_) = end {
+        // The reason, unless it is one of the process failures listed next.
+        if matches!(end, End::Timeout(_) | End::Failure(_)) {
             eprintln!("error: {reason}");
         }
         for p in failed {
