@@ -38,6 +38,7 @@ pub fn bridge(a: BridgeArgs) -> Outcome {
         Scope {
             can: true,
             quick_verify: false,
+            vehicle: false,
         },
         "bridge",
     ) {

@@ -23,13 +23,15 @@ pub struct CheckArgs {
     no_verify: bool,
 }
 
-/// Checks a project: syntax, names, types, markings, can.toml, and the quick verification.
+/// Checks a project: syntax, names, types, markings, can.toml, vehicle.toml, and the quick
+/// verification.
 pub fn check(a: CheckArgs) -> Outcome {
     let checked = match check_project(
         &a.dir,
         Scope {
             can: true,
             quick_verify: !a.no_verify,
+            vehicle: true,
         },
     ) {
         Ok(c) => c,
@@ -62,6 +64,20 @@ pub fn check(a: CheckArgs) -> Outcome {
                     c.timers.len(),
                     d.warning_count()
                 ));
+                if let Some(v) = &checked.vehicle {
+                    let names: Vec<String> = v
+                        .processes
+                        .iter()
+                        .map(|p| format!("{} ({})", p.name, p.kind.as_str()))
+                        .collect();
+                    out(&format!(
+                        "vehicle.toml: {} processes ({}), {} computers, {} timed sends\n",
+                        v.processes.len(),
+                        names.join(", "),
+                        v.computers.len(),
+                        v.sends.len()
+                    ));
+                }
             }
         }
     }

@@ -157,28 +157,9 @@ pub fn send(a: SendArgs) -> Outcome {
         Ok(c) => c,
         Err(o) => return o,
     };
-    // The same reading as a script line, so the operator types what scripts hold.
-    let script = match petrel_player::script::parse_script(&format!("0 {event}"), &c) {
-        Ok(s) => s,
-        Err(errors) => {
-            return Outcome::Usage(
-                errors
-                    .into_iter()
-                    .map(|(_, e)| e)
-                    .collect::<Vec<_>>()
-                    .join("; "),
-            )
-        }
-    };
-    let Some((
-        _,
-        petrel_player::script::Line::At {
-            event: Some((name, params)),
-            ..
-        },
-    )) = script.lines.first()
-    else {
-        return Outcome::Usage(format!("`{event}` is not an event"));
+    let (name, params) = match crate::common::operator_event(event, &c) {
+        Ok(e) => e,
+        Err(e) => return Outcome::Usage(e),
     };
     let (v, me, beats) = match join_as_tool(&c, vehicle, "send") {
         Ok(x) => x,
@@ -188,7 +169,7 @@ pub fn send(a: SendArgs) -> Outcome {
         Ok(s) => s,
         Err(e) => return Outcome::Usage(e.to_string()),
     };
-    let msg = petrel_ipc::EventMsg::new(name.clone(), params.clone());
+    let msg = petrel_ipc::EventMsg::new(name, params);
     let (mut delivered, mut refused, mut absent, mut last_seq) = (0u64, 0u64, 0u64, 0u64);
     for _ in 0..count {
         match sender.send(&msg) {

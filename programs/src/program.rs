@@ -208,6 +208,20 @@ impl Program {
         if names.is_empty() {
             return Err(ProgramError::NoProgram);
         }
+        // Signals first: once a node of the program is alive, a supervisor (`petrel up`) takes
+        // the program as started and may stop it at once; a SIGTERM must then reach a handler
+        // (the program leaves in good order at its next `recv`), not the default action.
+        //
+        // A spinning reactor never sleeps in the wait set, which is what reports signals: leave
+        // them their default action rather than swallow them.
+        let handle_signals = config.handle_signals && config.wait != WaitStrategy::Spin;
+        let mut reactor = if handle_signals {
+            Reactor::new(WaitStrategy::Block)?
+        } else {
+            Reactor::without_signal_handling(WaitStrategy::Block)?
+        };
+        let terminated = handle_signals && install_signal_handlers(&reactor)?;
+        reactor.set_strategy(config.wait);
         let mut hosts: Vec<Hosted> = Vec::with_capacity(names.len());
         for name in names {
             if hosts.iter().any(|h| h.name == *name) {
@@ -228,16 +242,6 @@ impl Program {
                 participant,
             });
         }
-        // A spinning reactor never sleeps in the wait set, which is what reports signals: leave
-        // them their default action rather than swallow them.
-        let handle_signals = config.handle_signals && config.wait != WaitStrategy::Spin;
-        let mut reactor = if handle_signals {
-            Reactor::new(WaitStrategy::Block)?
-        } else {
-            Reactor::without_signal_handling(WaitStrategy::Block)?
-        };
-        let terminated = handle_signals && install_signal_handlers(&reactor)?;
-        reactor.set_strategy(config.wait);
         Ok(Program {
             hosts,
             reactor,
