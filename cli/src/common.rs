@@ -141,8 +141,12 @@ pub fn check_project(dir: &Path, scope: Scope) -> Result<Checked, Outcome> {
             max_states: Some(QUICK_VERIFY_STATES),
             ..Default::default()
         };
+        use petrel_nets::check::{apply_allows, AllowPass};
         match verify::verify(c, opts) {
-            Ok(report) => d.extend(verify::diagnostics(&loaded.project, &report)),
+            Ok(report) => {
+                d.extend(verify::diagnostics(&loaded.project, &report));
+                apply_allows(&loaded.project, &mut d, AllowPass::Final);
+            }
             Err(e) => d.push(Diagnostic {
                 severity: Severity::Warning,
                 ..Diagnostic::global(

@@ -125,6 +125,7 @@ pub fn verify(a: VerifyArgs) -> Outcome {
                 eprint!("\r{states} states, {rate:.0} states/s   ");
             }) as Box<dyn FnMut(u64, f64)>
         }),
+        ..Default::default()
     };
     let r = match verify::verify(&c, opts) {
         Ok(r) => r,

@@ -41,7 +41,7 @@ pub fn check(project: &Project) -> (Option<c::CompiledProject>, Diagnostics) {
     };
     let compiled = ck.run();
     let mut d = ck.d;
-    apply_allows(project, &mut d, false);
+    apply_allows(project, &mut d, AllowPass::Check);
     d.sort();
     let compiled = if d.has_errors() { None } else { compiled };
     (compiled, d)
@@ -245,6 +245,7 @@ impl<'p> Checker<'p> {
         }
         let timers = self.timers_compiled();
         self.hierarchy();
+        self.cycles();
         self.find_roots();
 
         // Each body once.
@@ -379,6 +380,62 @@ impl<'p> Checker<'p> {
                         &ch.net,
                         self.decl_ids.keys().copied().collect(),
                     ),
+                }
+            }
+        }
+    }
+
+    /// Reports the `children` lines that lead from a net back to itself (such nets would have
+    /// no root to be instantiated from).
+    fn cycles(&mut self) {
+        let n = self.decls.len();
+        let children: Vec<Vec<usize>> = self
+            .decls
+            .iter()
+            .map(|d| {
+                d.children()
+                    .filter_map(|c| self.decl_ids.get(c.net.as_str()).copied())
+                    .collect()
+            })
+            .collect();
+        // 0 unseen, 1 on the path, 2 done.
+        let mut state = vec![0u8; n];
+        for root in 0..n {
+            if state[root] != 0 {
+                continue;
+            }
+            let mut stack: Vec<(usize, usize)> = vec![(root, 0)];
+            state[root] = 1;
+            while let Some(&mut (v, ref mut k)) = stack.last_mut() {
+                if let Some(&w) = children[v].get(*k) {
+                    *k += 1;
+                    match state[w] {
+                        0 => {
+                            state[w] = 1;
+                            stack.push((w, 0));
+                        }
+                        1 => {
+                            let path: Vec<String> = stack
+                                .iter()
+                                .skip_while(|(x, _)| *x != w)
+                                .map(|(x, _)| self.decls[*x].name.text.clone())
+                                .collect();
+                            let name = &self.decls[w].name;
+                            self.d.push(
+                                Diagnostic::error(
+                                    "E0304",
+                                    name.span,
+                                    format!("the children of net `{name}` lead back to it: {} -> {name}", path.join(" -> ")),
+                                )
+                                .label("a net is its own descendant")
+                                .help("the `children` lines must form a tree: remove one of the lines that closes the cycle"),
+                            );
+                        }
+                        _ => {}
+                    }
+                } else {
+                    state[v] = 2;
+                    stack.pop();
                 }
             }
         }
@@ -558,19 +615,8 @@ impl<'p> Checker<'p> {
             parent,
             children: Vec::new(),
         });
+        // `cycles` reported any cycle; this only keeps the expansion finite.
         if path.contains(&decl) {
-            let n = &self.decls[decl].name;
-            if self.reported.insert((n.span.file.0, n.span.start, "E0304")) {
-                self.d.push(
-                    Diagnostic::error(
-                        "E0304",
-                        n.span,
-                        format!("the children of net `{n}` lead back to it"),
-                    )
-                    .label("a net is its own descendant")
-                    .help("the `children` lines must form a tree: remove one of the lines that closes the cycle"),
-                );
-            }
             return me;
         }
         path.push(decl);
@@ -2017,15 +2063,26 @@ pub fn literal(e: &Expr, ty: Type) -> Option<c::Value> {
     })
 }
 
+/// Which pass of [`apply_allows`] this is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AllowPass {
+    /// The checker's: silences, and reports an `@allow` of a code that is not a warning's
+    /// (W0106).
+    Check,
+    /// Silences the warnings added since (a verification that did not finish), nothing more.
+    FilterOnly,
+    /// The last, once the verification's warnings are in: silences, and reports an `@allow`
+    /// that silenced nothing (W0105).
+    Final,
+}
+
 /// The warnings an `@allow` stands for, and the `@allow`s that stand for nothing.
 ///
 /// An `@allow(CODE)` before a transition or a place silences the warnings of that code whose
 /// location is the item's name; before a net, those located at the net's name or any of its
-/// items. The checker's pass (`final_pass` false) also reports an `@allow` of a code that is not
-/// a warning's (W0106); the last pass, once the verification's warnings are in too, reports an
-/// `@allow` that silenced nothing (W0105).
-pub fn apply_allows(project: &Project, d: &mut Diagnostics, final_pass: bool) {
-    let judged_all = final_pass;
+/// items.
+pub fn apply_allows(project: &Project, d: &mut Diagnostics, pass: AllowPass) {
+    let (final_pass, judged_all) = (pass != AllowPass::Check, pass == AllowPass::Final);
     struct Allowed<'a> {
         allow: &'a Allow,
         covers: Vec<Span>,

@@ -424,11 +424,11 @@ pub fn parse_manifest(file: FileId, text: &str, diags: &mut Diagnostics) -> Opti
             range = range.start + 1..range.end.saturating_sub(1);
         }
         let formula = if exact {
-            crate::formula::parse_formula(file, range.start, v.get_ref(), "E0612", r.diags)
+            crate::formula::parse_formula(file, range.start, v.get_ref(), "E0108", r.diags)
         } else {
             // Escapes move positions: report at the whole string.
             let mut inner = Diagnostics::new();
-            let f = crate::formula::parse_formula(file, 0, v.get_ref(), "E0612", &mut inner);
+            let f = crate::formula::parse_formula(file, 0, v.get_ref(), "E0108", &mut inner);
             for mut d in inner.into_iter() {
                 d.span = Some(r.span(v.span()));
                 r.diags.push(d);

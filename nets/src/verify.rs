@@ -28,6 +28,8 @@ pub struct VerifyOptions {
     pub only_net: Option<String>,
     /// Called about once a second with (states so far, states per second).
     pub progress: Option<Box<dyn FnMut(u64, f64)>>,
+    /// Keep every reachable stable state in [`Report::reachable`] (for cross-checks).
+    pub keep_states: bool,
 }
 
 /// Why a verification could not finish.
@@ -180,6 +182,9 @@ pub struct Report {
     /// Each net's template (its declaration in the net files), for locating findings.
     #[serde(skip)]
     pub templates: HashMap<String, String>,
+    /// Every reachable stable state, when [`VerifyOptions::keep_states`] asked for them.
+    #[serde(skip)]
+    pub reachable: Vec<State>,
 }
 
 impl Report {
@@ -999,6 +1004,9 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
         .filter(|&e| l.by_event[e].is_empty() && !builtin(&p.events[e].name))
         .map(|e| p.events[e].name.clone())
         .collect();
+    if opts.keep_states {
+        report.reachable = states;
+    }
     report.templates = p
         .nets
         .iter()
@@ -1432,11 +1440,28 @@ pub fn diagnostics(project: &crate::model::Project, r: &Report) -> crate::diag::
         ));
     }
     for t in &r.never_fired {
+        let immediate = t.rsplit_once('.').and_then(|(net, name)| {
+            decl_of(net)?
+                .transitions()
+                .find(|x| x.name.text == name)
+                .map(|x| x.trigger.is_none())
+        });
+        let (label, help) = if immediate == Some(true) {
+            (
+                "never enabled",
+                "check its input places (and its guard); remove it if it is dead code, or say it is intended with @allow(W0602, \"why\")",
+            )
+        } else {
+            (
+                "never enabled (guard included) when its event comes",
+                "check its input places, its guard and its event; remove it if it is dead code, or say it is intended with @allow(W0602, \"why\")",
+            )
+        };
         d.push(at(
             transition_span(t),
             Diagnostic::warning("W0602", Default::default(), format!("{t} can never fire"))
-                .label("never enabled when its event comes")
-                .help("check its input places and its event; remove it if it is dead code"),
+                .label(label)
+                .help(help),
         ));
     }
     for n in &r.never_activated {

@@ -144,3 +144,42 @@ fn json_report_names_file_line_and_column() {
         .unwrap()
         .contains("did you mean `busy`?"));
 }
+
+#[test]
+fn templates_instances_and_activation_arguments() {
+    let codes = golden("templates");
+    for code in [
+        "E0209", "E0210", "E0303", "E0304", "E0401", "E0402", "E0412",
+    ] {
+        assert!(codes.contains(&code), "{code} missing from {codes:?}");
+    }
+}
+
+#[test]
+fn children_completion_places_and_finish() {
+    let codes = golden("hierarchy");
+    for code in ["E0413", "E0414", "E0415"] {
+        assert!(codes.contains(&code), "{code} missing from {codes:?}");
+    }
+}
+
+#[test]
+fn guards_and_emptiness_tests() {
+    let codes = golden("guards");
+    assert_eq!(
+        codes.iter().filter(|c| **c == "E0410").count(),
+        3,
+        "{codes:?}"
+    );
+    for code in ["E0207", "E0416", "E0209"] {
+        assert!(codes.contains(&code), "{code} missing from {codes:?}");
+    }
+}
+
+#[test]
+fn program_names_invariants_scoped_globals_and_allows() {
+    let codes = golden("language");
+    for code in ["E0107", "E0108", "E0211", "E0417", "W0106"] {
+        assert!(codes.contains(&code), "{code} missing from {codes:?}");
+    }
+}
