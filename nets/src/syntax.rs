@@ -1041,8 +1041,19 @@ impl Parser<'_> {
                 Action::StartTimer { timer, after }
             }
             "call" => {
-                const HELP: &str = "write `call PROGRAM.FUNCTION(arg, ...)`";
-                let program = self.name("a program name", HELP)?;
+                const HELP: &str = "write `call PROGRAM.FUNCTION(arg, ...)`, or `call self.PARAM.FUNCTION(...)` for the program a net parameter names";
+                // `self.PARAM`: the program a parameter of the net names.
+                let program = if self.at_ident("self") {
+                    let s = self.bump().span;
+                    self.expect(Tok::Dot, HELP)?;
+                    let param = self.name("a parameter name", HELP)?;
+                    Name {
+                        text: format!("self.{}", param.text),
+                        span: s.to(param.span),
+                    }
+                } else {
+                    self.name("a program name", HELP)?
+                };
                 self.expect(Tok::Dot, HELP)?;
                 let function = self.name("a function name", HELP)?;
                 self.expect(Tok::LParen, HELP)?;

@@ -437,3 +437,105 @@ fn guards_run_with_any_sink() {
     e.run_until_idle(&mut Quiet);
     assert!(marking(&e).contains(&"R2.inside".into()));
 }
+
+const UGV: &str = r#"
+[project]
+name = "ugv"
+files = ["a.pn"]
+start = ["R1", "R2"]
+
+[instances]
+R1 = { net = "ROBOT", args = ["r1", "MOVES_R1"] }
+R2 = { net = "ROBOT", args = ["r2", "MOVES_R2"] }
+
+[events]
+next_move = { category = "nominal", params = ["robot: text", "kind: text"] }
+move_done = { category = "nominal", params = ["robot: text"] }
+
+[programs.MOVES_R1]
+functions = { execute = ["kind: text", "speed: float"] }
+[programs.MOVES_R2]
+functions = { execute = ["kind: text", "speed: float"] }
+"#;
+
+const UGV_NETS: &str = r#"
+net ROBOT(robot: text, moves: text) {
+    children MOVE(self.robot, self.moves)
+    place ready = 1
+    place moving
+    transition go on next_move(r, k) if r == self.robot: ready -> moving {
+        activate MOVE(k)
+    }
+    transition moved: moving, MOVE.done -> ready
+}
+
+net MOVE(robot: text, moves: text, kind: text) {
+    place order = 1
+    place running
+    transition send: order -> running {
+        call self.moves.execute(self.kind, 1)
+    }
+    transition over on move_done(r) if r == self.robot: running -> {
+        finish
+    }
+}
+"#;
+
+#[test]
+fn instances_fix_leading_parameters_and_name_their_own_programs() {
+    let p = compile(UGV, UGV_NETS);
+    let names: Vec<&str> = p.nets.iter().map(|n| n.name.as_str()).collect();
+    assert_eq!(names, ["R1", "R1/MOVE", "R2", "R2/MOVE"]);
+    // R1/MOVE keeps one parameter for its activations: `kind`.
+    assert_eq!(
+        p.nets[1].params,
+        vec![("kind".to_string(), petrel_value::Type::Text)]
+    );
+    let mut e = Engine::new(&p);
+    let mut rec = StepRecord::new(&p);
+    e.start(0, &mut rec);
+    send(
+        &mut e,
+        &mut rec,
+        "next_move",
+        vec![text("r2"), text("turn_left")],
+    );
+    assert!(
+        rec.actions
+            .iter()
+            .any(|a| a == "call MOVES_R2.execute(\"turn_left\", 1.0)"),
+        "{:?}",
+        rec.actions
+    );
+    assert!(marking(&e).contains(&"R2/MOVE.running".into()));
+    rec.clear();
+    send(&mut e, &mut rec, "move_done", vec![text("r2")]);
+    let m = marking(&e);
+    assert!(
+        m.contains(&"R2.ready".into()) && !m.contains(&"R2/MOVE+".into()),
+        "{m:?}"
+    );
+    // R1 was never concerned.
+    assert!(m.contains(&"R1.ready".into()), "{m:?}");
+}
+
+#[test]
+fn a_program_named_by_a_parameter_must_exist_and_be_fixed() {
+    let bad = UGV.replace("\"MOVES_R2\"", "\"MOVES_R9\"");
+    let (_, c, d, _) = from_sources(&bad, &[("a.pn", UGV_NETS)]);
+    assert!(c.is_none());
+    let e = d
+        .iter()
+        .find(|x| x.code == "E0204")
+        .expect("unknown program");
+    assert!(e.message.contains("MOVES_R9"), "{}", e.message);
+    // A parameter bound only at activation cannot name a program.
+    let at_activation = UGV_NETS.replace(
+        "children MOVE(self.robot, self.moves)",
+        "children MOVE(self.robot)",
+    );
+    let at_activation = at_activation.replace("activate MOVE(k)", "activate MOVE(self.moves, k)");
+    let (_, c, d, _) = from_sources(UGV, &[("a.pn", &at_activation)]);
+    assert!(c.is_none());
+    assert!(d.iter().any(|x| x.code == "E0418"), "{d:?}");
+}
