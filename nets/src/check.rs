@@ -282,6 +282,7 @@ impl<'p> Checker<'p> {
                     .iter()
                     .map(|p| (p.name.text.clone(), p.ty))
                     .collect(),
+                internal: e.internal,
             })
             .collect();
         let programs = m
@@ -299,6 +300,11 @@ impl<'p> Checker<'p> {
                             .iter()
                             .map(|p| (p.name.text.clone(), p.ty))
                             .collect(),
+                        answers: f
+                            .answers
+                            .iter()
+                            .filter_map(|a| self.answer(p, f, a))
+                            .collect(),
                     })
                     .collect(),
             })
@@ -313,8 +319,15 @@ impl<'p> Checker<'p> {
             start: Vec::new(),
             finals: Vec::new(),
             invariants: Vec::new(),
+            goals: Vec::new(),
+            progress_excludes: self.progress_excludes(),
         };
         project.start = self.start(&project, &root_inst);
+        project.goals = m
+            .goals
+            .iter()
+            .map(|f| self.final_marking(&project, f))
+            .collect();
         project.finals = m
             .finals
             .iter()
@@ -322,6 +335,50 @@ impl<'p> Checker<'p> {
             .collect();
         project.invariants = self.invariants(&project);
         Some(project)
+    }
+
+    /// An event a function declares it answers with: declared, and not `internal` (nets emit
+    /// those, programs do not).
+    fn answer(&mut self, p: &ProgramDecl, f: &FunctionDecl, a: &Name) -> Option<u32> {
+        let Some(&e) = self.events.get(a.as_str()) else {
+            self.unknown("E0203", "event", a, self.events.keys().copied().collect());
+            return None;
+        };
+        if self.event_decl(e).internal {
+            self.d.push(
+                Diagnostic::error(
+                    "E0419",
+                    a.span,
+                    format!(
+                        "`{}.{}` answers with `{a}`, which is internal: only nets emit it",
+                        p.name, f.name
+                    ),
+                )
+                .label("an internal event")
+                .help("remove `internal = true` from the event, or the event from the answers"),
+            );
+            return None;
+        }
+        Some(e)
+    }
+
+    /// The categories the progress check leaves out (default: catastrophic).
+    fn progress_excludes(&mut self) -> Vec<Category> {
+        let Some(list) = &self.p.manifest.progress_excludes else {
+            return vec![Category::Catastrophic];
+        };
+        let mut out = Vec::new();
+        for n in list {
+            match Category::from_keyword(&n.text) {
+                Some(c) => out.push(c),
+                None => self.d.push(
+                    Diagnostic::error("E0102", n.span, format!("unknown event category `{n}`"))
+                        .label("not a category")
+                        .help("the categories are catastrophic, safety, mission, communication and nominal"),
+                ),
+            }
+        }
+        out
     }
 
     fn timers_compiled(&mut self) -> Vec<c::Timer> {

@@ -386,6 +386,7 @@ impl Rebuild<'_, '_> {
                 category,
                 params: self.params(e),
                 description: e.child("description").map(|d| d.text.clone()),
+                internal: false,
             });
         }
         for p in n.children("program") {
@@ -394,6 +395,7 @@ impl Rebuild<'_, '_> {
                 .map(|f| FunctionDecl {
                     name: self.name(f, "name"),
                     params: self.params(f),
+                    answers: Vec::new(),
                 })
                 .collect();
             m.programs.push(ProgramDecl {
