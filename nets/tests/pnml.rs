@@ -748,17 +748,21 @@ fn sample_project() -> Project {
             category,
             params: vec![param(&format!("x{i}"), *ty), param("flag", Type::Bool)],
             description: (i % 2 == 0).then(|| format!("event {i}: \"<&>\"\nsecond line")),
+            internal: false,
         })
         .chain([EventDecl {
             name: n("tick"),
             category: Category::Nominal,
             params: vec![],
             description: Some(String::new()),
+            internal: false,
         }])
         .collect();
     let manifest = Manifest {
         instances: Vec::new(),
         invariants: Vec::new(),
+        goals: Vec::new(),
+        progress_excludes: None,
         name: "uav mission <&> \"quoted\"".into(),
         description: Some("  leading spaces\r\nand CRLF\ttab ]]> end  ".into()),
         files: vec![
@@ -796,6 +800,7 @@ fn sample_project() -> Project {
                 functions: vec![
                     FunctionDecl {
                         name: n("goto"),
+                        answers: Vec::new(),
                         params: vec![
                             param("x", Type::Float),
                             param("path", Type::FloatList),
@@ -804,6 +809,7 @@ fn sample_project() -> Project {
                     },
                     FunctionDecl {
                         name: n("stop"),
+                        answers: Vec::new(),
                         params: vec![],
                     },
                 ],
@@ -813,6 +819,7 @@ fn sample_project() -> Project {
                 description: None,
                 functions: vec![FunctionDecl {
                     name: n("show"),
+                    answers: Vec::new(),
                     params: vec![param("n", Type::Int)],
                 }],
             },

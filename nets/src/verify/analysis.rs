@@ -311,6 +311,9 @@ pub(super) fn components(g: &Graph) -> Components {
     Components { comp, size }
 }
 
+/// What a loop's inner edges show: the rules fired, the events, one state of it.
+type LoopInside = (HashSet<u32>, Vec<EventId>, u32, bool);
+
 /// Starvation: a loop of stable states the environment can keep the mission in forever, in
 /// which a net waits (it is active throughout and never fires) for a global place that the
 /// loop's own firings give back and take again: its transition could fire, and never does.
@@ -323,7 +326,7 @@ pub(super) fn starvation(
     let mut out: Vec<StarvationFinding> = Vec::new();
     // Per component: the rules fired on its inner edges (not self-loops that change nothing),
     // its events, and one of its states.
-    let mut inner: HashMap<u32, (HashSet<u32>, Vec<EventId>, u32, bool)> = HashMap::new();
+    let mut inner: HashMap<u32, LoopInside> = HashMap::new();
     for e in &g.edges {
         let (a, b) = (c.comp[e.from as usize], c.comp[e.to as usize]);
         if a != b || e.from == e.to {
@@ -340,7 +343,7 @@ pub(super) fn starvation(
             entry.1.push(ev);
         }
     }
-    let mut comps: Vec<(&u32, &(HashSet<u32>, Vec<EventId>, u32, bool))> = inner.iter().collect();
+    let mut comps: Vec<(&u32, &LoopInside)> = inner.iter().collect();
     comps.sort_by_key(|(_, v)| v.2);
     for (comp, (fired, events, sample, _)) in comps {
         let states: Vec<usize> = (0..g.states.len())

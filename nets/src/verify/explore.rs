@@ -248,6 +248,9 @@ pub(super) fn run_step(
     t
 }
 
+/// A state reached from the one being expanded, how, and the edge's label and fired set.
+type Successor = (State, Via, Option<(u32, u32)>);
+
 /// Explores every stable state of `p`.
 pub(super) fn explore(
     p: &CompiledProject,
@@ -367,7 +370,7 @@ pub(super) fn explore(
             *seen |= l.is_active(&s, n as NetId);
         }
         g.max_tokens_per_marking = g.max_tokens_per_marking.max(l.tokens(&s) as u64);
-        let mut successors: Vec<(State, Via, Option<(u32, u32)>)> = Vec::new();
+        let mut successors: Vec<Successor> = Vec::new();
         let mut any_enabled = false;
         if !l.is_over(&s) {
             for (di, d) in deliveries.iter().enumerate() {
