@@ -9,8 +9,17 @@
 //! replayed through the engine and every recorded state checked.
 //!
 //! A record cut short by a crash (its length runs past the end of the last segment, or its
-//! checksum fails and nothing follows it) is *torn*: dropped with a warning. A bad checksum
-//! anywhere else is *corruption*: an error that names the segment, the offset and the record.
+//! checksum fails and nothing but zero bytes follows it) is *torn*: dropped with a warning. So
+//! is a run of zero bytes at the end of the last segment, what a power loss leaves when a file's
+//! length reached the disk before its data. A bad checksum anywhere else is *corruption*: an
+//! error that names the segment, the offset and the record. `petrel play --resume` cuts a torn
+//! tail off ([`cut_torn_tail`]) before it writes on, so that it never becomes corruption in the
+//! middle of the journal.
+//!
+//! Decoding is bounded: a record's body is decoded with a bincode limit proportional to its own
+//! length ([`decode_entry`]), so a body with a valid checksum that claims a vector of 2^61
+//! elements or a string of 2^40 bytes is refused as an undecodable record, never a panic or an
+//! allocation the machine cannot make.
 
 use bincode::{Decode, Encode};
 use petrel_nets::compiled::Value;
@@ -20,8 +29,63 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 const MAGIC: &[u8; 8] = b"PETRELJ1";
-/// Largest record accepted when reading (a guard against a corrupt length field).
-const MAX_RECORD: u32 = 64 << 20;
+/// Largest record written or read (a guard against a corrupt length field). A step of the
+/// largest project holds a few kilobytes; events on the wire are at most 64 KiB.
+pub const MAX_RECORD: u32 = 16 << 20;
+
+/// How many bytes of memory decoding may claim per byte of a record. bincode claims
+/// `len × size_of::<T>()` before it decodes a container; the widest element an entry holds per
+/// byte of its encoding is a `String` (24 bytes in memory, 1 byte encoded when empty), so 32
+/// accepts every record the writer produces, and bounds what a crafted one can make us
+/// allocate to 32 times its own length.
+const CLAIM_PER_BYTE: usize = 32;
+
+fn decode_limited<const LIMIT: usize>(
+    body: &[u8],
+) -> Result<(Entry, usize), bincode::error::DecodeError> {
+    bincode::decode_from_slice(body, bincode::config::standard().with_limit::<LIMIT>())
+}
+
+/// Decodes one record's body into an [`Entry`], with a bincode limit of
+/// [`CLAIM_PER_BYTE`] times the body's length (rounded up to a power of two, at least 4 KiB):
+/// every byte of the body must belong to the entry. bincode's limit is a constant of its
+/// configuration type, so the limit is picked from a fixed ladder of powers of two.
+pub fn decode_entry(body: &[u8]) -> Result<Entry, String> {
+    if body.len() > MAX_RECORD as usize {
+        return Err(format!(
+            "a record of {} bytes, more than the {MAX_RECORD} a journal holds",
+            body.len()
+        ));
+    }
+    let limit = body
+        .len()
+        .saturating_mul(CLAIM_PER_BYTE)
+        .max(4096)
+        .next_power_of_two();
+    macro_rules! ladder {
+        ($($bits:literal)*) => {
+            match limit.trailing_zeros() {
+                $($bits => decode_limited::<{ 1usize << $bits }>(body),)*
+                _ => return Err(format!("a record of {} bytes is too large to decode", body.len())),
+            }
+        };
+    }
+    // 2^12 (4 KiB) up to 2^29 (32 × MAX_RECORD).
+    let decoded = ladder!(12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29);
+    match decoded {
+        Ok((entry, used)) if used == body.len() => Ok(entry),
+        Ok((_, used)) => Err(format!(
+            "{} bytes left over after the entry (of {})",
+            body.len() - used,
+            body.len()
+        )),
+        Err(bincode::error::DecodeError::LimitExceeded) => Err(format!(
+            "undecodable entry: it claims more memory than a record of {} bytes can hold (a corrupt or crafted length)",
+            body.len()
+        )),
+        Err(e) => Err(format!("undecodable entry: {e}")),
+    }
+}
 
 /// One journal entry.
 #[derive(Clone, Debug, PartialEq, Encode, Decode)]
@@ -450,6 +514,13 @@ pub fn read_journal(path: &Path) -> Result<JournalRead, JournalError> {
                 what,
             };
             let rest = bytes.len() - pos;
+            if last_file && all_zero(&bytes[pos..]) {
+                // A power loss after the file grew but before its data reached the disk.
+                read.torn = Some(damage(format!(
+                    "{rest} zero bytes at the end of the segment (a power loss before the data reached the disk)"
+                )));
+                return Ok(read);
+            }
             if rest < 8 {
                 let d = damage(format!("{rest} bytes left, less than a record header"));
                 if last_file {
@@ -477,21 +548,19 @@ pub fn read_journal(path: &Path) -> Result<JournalRead, JournalError> {
             let body = &bytes[pos + 8..end];
             if crc32fast::hash(body) != crc {
                 let d = damage("checksum mismatch".into());
-                if last_file && end == bytes.len() {
+                // The last record written, or one whose data only partly reached the disk
+                // before a power loss (zeros after it): torn, not damage.
+                if last_file && all_zero(&bytes[end..]) {
                     read.torn = Some(d);
                 } else {
                     read.corrupt = Some(d);
                 }
                 return Ok(read);
             }
-            match bincode::decode_from_slice::<Entry, _>(body, bincode::config::standard()) {
-                Ok((entry, used)) if used == body.len() => read.entries.push(entry),
-                Ok(_) => {
-                    read.corrupt = Some(damage("bytes left over after the entry".into()));
-                    return Ok(read);
-                }
-                Err(e) => {
-                    read.corrupt = Some(damage(format!("undecodable entry: {e}")));
+            match decode_entry(body) {
+                Ok(entry) => read.entries.push(entry),
+                Err(what) => {
+                    read.corrupt = Some(damage(what));
                     return Ok(read);
                 }
             }
@@ -500,6 +569,22 @@ pub fn read_journal(path: &Path) -> Result<JournalRead, JournalError> {
         }
     }
     Ok(read)
+}
+
+fn all_zero(bytes: &[u8]) -> bool {
+    bytes.iter().all(|&b| b == 0)
+}
+
+/// Cuts a torn tail off its segment, so that the journal ends at its last good record before a
+/// player writes on (a torn record in a segment that is no longer the last would read as
+/// corruption). A segment torn before its first record is removed.
+pub fn cut_torn_tail(torn: &Damage) -> std::io::Result<()> {
+    if torn.offset < MAGIC.len() as u64 {
+        return std::fs::remove_file(&torn.segment);
+    }
+    let file = OpenOptions::new().write(true).open(&torn.segment)?;
+    file.set_len(torn.offset)?;
+    file.sync_all()
 }
 
 /// A stable digest of a compiled project (FNV-1a over its debug text), so a journal is only

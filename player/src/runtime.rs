@@ -238,7 +238,13 @@ fn resume<'p>(
         )));
     }
     if let Some(t) = &read.torn {
-        warn!(segment = %t.segment.display(), offset = t.offset, what = %t.what, "the last journal record was torn by the crash: dropped");
+        warn!(segment = %t.segment.display(), offset = t.offset, what = %t.what, "the end of the journal was torn by the crash: dropped, and cut off so that the journal goes on from its last good record");
+        crate::journal::cut_torn_tail(t).map_err(|e| {
+            PlayError::Journal(format!(
+                "cannot cut the torn tail off {}: {e}",
+                t.segment.display()
+            ))
+        })?;
     }
     let digest = crate::journal::project_digest(project);
     if let Some(Entry::Header { digest: d, .. }) = read.entries.first() {

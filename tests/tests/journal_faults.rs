@@ -1,0 +1,137 @@
+//! The flight recorder against bad journals, through the real binaries: crafted records with
+//! valid checksums, a zero-filled tail (power loss).
+
+use petrel_tests::{
+    ended_cleanly, journal_json, journal_record, journal_segments, petrel, petrel_bin, repo,
+    unique_vehicle, Player, Workdir,
+};
+use std::path::Path;
+use std::process::Command;
+
+fn liveness_dir() -> std::path::PathBuf {
+    repo().join("tests/data/liveness")
+}
+
+fn text(o: &std::process::Output) -> String {
+    format!(
+        "exit {:?}\nstdout: {}\nstderr: {}",
+        o.status.code(),
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    )
+}
+
+/// A player of the liveness project that took `ticks` events and was stopped; its work
+/// directory (which holds the journal) is returned with the journal's path.
+fn recorded_mission(tag: &str, ticks: u64) -> (Workdir, std::path::PathBuf, String) {
+    let vehicle = unique_vehicle(tag);
+    let player = Player::start(&liveness_dir(), &vehicle);
+    for n in 0..ticks {
+        let o = player.send(&format!("tick({n})"), 1);
+        assert!(o.status.success(), "{}", text(&o));
+    }
+    let work = player.work.clone();
+    let journal = player.journal.clone();
+    assert!(player.stop().success());
+    (work, journal, vehicle)
+}
+
+fn append(file: &Path, bytes: &[u8]) {
+    use std::io::Write;
+    let mut f = std::fs::OpenOptions::new().append(true).open(file).unwrap();
+    f.write_all(bytes).unwrap();
+}
+
+/// `petrel play --resume` on `journal`, for at most `secs` seconds.
+fn resume(journal: &Path, vehicle: &str, secs: &str) -> std::process::Output {
+    Command::new(petrel_bin())
+        .arg("play")
+        .arg(liveness_dir())
+        .args(["--vehicle", vehicle, "--resume", "--run-for", secs])
+        .arg("--journal")
+        .arg(journal)
+        .output()
+        .unwrap()
+}
+
+/// Regression (issue 10, item 4): a record with a valid checksum whose body claims a vector of
+/// 2^61 elements panicked ("capacity overflow"), one claiming a string of 2^40 bytes aborted on
+/// allocation, in `replay`, `journal show` and `play --resume`. Each now refuses the journal,
+/// naming the record.
+#[test]
+fn crafted_records_with_huge_lengths_are_refused_cleanly_everywhere() {
+    // Entry::Start { time: 0, state: a vector of 2^61 words }.
+    let mut huge_vec = vec![1u8, 0, 253];
+    huge_vec.extend_from_slice(&(1u64 << 61).to_le_bytes());
+    // Entry::Submit { time: 0, event: a string of 2^40 bytes, ... }.
+    let mut huge_text = vec![3u8, 0, 253];
+    huge_text.extend_from_slice(&(1u64 << 40).to_le_bytes());
+    huge_text.extend_from_slice(b"abc");
+    for (what, body) in [("vector", huge_vec), ("string", huge_text)] {
+        let (_work, journal, vehicle) = recorded_mission("craft", 2);
+        let last = journal_segments(&journal).pop().unwrap();
+        append(&last, &journal_record(&body));
+        let (_, show) = journal_json(&journal);
+        let replay = petrel(&["replay", &journal.display().to_string()]);
+        let resumed = resume(&journal, &vehicle, "2");
+        for (cmd, o) in [
+            ("journal show", &show),
+            ("replay", &replay),
+            ("play --resume", &resumed),
+        ] {
+            assert!(ended_cleanly(o), "{what}, {cmd}: {}", text(o));
+            assert_ne!(o.status.code(), Some(0), "{what}, {cmd}: {}", text(o));
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert!(
+                err.contains("record") && !err.contains("panicked"),
+                "{what}, {cmd}: {}",
+                text(o)
+            );
+        }
+        petrel_tests::forget_vehicle(&vehicle);
+    }
+}
+
+/// Regression (issue 10, item 4): a run of zero bytes at the end of the last segment (what a
+/// power loss leaves when the file's length reached the disk but not its data) was called
+/// damage, and `--resume` refused. It is a torn tail: dropped with a warning, and cut off, so
+/// the journal still replays as a whole after the resumed run.
+#[test]
+fn a_zero_filled_tail_is_a_torn_tail_and_the_mission_resumes() {
+    let vehicle = unique_vehicle("zeros");
+    let player = Player::start(&liveness_dir(), &vehicle);
+    for n in 0..3 {
+        let o = player.send(&format!("tick({n})"), 1);
+        assert!(o.status.success(), "{}", text(&o));
+    }
+    let work = player.work.clone();
+    let journal = player.journal.clone();
+    assert!(player.stop().success());
+    let last = journal_segments(&journal).pop().unwrap();
+    append(&last, &[0u8; 4096]);
+    let o = petrel(&["replay", &journal.display().to_string()]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("zero"),
+        "{}",
+        text(&o)
+    );
+    let player = Player::start_in(&work, &liveness_dir(), &vehicle, &["--resume"]);
+    let s = player.wait_for(5.0, |s| s["stats"]["resumed_steps"].as_u64() > Some(0));
+    assert_eq!(s["stats"]["resumed_steps"], 3, "{s}");
+    let o = player.send("tick(9)", 1);
+    assert!(o.status.success(), "{}", text(&o));
+    let log = player.log.clone();
+    assert!(player.stop().success());
+    let log = std::fs::read_to_string(log).unwrap();
+    assert!(log.contains("zero"), "{log}");
+    // The zeros were cut off: the first segment is no longer the last, and nothing reads as
+    // damage.
+    let o = petrel(&["replay", &journal.display().to_string()]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("4 steps"),
+        "{}",
+        text(&o)
+    );
+}
