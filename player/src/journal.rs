@@ -368,6 +368,8 @@ pub struct Journal {
     writer: Option<JournalWriter>,
     /// Entries that could not be written or flushed.
     pub failures: u64,
+    /// Whether an entry failed since the last [`flush`](Self::flush).
+    missed: bool,
 }
 
 impl Journal {
@@ -376,6 +378,7 @@ impl Journal {
         Journal {
             writer,
             failures: 0,
+            missed: false,
         }
     }
 
@@ -384,19 +387,23 @@ impl Journal {
         if let Some(w) = self.writer.as_mut() {
             if let Err(e) = w.append(entry) {
                 self.failures += 1;
+                self.missed = true;
                 tracing::error!(error = %e, "journal write failed: the flight recorder is missing this entry");
             }
         }
     }
 
-    /// Hands everything written to the operating system.
-    pub fn flush(&mut self) {
+    /// Hands everything written to the operating system; true when everything appended since
+    /// the last flush is on record (or there is no journal).
+    pub fn flush(&mut self) -> bool {
         if let Some(w) = self.writer.as_mut() {
             if let Err(e) = w.flush() {
                 self.failures += 1;
+                self.missed = true;
                 tracing::error!(error = %e, "journal flush failed");
             }
         }
+        !std::mem::take(&mut self.missed)
     }
 
     /// Records written and time spent writing them, if there is a journal.

@@ -6,15 +6,21 @@
 //! (refusing malformed ones with a `bad_message` event), turns dead programs into
 //! `program_lost`, processes the queue, sends calls (an absent program gives `call_failed`),
 //! journals every input and step, and publishes marking deltas and a heartbeat carrying the
-//! live status. The heartbeat is the acknowledgement senders wait for, and it goes out only
-//! after the journal is flushed: an acknowledged event is on record.
+//! live status (JSON, for people and tools) and, typed, the acknowledgement of each sender
+//! ([`crate::ack`]). The heartbeat is the acknowledgement senders wait for, and an event is
+//! acknowledged as settled only after the journal holding it is flushed: an acknowledged event
+//! is on record. The heartbeat's publisher is sized from the project, so that the status of
+//! the largest marking and the fullest ledger always fit; a heartbeat that cannot be sent
+//! anyway is logged and counted (`heartbeats_refused` in the status).
 
+use crate::ack::Ledger;
 use crate::engine::{Args, Engine, Micros, Refusal, Sink, Stats};
 use crate::journal::{Entry, FlushPolicy, Journal, JournalWriter};
 use crate::record::{marked_places, outcome_name, StepRecord};
 use petrel_ipc::{
-    CallMsg, CallSender, EventReceiver, HeartbeatPublisher, MarkingMsg, MarkingPublisher,
-    Participant, ProgramWatch, Reactor, RecvError, Role, SendError, Vehicle, WaitStrategy,
+    CallMsg, CallSender, EventReceiver, Heartbeat, HeartbeatPublisher, MarkingMsg,
+    MarkingPublisher, Participant, ProgramWatch, Reactor, RecvError, Role, SendError, Vehicle,
+    WaitStrategy,
 };
 use petrel_nets::compiled::{
     CompiledProject, EventId, FunctionId, NetId, ProgramId, TimerId, Value,
@@ -109,6 +115,11 @@ pub struct PlayReport {
     pub journal_busy: Duration,
     /// Steps restored from the journal by `--resume`.
     pub resumed_steps: u64,
+    /// Heartbeats published.
+    pub heartbeats_sent: u64,
+    /// Heartbeats that could not be published at all (no shared memory, a bug in their size):
+    /// each is logged (the first, then one in a hundred) and counted here.
+    pub heartbeats_refused: u64,
 }
 
 /// Runs the player until SIGINT/SIGTERM (or `run_for`).
@@ -296,6 +307,8 @@ pub struct PlayerLoop<'p> {
     reactor: Reactor,
     builtins: Builtins,
     report: PlayReport,
+    /// What was taken from each sender, refused and settled: the heartbeat's acknowledgements.
+    ledger: Ledger,
     /// When the loop started, and the mission time it started at (after a resume).
     t0: Instant,
     base: Micros,
@@ -331,6 +344,14 @@ impl<'p> PlayerLoop<'p> {
 
         let setup = |e: petrel_ipc::SetupError| PlayError::Setup(e.to_string());
         let me = Participant::join(&vehicle, Role::Player).map_err(setup)?;
+        // The largest status this project can have, and the fullest ledger, always fit.
+        let heartbeat_max = Heartbeat::max_encoded_len(status_bound(project));
+        if heartbeat_max > petrel_ipc::wire::MAX_BODY_LEN {
+            warn!(
+                bytes = heartbeat_max,
+                "the status of this project may exceed what a heartbeat carries: it will leave out the marking when it does"
+            );
+        }
         let ports = Ports {
             events: me.event_receiver().map_err(setup)?,
             calls: project
@@ -340,7 +361,7 @@ impl<'p> PlayerLoop<'p> {
                 .collect::<Result<_, _>>()
                 .map_err(setup)?,
             marking: me.marking_publisher().map_err(setup)?,
-            heartbeat: me.heartbeat_publisher().map_err(setup)?,
+            heartbeat: me.heartbeat_publisher_sized(heartbeat_max).map_err(setup)?,
             _me: me,
         };
         let watch = ProgramWatch::new(&vehicle, project.programs.iter().map(|p| p.name.clone()));
@@ -411,6 +432,7 @@ impl<'p> PlayerLoop<'p> {
                 bad_message: project.event_id("bad_message"),
             },
             report,
+            ledger: Ledger::new(),
             t0: Instant::now(),
             base,
             previous: vec![0u64; words],
@@ -531,28 +553,61 @@ impl<'p> PlayerLoop<'p> {
         }
     }
 
-    /// Publishes the heartbeat, with the live status, when its period is over. The heartbeat
-    /// acknowledges what the player took: the journal is flushed first.
+    /// Publishes the heartbeat, with the live status and the acknowledgements, when its period
+    /// is over. The journal is flushed first: what it holds is then settled.
     fn heartbeat_if_due(&mut self) {
         let instant = Instant::now();
         if instant < self.next_heartbeat {
             return;
         }
-        self.journal.flush();
+        self.next_heartbeat = instant + self.opts.heartbeat;
+        if self.journal.flush() {
+            self.ledger.settle();
+        } else {
+            // The old writer cannot take back what failed: those events are not on record.
+            self.ledger.lose_unsettled();
+        }
         if let Some((records, busy)) = self.journal.written() {
             self.report.journal_records = records;
             self.report.journal_busy = busy;
         }
-        let status = status_json(&self.engine, &self.report, &self.ports.events);
-        let hb = petrel_ipc::Heartbeat {
+        for gone in self.ledger.prune(&self.ports.events.live_senders()) {
+            self.ports.events.forget_sender(gone);
+        }
+        let max = self.ports.heartbeat.spec().max_body_len;
+        let mut hb = Heartbeat {
             uptime_ms: self.t0.elapsed().as_millis() as u64,
             period_ms: self.opts.heartbeat.as_millis() as u32,
             progress: self.step_no,
-            status,
+            status: String::new(),
+            acks: self.ledger.acks(),
+            recorder: petrel_ipc::Recorder::default(),
         };
-        // Latest-value service: a heartbeat nobody reads is not an error.
-        let _ = self.ports.heartbeat.send(&hb);
-        self.next_heartbeat = instant + self.opts.heartbeat;
+        hb.bound();
+        let snapshot = StatusSnapshot::of(&self.engine, &self.report, &self.ledger);
+        hb.status = status_json(&snapshot);
+        if Heartbeat::max_encoded_len(hb.status.len()) > max {
+            // Only a project past the largest body a service carries gets here (see `new`).
+            hb.status = status_json(&StatusSnapshot {
+                marking: None,
+                ..snapshot
+            });
+        }
+        match self.ports.heartbeat.send(&hb) {
+            // Latest-value service: a heartbeat nobody reads is not an error, and one that
+            // missed a receiver still connecting (buffers never fill: they overwrite) reaches
+            // it with the next period.
+            Ok(_) | Err(SendError::NoReceiver { .. } | SendError::Refused { .. }) => {
+                self.report.heartbeats_sent += 1
+            }
+            Err(e) => {
+                self.report.heartbeats_refused += 1;
+                let n = self.report.heartbeats_refused;
+                if n == 1 || n.is_multiple_of(100) {
+                    error!(error = %e, refused = n, "heartbeat not published: status and acknowledgements are not seen");
+                }
+            }
+        }
     }
 
     /// Drains the events service into the engine; true when iceoryx2 saw a sender die.
@@ -560,11 +615,13 @@ impl<'p> PlayerLoop<'p> {
         let engine = &mut self.engine;
         let journal = &mut self.journal;
         let report = &mut self.report;
+        let ledger = &mut self.ledger;
         let bad_message = self.builtins.bad_message;
         let drained = self.ports.events.drain(|r| {
             report.messages += 1;
             match r {
                 Ok(rcv) => {
+                    let (sender, who, seq, missed) = (rcv.sender, rcv.origin, rcv.seq, rcv.missed);
                     let origin = rcv.origin.to_string();
                     let time = engine.now();
                     let record = Entry::Submit {
@@ -577,8 +634,12 @@ impl<'p> PlayerLoop<'p> {
                     let mut params = engine.param_buffer();
                     params.extend(rcv.msg.params);
                     match engine.submit_named(&rcv.msg.name, params) {
-                        Ok(()) => journal.append(&record),
+                        Ok(()) => {
+                            journal.append(&record);
+                            ledger.taken(sender, who, seq, missed);
+                        }
                         Err(refusal) => {
+                            ledger.refused(sender, who, seq, missed, &refusal.to_string(), false);
                             journal.append(&Entry::Refused {
                                 time,
                                 what: rcv.msg.name.clone(),
@@ -598,9 +659,15 @@ impl<'p> PlayerLoop<'p> {
                     }
                 }
                 Err(RecvError::Undecodable {
-                    origin, seq, error, ..
+                    origin,
+                    seq,
+                    error,
+                    sender,
+                    ..
                 }) => {
                     report.bad_messages += 1;
+                    let reason = format!("undecodable: {error}");
+                    ledger.refused(sender, origin, seq, 0, &reason, true);
                     warn!(from = %origin, seq, error = %error, "undecodable event refused");
                     journal.append(&Entry::Refused {
                         time: engine.now(),
@@ -703,45 +770,222 @@ impl<'p> PlayerLoop<'p> {
     }
 }
 
-/// The live status carried by the heartbeat: JSON with the marking of every active net, the
-/// counters, and the last sequence number taken from each sender (read by `petrel status`, and
-/// by `petrel send` as its acknowledgement).
-fn status_json(engine: &Engine, report: &PlayReport, events: &EventReceiver) -> String {
-    let senders: serde_json::Map<String, serde_json::Value> = events
-        .senders()
-        .into_iter()
-        .map(|a| {
+/// What the status JSON shows: a snapshot of the player, or the largest one its project can
+/// have ([`status_bound`]).
+struct StatusSnapshot {
+    project: String,
+    time_s: f64,
+    over: bool,
+    /// The marked places of each active net (`global` last); `None`: left out (too large).
+    marking: Option<Vec<(String, Vec<String>)>>,
+    /// The counters of `stats`, in [`STATS_FIELDS`] order.
+    stats: [u64; 13],
+    /// Each sender: origin, last_seq, received, undecodable, missing, taken, refused, pending,
+    /// unrecorded, settled_seq.
+    senders: Vec<(String, [u64; 9])>,
+}
+
+/// The names of the counters in the status JSON's `stats`, in [`StatusSnapshot::stats`] order.
+const STATS_FIELDS: [&str; 13] = [
+    "messages",
+    "bad_messages",
+    "received",
+    "processed",
+    "unused",
+    "refused",
+    "queued",
+    "calls_sent",
+    "calls_failed",
+    "journal_records",
+    "resumed_steps",
+    "heartbeats_sent",
+    "heartbeats_refused",
+];
+
+/// The names of a sender's counters in the status JSON, in [`StatusSnapshot::senders`] order.
+const SENDER_FIELDS: [&str; 9] = [
+    "last_seq",
+    "received",
+    "undecodable",
+    "missing",
+    "taken",
+    "refused",
+    "pending",
+    "unrecorded",
+    "settled_seq",
+];
+
+impl StatusSnapshot {
+    fn of(engine: &Engine, report: &PlayReport, ledger: &Ledger) -> Self {
+        let s = engine.stats();
+        // Oldest first, so that two senders of one origin show the most recent one.
+        let mut senders: Vec<(String, [u64; 9])> = ledger
+            .recent()
+            .into_iter()
+            .map(|a| {
+                let k = &a.ack;
+                (
+                    k.origin.clone(),
+                    [
+                        k.last_seq,
+                        k.received,
+                        a.undecodable,
+                        k.missing,
+                        k.taken,
+                        k.refused,
+                        k.pending,
+                        k.unrecorded,
+                        k.settled_seq,
+                    ],
+                )
+            })
+            .collect();
+        senders.reverse();
+        StatusSnapshot {
+            project: engine.project().name.clone(),
+            time_s: engine.now() as f64 / 1e6,
+            over: engine.is_over(),
+            marking: Some(engine.marking()),
+            stats: [
+                report.messages,
+                report.bad_messages,
+                s.received,
+                s.processed,
+                s.unused,
+                s.refused,
+                engine.queued() as u64,
+                report.calls_sent,
+                report.calls_failed,
+                report.journal_records,
+                report.resumed_steps,
+                report.heartbeats_sent,
+                report.heartbeats_refused,
+            ],
+            senders,
+        }
+    }
+}
+
+/// The live status carried by the heartbeat, for people and tools: JSON with the marking of
+/// every active net, the counters, and each sender's account (read by `petrel status`; the
+/// acknowledgements senders wait for are the heartbeat's typed [`Heartbeat::acks`]).
+fn status_json(s: &StatusSnapshot) -> String {
+    let mut doc = serde_json::Map::new();
+    doc.insert("project".into(), s.project.clone().into());
+    doc.insert("time".into(), s.time_s.into());
+    doc.insert("over".into(), s.over.into());
+    match &s.marking {
+        Some(m) => {
+            let marking: serde_json::Map<String, serde_json::Value> = m
+                .iter()
+                .map(|(n, places)| (n.clone(), places.clone().into()))
+                .collect();
+            doc.insert("marking".into(), marking.into());
+        }
+        None => {
+            doc.insert("marking".into(), serde_json::Map::new().into());
+            doc.insert("marking_omitted".into(), true.into());
+        }
+    }
+    let stats: serde_json::Map<String, serde_json::Value> = STATS_FIELDS
+        .iter()
+        .zip(&s.stats)
+        .map(|(k, v)| (k.to_string(), (*v).into()))
+        .collect();
+    doc.insert("stats".into(), stats.into());
+    let senders: serde_json::Map<String, serde_json::Value> = s
+        .senders
+        .iter()
+        .map(|(origin, counts)| {
+            let fields: serde_json::Map<String, serde_json::Value> = SENDER_FIELDS
+                .iter()
+                .zip(counts)
+                .map(|(k, v)| (k.to_string(), (*v).into()))
+                .collect();
+            (origin.clone(), fields.into())
+        })
+        .collect();
+    doc.insert("senders".into(), senders.into());
+    serde_json::Value::Object(doc).to_string()
+}
+
+/// The length of the largest status JSON `project` can give: every net active with every place
+/// marked, the ledger full of senders whose origins need the most escaping, every counter at
+/// its largest. The heartbeat's publisher is sized from it, so that no status is ever refused.
+fn status_bound(project: &CompiledProject) -> usize {
+    let mut marking: Vec<(String, Vec<String>)> = project
+        .nets
+        .iter()
+        .map(|n| {
             (
-                a.origin.to_string(),
-                serde_json::json!({"last_seq": a.last_seq, "received": a.received, "undecodable": a.undecodable, "missing": a.missing}),
+                n.name.clone(),
+                n.places.iter().map(|p| p.name.clone()).collect(),
             )
         })
         .collect();
-    let marking: serde_json::Map<String, serde_json::Value> = engine
-        .marking()
-        .into_iter()
-        .map(|(n, places)| (n, places.into()))
-        .collect();
-    let s = engine.stats();
-    serde_json::json!({
-        "project": engine.project().name,
-        "time": engine.now() as f64 / 1e6,
-        "over": engine.is_over(),
-        "marking": marking,
-        "stats": {
-            "messages": report.messages,
-            "bad_messages": report.bad_messages,
-            "received": s.received,
-            "processed": s.processed,
-            "unused": s.unused,
-            "refused": s.refused,
-            "queued": engine.queued(),
-            "calls_sent": report.calls_sent,
-            "calls_failed": report.calls_failed,
-            "journal_records": report.journal_records,
-            "resumed_steps": report.resumed_steps,
-        },
-        "senders": senders,
-    })
-    .to_string()
+    marking.push((
+        "global".into(),
+        project.globals.iter().map(|g| g.name.clone()).collect(),
+    ));
+    // A control character is escaped in six bytes (`\u0001`), the most any byte takes; the
+    // ledger keys senders by id, so that every one of them may show under its own origin:
+    // origins of control characters 1 and 2 only, distinct by the bits of their index.
+    let origin = |i: usize| -> String {
+        (0..petrel_ipc::wire::ORIGIN_LEN)
+            .map(|k| char::from(1 + ((i >> (k % 8)) & 1) as u8))
+            .collect()
+    };
+    let worst = StatusSnapshot {
+        project: project.name.clone(),
+        time_s: -f64::MAX,
+        over: false,
+        marking: Some(marking),
+        stats: [u64::MAX; 13],
+        senders: (0..petrel_ipc::wire::MAX_ACKS)
+            .map(|i| (origin(i), [u64::MAX; 9]))
+            .collect(),
+    };
+    status_json(&worst).len()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use petrel_ipc::Origin;
+
+    fn project() -> CompiledProject {
+        let manifest = "[project]\nname = \"p\"\nfiles = [\"a.pn\"]\nstart = [\"A\", \"B\"]\n\n[globals]\ng_one = 1\n\n[events]\ngo = { category = \"nominal\" }\n";
+        let net = "net A {\n    place a_very_long_place_name_one = 1\n    place two = 1\n    transition t on go: two -> two\n}\nnet B {\n    place b = 1\n    transition u on go: b -> b\n}\n";
+        let (_, c, d, _) = petrel_nets::project::from_sources(manifest, &[("a.pn", net)]);
+        assert!(!d.has_errors(), "{d:?}");
+        c.unwrap()
+    }
+
+    #[test]
+    fn the_status_never_exceeds_its_bound() {
+        let p = project();
+        let bound = status_bound(&p);
+        let mut engine = Engine::new(&p);
+        engine.start(0, &mut crate::engine::NullSink);
+        let mut ledger = Ledger::new();
+        // More senders than a heartbeat carries, with origins that escape the most.
+        for i in 0..200u64 {
+            let origin: String = format!("{i:03}")
+                .chars()
+                .chain((3..32).map(|k| char::from(((i + k) % 31 + 1) as u8)))
+                .collect();
+            ledger.taken(i, Origin::new(&origin), u64::MAX, u64::MAX / 2);
+        }
+        let report = PlayReport {
+            messages: u64::MAX,
+            heartbeats_refused: u64::MAX,
+            ..PlayReport::default()
+        };
+        let json = status_json(&StatusSnapshot::of(&engine, &report, &ledger));
+        assert!(json.len() <= bound, "{} > {bound}", json.len());
+        let doc: serde_json::Value = serde_json::from_str(&json).unwrap();
+        assert_eq!(doc["marking"]["A"].as_array().map(Vec::len), Some(2));
+        assert_eq!(doc["senders"].as_object().map(|m| m.len()), Some(64));
+        assert!(Heartbeat::max_encoded_len(bound) < petrel_ipc::wire::MAX_BODY_LEN);
+    }
 }
