@@ -107,10 +107,17 @@ pub fn replay(a: ReplayArgs) -> Outcome {
         .into_iter()
         .map(|(n, p)| format!("{n}{{{}}}", p.join(", ")))
         .collect();
+    if r.gaps > 0 {
+        eprintln!(
+            "warning: the flight recorder dropped {} entries (in {} gap(s)) it could not write; the replay went on from the checkpoint after each gap",
+            r.lost, r.gaps
+        );
+    }
     out(&format!(
-        "replayed {} entries, {} steps: every recorded marking reproduced{}\nstate at t = {:.6} s: {}\n",
+        "replayed {} entries, {} steps: every recorded marking reproduced{}{}\nstate at t = {:.6} s: {}\n",
         r.entries,
         r.steps,
+        if r.gaps > 0 { " (from a checkpoint after each gap)" } else { "" },
         if r.stopped_early { " (stopped at --until)" } else { "" },
         match until {
             Some(u) if r.stopped_early => u,
@@ -195,6 +202,24 @@ fn journal_show(journal: &Path, format: &str) -> Outcome {
                 vec![],
                 origin.clone(),
                 reason.clone(),
+                vec![],
+                vec![],
+            ),
+            Entry::Gap { lost, reason, .. } => (
+                "gap",
+                String::new(),
+                vec![],
+                String::new(),
+                format!("{lost} entries lost: {reason}"),
+                vec![],
+                vec![],
+            ),
+            Entry::Checkpoint { .. } => (
+                "checkpoint",
+                String::new(),
+                vec![],
+                String::new(),
+                String::new(),
                 vec![],
                 vec![],
             ),

@@ -30,6 +30,11 @@ pub struct PlayArgs {
     /// Start a new journal segment past this many megabytes.
     #[arg(long, default_value_t = 64)]
     rotate_mb: u64,
+    /// While the journal cannot be written (a full disk), keep up to this many megabytes of
+    /// its records in memory (the events they hold are not acknowledged until written); past
+    /// it the recorder drops records, and the journal goes on from a checkpoint of the state.
+    #[arg(long, default_value_t = 32.0)]
+    journal_backlog_mb: f64,
     /// Restore the mission from the journal (after a crash) and carry on.
     #[arg(long)]
     resume: bool,
@@ -56,6 +61,13 @@ pub fn play(a: PlayArgs) -> Outcome {
     opts.project_dir = dir.display().to_string();
     opts.resume = a.resume;
     opts.rotate_bytes = a.rotate_mb.saturating_mul(1 << 20);
+    if !(a.journal_backlog_mb.is_finite() && a.journal_backlog_mb >= 0.0) {
+        return Outcome::Usage(format!(
+            "--journal-backlog-mb takes a number of megabytes, not {}",
+            a.journal_backlog_mb
+        ));
+    }
+    opts.journal_backlog = (a.journal_backlog_mb * (1u64 << 20) as f64) as usize;
     opts.flush = match a.flush.parse() {
         Ok(f) => f,
         Err(e) => return Outcome::Usage(e),
@@ -99,9 +111,9 @@ pub fn play(a: PlayArgs) -> Outcome {
                 0.0
             };
             eprintln!(
-                "player stopped: {} messages ({} refused before the engine), {} events received, {} processed, {} unused, {} refused; {} calls sent, {} failed; journal: {} records, {:.1} us each{}",
+                "player stopped: {} messages ({} refused before the engine), {} events received, {} processed, {} unused, {} refused; {} calls sent, {} failed; journal: {} records, {:.1} us each, {} failed writes, {} entries lost{}",
                 r.messages, r.bad_messages, s.received, s.processed, s.unused, s.refused, r.calls_sent, r.calls_failed,
-                r.journal_records, per_record,
+                r.journal_records, per_record, r.journal_failures, r.journal_lost,
                 if r.resumed_steps > 0 { format!("; resumed after {} steps", r.resumed_steps) } else { String::new() }
             );
             Outcome::Clean
@@ -438,6 +450,18 @@ pub fn status(a: StatusArgs) -> Outcome {
         }
     }
     text.push_str(&format!("  counters: {}\n", doc["stats"]));
+    let recorder = &doc["recorder"];
+    match recorder["state"].as_str() {
+        Some("ok") => text.push_str("  flight recorder: ok\n"),
+        Some("none") | None => text.push_str("  flight recorder: none (--no-journal)\n"),
+        Some(state) => text.push_str(&format!(
+            "  flight recorder: {}: {} ({} records waiting in memory, {} entries lost); events are processed but not acknowledged\n",
+            state.to_uppercase(),
+            recorder["reason"].as_str().unwrap_or("?"),
+            recorder["backlog_records"],
+            recorder["lost_entries"],
+        )),
+    }
     if let Some(b) = &bridge_doc {
         text.push_str(&format!(
             "  CAN data server on `{}`: bus {}, {} frames ({} unknown, {} of a wrong length, {} error frames), {} events sent ({} waiting), {} commands ({} failed)\n",

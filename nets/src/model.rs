@@ -161,6 +161,18 @@ pub fn builtin_events() -> &'static [EventDecl] {
                 &[("sender", Type::Text), ("reason", Type::Text)],
                 "a message was refused: unknown event, wrong parameters, or undecodable",
             ),
+            ev(
+                "recorder_failed",
+                Category::Safety,
+                &[("reason", Type::Text)],
+                "the flight recorder cannot write its journal (a full disk...): events are processed but not acknowledged",
+            ),
+            ev(
+                "recorder_restored",
+                Category::Safety,
+                &[],
+                "the flight recorder writes its journal again",
+            ),
         ]
     })
 }

@@ -22,9 +22,11 @@
 //! allocation the machine cannot make.
 
 use bincode::{Decode, Encode};
+use petrel_ipc::RecorderState;
 use petrel_nets::compiled::Value;
 use std::fs::{File, OpenOptions};
-use std::io::{BufWriter, Read, Write};
+use std::io::{Read, Write};
+use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
@@ -87,12 +89,16 @@ pub fn decode_entry(body: &[u8]) -> Result<Entry, String> {
     }
 }
 
+/// The journal format this Petrel writes (the header's `version`): 2 added [`Entry::Gap`] and
+/// [`Entry::Checkpoint`]. Version 1 journals read the same.
+pub const FORMAT_VERSION: u32 = 2;
+
 /// One journal entry.
 #[derive(Clone, Debug, PartialEq, Encode, Decode)]
 pub enum Entry {
     /// The first entry of every segment: what was recorded, and with which project.
     Header {
-        /// Format version (1).
+        /// Format version ([`FORMAT_VERSION`]).
         version: u32,
         /// Project name.
         project: String,
@@ -160,6 +166,27 @@ pub enum Entry {
         /// Running timers' deadlines after the step (microseconds), by timer.
         deadlines: Vec<Option<u64>>,
     },
+    /// The flight recorder could not keep `lost` entries (it could not write them, and no
+    /// longer had room in memory for them): the journal goes on from the [`Entry::Checkpoint`]
+    /// that follows.
+    Gap {
+        /// Mission time when the recorder could write again, microseconds.
+        time: u64,
+        /// Entries dropped.
+        lost: u64,
+        /// Why they could not be written.
+        reason: String,
+    },
+    /// The whole state of the engine between two steps (its queue empty): after a
+    /// [`Entry::Gap`], replay and `--resume` start over from it.
+    Checkpoint {
+        /// Mission time, microseconds.
+        time: u64,
+        /// The state.
+        state: Vec<u64>,
+        /// Running timers' deadlines (microseconds), by timer.
+        deadlines: Vec<Option<u64>>,
+    },
 }
 
 impl Entry {
@@ -171,7 +198,9 @@ impl Entry {
             | Entry::Resume { time }
             | Entry::Submit { time, .. }
             | Entry::Refused { time, .. }
-            | Entry::Step { time, .. } => Some(*time),
+            | Entry::Step { time, .. }
+            | Entry::Gap { time, .. }
+            | Entry::Checkpoint { time, .. } => Some(*time),
         }
     }
 }
@@ -208,16 +237,29 @@ impl std::str::FromStr for FlushPolicy {
 }
 
 /// Appends entries to a journal directory.
+///
+/// Entries are encoded into a queue of complete records, and written from it ([`flush`]
+/// (Self::flush), which each [`append`](Self::append) does according to the policy) at the
+/// segment's last good record boundary. A write that fails (a full disk) is cut back to that
+/// boundary, so a partial record never stays in the file, and the records stay queued: the next
+/// flush writes them again. Nothing queued is lost while the writer lives.
 pub struct JournalWriter {
     dir: PathBuf,
     policy: FlushPolicy,
     rotate_bytes: u64,
     header: Entry,
-    out: BufWriter<File>,
+    file: File,
     segment: u32,
-    segment_bytes: u64,
+    /// Bytes of the current segment on record: the end of its last good record.
+    written: u64,
+    /// The magic and the header: a segment holding only these takes any record.
+    floor: u64,
+    /// The file may hold bytes past `written` (a failed write whose cut failed too).
+    tail_dirty: bool,
+    /// Encoded records not yet written, and the length of each.
+    queued: Vec<u8>,
+    lengths: Vec<usize>,
     last_flush: Instant,
-    dirty: bool,
     buf: Vec<u8>,
     /// Records written.
     pub records: u64,
@@ -246,6 +288,26 @@ pub fn segments(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
     Ok(files)
 }
 
+/// Encodes `entry` as one record (length, CRC-32, body) at the end of `out`.
+fn encode_record(entry: &Entry, body: &mut Vec<u8>, out: &mut Vec<u8>) -> std::io::Result<()> {
+    body.clear();
+    bincode::encode_into_std_write(entry, body, bincode::config::standard())
+        .map_err(std::io::Error::other)?;
+    if body.len() > MAX_RECORD as usize {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!(
+                "a journal entry of {} bytes, more than the {MAX_RECORD} a record holds",
+                body.len()
+            ),
+        ));
+    }
+    out.extend_from_slice(&(body.len() as u32).to_le_bytes());
+    out.extend_from_slice(&crc32fast::hash(body).to_le_bytes());
+    out.extend_from_slice(body);
+    Ok(())
+}
+
 impl JournalWriter {
     /// Starts a journal in `dir` (created if needed), after any segments already there, and
     /// writes `header` first.
@@ -266,94 +328,175 @@ impl JournalWriter {
                     .ok()
             })
             .map_or(1, |n| n + 1);
-        let out = Self::new_segment(dir, next)?;
-        let mut w = JournalWriter {
+        let (file, floor) = Self::new_segment(dir, next, &header, policy)?;
+        Ok(JournalWriter {
             dir: dir.to_path_buf(),
             policy,
             rotate_bytes: rotate_bytes.max(4096),
-            header: header.clone(),
-            out,
+            header,
+            file,
             segment: next,
-            segment_bytes: MAGIC.len() as u64,
+            written: floor,
+            floor,
+            tail_dirty: false,
+            queued: Vec::with_capacity(4096),
+            lengths: Vec::new(),
             last_flush: Instant::now(),
-            dirty: false,
             buf: Vec::with_capacity(4096),
-            records: 0,
+            records: 1,
             busy: Duration::ZERO,
-        };
-        w.append(&header)?;
-        w.flush()?;
-        Ok(w)
+        })
     }
 
-    fn new_segment(dir: &Path, n: u32) -> std::io::Result<BufWriter<File>> {
-        let file = OpenOptions::new()
+    /// Creates segment `n` with the magic and the header, written (and synced under
+    /// [`FlushPolicy::Sync`]); a segment that could not be completed is removed.
+    fn new_segment(
+        dir: &Path,
+        n: u32,
+        header: &Entry,
+        policy: FlushPolicy,
+    ) -> std::io::Result<(File, u64)> {
+        let path = segment_path(dir, n);
+        let mut file = OpenOptions::new()
             .create_new(true)
+            .read(true)
             .write(true)
-            .open(segment_path(dir, n))?;
-        let mut out = BufWriter::with_capacity(64 << 10, file);
-        out.write_all(MAGIC)?;
-        Ok(out)
+            .open(&path)?;
+        let mut bytes = MAGIC.to_vec();
+        encode_record(header, &mut Vec::new(), &mut bytes)?;
+        let done = file.write_all(&bytes).and_then(|()| {
+            if policy == FlushPolicy::Sync {
+                file.sync_data()
+            } else {
+                Ok(())
+            }
+        });
+        if let Err(e) = done {
+            drop(file);
+            let _ = std::fs::remove_file(&path);
+            return Err(e);
+        }
+        Ok((file, bytes.len() as u64))
     }
 
-    /// Appends one entry and flushes according to the policy.
-    pub fn append(&mut self, entry: &Entry) -> std::io::Result<()> {
+    /// Queues one entry without writing it (see [`flush`](Self::flush)). Fails only when the
+    /// entry cannot be encoded as a record (larger than [`MAX_RECORD`]).
+    pub fn push(&mut self, entry: &Entry) -> std::io::Result<()> {
         let started = Instant::now();
-        self.buf.clear();
-        bincode::encode_into_std_write(entry, &mut self.buf, bincode::config::standard())
-            .map_err(std::io::Error::other)?;
-        if self.segment_bytes + 8 + self.buf.len() as u64 > self.rotate_bytes
-            && !matches!(entry, Entry::Header { .. })
-        {
-            self.rotate()?;
-            // Re-encode: rotate() used the buffer for the new segment's header.
-            self.buf.clear();
-            bincode::encode_into_std_write(entry, &mut self.buf, bincode::config::standard())
-                .map_err(std::io::Error::other)?;
-        }
-        let crc = crc32fast::hash(&self.buf);
-        self.out.write_all(&(self.buf.len() as u32).to_le_bytes())?;
-        self.out.write_all(&crc.to_le_bytes())?;
-        self.out.write_all(&self.buf)?;
-        self.segment_bytes += 8 + self.buf.len() as u64;
-        self.records += 1;
-        self.dirty = true;
-        match self.policy {
-            FlushPolicy::EveryRecord => self.flush()?,
-            FlushPolicy::Sync => {
-                self.flush()?;
-                self.out.get_ref().sync_data()?;
-            }
-            FlushPolicy::Interval(p) => {
-                if self.last_flush.elapsed() >= p {
-                    self.flush()?;
-                }
-            }
-        }
+        let before = self.queued.len();
+        encode_record(entry, &mut self.buf, &mut self.queued)?;
+        self.lengths.push(self.queued.len() - before);
         self.busy += started.elapsed();
         Ok(())
     }
 
-    /// Hands everything written so far to the operating system.
-    pub fn flush(&mut self) -> std::io::Result<()> {
-        if self.dirty {
-            self.out.flush()?;
-            self.dirty = false;
+    /// Queues one entry and writes according to the policy. On an error the entry stays
+    /// queued (unless it could not be encoded at all), and the next flush tries again.
+    pub fn append(&mut self, entry: &Entry) -> std::io::Result<()> {
+        self.push(entry)?;
+        match self.policy {
+            FlushPolicy::EveryRecord | FlushPolicy::Sync => self.flush(),
+            FlushPolicy::Interval(p) => {
+                if self.last_flush.elapsed() >= p {
+                    self.flush()
+                } else {
+                    Ok(())
+                }
+            }
         }
-        self.last_flush = Instant::now();
-        Ok(())
+    }
+
+    /// Writes every queued record to the operating system (and syncs it to the disk under
+    /// [`FlushPolicy::Sync`]), starting new segments past the rotation size. On an error, what
+    /// was written stays written, the rest stays queued, and the segment ends at its last good
+    /// record.
+    pub fn flush(&mut self) -> std::io::Result<()> {
+        let started = Instant::now();
+        let result = self.write_queued();
+        if result.is_ok() {
+            self.last_flush = Instant::now();
+        }
+        self.busy += started.elapsed();
+        result
+    }
+
+    fn write_queued(&mut self) -> std::io::Result<()> {
+        if self.tail_dirty {
+            self.file.set_len(self.written)?;
+            self.tail_dirty = false;
+        }
+        let (mut done, mut k) = (0usize, 0usize);
+        let result = loop {
+            if k == self.lengths.len() {
+                break Ok(());
+            }
+            // The records that fit in this segment (any one record fits in a fresh segment).
+            let (mut end, mut j) = (done, k);
+            while j < self.lengths.len() {
+                let len = self.lengths[j];
+                let fresh = self.written == self.floor && end == done;
+                if !fresh && self.written + (end - done + len) as u64 > self.rotate_bytes {
+                    break;
+                }
+                end += len;
+                j += 1;
+            }
+            if end > done {
+                let bytes = &self.queued[done..end];
+                if let Err(e) = self.file.write_all_at(bytes, self.written) {
+                    // No partial record stays in the file: cut back to the last good one.
+                    self.tail_dirty = self.file.set_len(self.written).is_err();
+                    break Err(e);
+                }
+                if self.policy == FlushPolicy::Sync {
+                    // Not synced, not on record: written again (the same bytes) next time.
+                    if let Err(e) = self.file.sync_data() {
+                        break Err(e);
+                    }
+                }
+                self.written += (end - done) as u64;
+                self.records += (j - k) as u64;
+                done = end;
+                k = j;
+            }
+            if k < self.lengths.len() {
+                if let Err(e) = self.rotate() {
+                    break Err(e);
+                }
+            }
+        };
+        self.queued.drain(..done);
+        self.lengths.drain(..k);
+        result
     }
 
     fn rotate(&mut self) -> std::io::Result<()> {
-        self.flush()?;
-        if self.policy == FlushPolicy::Sync {
-            self.out.get_ref().sync_data()?;
-        }
+        let (file, floor) =
+            Self::new_segment(&self.dir, self.segment + 1, &self.header, self.policy)?;
+        self.file = file;
         self.segment += 1;
-        self.out = Self::new_segment(&self.dir, self.segment)?;
-        self.segment_bytes = MAGIC.len() as u64;
-        let header = self.header.clone();
-        self.append(&header)
+        self.written = floor;
+        self.floor = floor;
+        self.records += 1;
+        Ok(())
+    }
+
+    /// Records queued and not yet written.
+    pub fn queued_records(&self) -> usize {
+        self.lengths.len()
+    }
+
+    /// Bytes queued and not yet written.
+    pub fn queued_bytes(&self) -> usize {
+        self.queued.len()
+    }
+
+    /// Drops every queued record (the recorder gives up on them); returns how many.
+    pub fn discard_queued(&mut self) -> usize {
+        let n = self.lengths.len();
+        self.queued.clear();
+        self.lengths.clear();
+        n
     }
 
     /// The directory.
@@ -362,48 +505,250 @@ impl JournalWriter {
     }
 }
 
-/// The journal of a running player: a writer, or none (`--no-journal`). A failure to write is
-/// logged loudly and counted but never stops the player: a vehicle must keep flying.
+/// What the journal's [`flush`](Journal::flush) means for the events taken since the last one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Settlement {
+    /// Everything appended is on record (or there is no journal): settled.
+    Recorded,
+    /// Not written yet (the recorder is failing and keeps them): not settled.
+    Pending,
+    /// Dropped by the recorder: settled as unrecorded.
+    Lost,
+}
+
+/// A change of the recorder's state, for the player to raise as a built-in event.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum RecorderChange {
+    /// It could not write (`recorder_failed(reason)`).
+    Failed(String),
+    /// It wrote everything again (`recorder_restored`).
+    Restored,
+}
+
+/// Default of [`Journal::with_backlog`]: what a failing recorder keeps in memory before it
+/// drops records (a minute of a busy vehicle's steps, and more).
+pub const DEFAULT_BACKLOG: usize = 32 << 20;
+
+/// The journal of a running player: a writer, or none (`--no-journal`), and the recorder's
+/// state.
+///
+/// A failure to write never stops the player (a vehicle must keep flying). The recorder goes
+/// **failing**: records stay queued in memory, the events they hold are not acknowledged
+/// ([`Settlement::Pending`]), and every [`flush`](Self::flush) (each heartbeat) tries again;
+/// when one succeeds it is **ok** again and everything is on record. Past the backlog it goes
+/// **dropping**: the queued records are dropped and counted, and so is every later one
+/// ([`Settlement::Lost`]), until a [`checkpoint`](Self::checkpoint) (an [`Entry::Gap`] and an
+/// [`Entry::Checkpoint`] of the engine) can be written, from which replay and `--resume` go
+/// on. Each change is said once in the log (not once per record) and handed to the player
+/// ([`take_changes`](Self::take_changes)) to raise `recorder_failed` or `recorder_restored`.
 pub struct Journal {
     writer: Option<JournalWriter>,
-    /// Entries that could not be written or flushed.
+    state: RecorderState,
+    reason: String,
+    backlog: usize,
+    since: Instant,
+    changes: Vec<RecorderChange>,
+    /// Write or flush attempts that failed.
     pub failures: u64,
-    /// Whether an entry failed since the last [`flush`](Self::flush).
-    missed: bool,
+    /// Entries the recorder dropped.
+    pub lost: u64,
+    /// Of them, those a [`Entry::Gap`] on record accounts for.
+    lost_in_gaps: u64,
 }
 
 impl Journal {
-    /// A journal writing through `writer`, if any.
+    /// A journal writing through `writer`, if any, with the default backlog.
     pub fn new(writer: Option<JournalWriter>) -> Self {
+        Self::with_backlog(writer, DEFAULT_BACKLOG)
+    }
+
+    /// A journal that keeps up to `backlog` bytes of records in memory while it cannot write.
+    pub fn with_backlog(writer: Option<JournalWriter>, backlog: usize) -> Self {
         Journal {
+            state: if writer.is_some() {
+                RecorderState::Ok
+            } else {
+                RecorderState::None
+            },
             writer,
+            reason: String::new(),
+            backlog,
+            since: Instant::now(),
+            changes: Vec::new(),
             failures: 0,
-            missed: false,
+            lost: 0,
+            lost_in_gaps: 0,
         }
     }
 
-    /// Appends one entry (if there is a journal).
+    /// The recorder's state.
+    pub fn state(&self) -> RecorderState {
+        self.state
+    }
+
+    /// Why it last failed (empty when it is ok).
+    pub fn reason(&self) -> &str {
+        &self.reason
+    }
+
+    /// Records and bytes waiting in memory.
+    pub fn backlog(&self) -> (usize, usize) {
+        self.writer
+            .as_ref()
+            .map_or((0, 0), |w| (w.queued_records(), w.queued_bytes()))
+    }
+
+    /// The state changes since the last call, oldest first.
+    pub fn take_changes(&mut self) -> Vec<RecorderChange> {
+        std::mem::take(&mut self.changes)
+    }
+
+    /// True when a change waits for [`take_changes`](Self::take_changes).
+    pub fn has_changes(&self) -> bool {
+        !self.changes.is_empty()
+    }
+
+    fn fail(&mut self, e: &std::io::Error) {
+        self.failures += 1;
+        self.reason = e.to_string();
+        if self.state == RecorderState::Ok {
+            self.state = RecorderState::Failing;
+            self.since = Instant::now();
+            tracing::error!(error = %e, "the flight recorder cannot write: its records wait in memory and the events they hold are not acknowledged until it can; raising recorder_failed");
+            self.changes
+                .push(RecorderChange::Failed(self.reason.clone()));
+        } else {
+            tracing::debug!(error = %e, "the flight recorder still cannot write");
+        }
+    }
+
+    fn start_dropping(&mut self, why: String) {
+        let dropped = self
+            .writer
+            .as_mut()
+            .map_or(0, JournalWriter::discard_queued);
+        self.lost += dropped as u64;
+        if self.state == RecorderState::Ok {
+            self.changes.push(RecorderChange::Failed(why.clone()));
+        }
+        self.state = RecorderState::Dropping;
+        self.reason = why;
+        tracing::error!(dropped, reason = %self.reason, "the flight recorder drops records: the journal will go on from a checkpoint of the state once it can write");
+    }
+
+    /// Appends one entry (if there is a journal): written now or later, or dropped (and
+    /// counted) while the recorder is dropping.
     pub fn append(&mut self, entry: &Entry) {
-        if let Some(w) = self.writer.as_mut() {
-            if let Err(e) = w.append(entry) {
-                self.failures += 1;
-                self.missed = true;
-                tracing::error!(error = %e, "journal write failed: the flight recorder is missing this entry");
-            }
+        let Some(w) = self.writer.as_mut() else {
+            return;
+        };
+        match self.state {
+            RecorderState::Dropping => self.lost += 1,
+            RecorderState::Ok => match w.push(entry) {
+                Err(e) => self.start_dropping(format!("an entry cannot be recorded: {e}")),
+                Ok(()) => {
+                    let due = match w.policy {
+                        FlushPolicy::EveryRecord | FlushPolicy::Sync => true,
+                        FlushPolicy::Interval(p) => w.last_flush.elapsed() >= p,
+                    };
+                    if due {
+                        if let Err(e) = w.flush() {
+                            self.fail(&e);
+                        }
+                    }
+                }
+            },
+            // Retried at the next flush, not at every record.
+            _ => match w.push(entry) {
+                Err(e) => self.start_dropping(format!("an entry cannot be recorded: {e}")),
+                Ok(()) if w.queued_bytes() > self.backlog => {
+                    let why = format!(
+                        "{} (and more than {} bytes of records waited in memory)",
+                        self.reason, self.backlog
+                    );
+                    self.start_dropping(why);
+                }
+                Ok(()) => {}
+            },
         }
     }
 
-    /// Hands everything written to the operating system; true when everything appended since
-    /// the last flush is on record (or there is no journal).
-    pub fn flush(&mut self) -> bool {
-        if let Some(w) = self.writer.as_mut() {
-            if let Err(e) = w.flush() {
+    /// Writes what waits (each heartbeat calls it, before the acknowledgements go out) and
+    /// says what that means for the events taken since the last flush.
+    pub fn flush(&mut self) -> Settlement {
+        let Some(w) = self.writer.as_mut() else {
+            return Settlement::Recorded;
+        };
+        match self.state {
+            RecorderState::Dropping => Settlement::Lost,
+            _ => match w.flush() {
+                Ok(()) => {
+                    if self.state == RecorderState::Failing {
+                        tracing::warn!(
+                            after_s = self.since.elapsed().as_secs_f64(),
+                            "the flight recorder writes again: every record waiting in memory is written; raising recorder_restored"
+                        );
+                        self.state = RecorderState::Ok;
+                        self.reason.clear();
+                        self.changes.push(RecorderChange::Restored);
+                    }
+                    Settlement::Recorded
+                }
+                Err(e) => {
+                    self.fail(&e);
+                    Settlement::Pending
+                }
+            },
+        }
+    }
+
+    /// True when the recorder is dropping and waits for a checkpoint to go on.
+    pub fn wants_checkpoint(&self) -> bool {
+        self.state == RecorderState::Dropping
+    }
+
+    /// While dropping: tries to write an [`Entry::Gap`] (what was lost) and `checkpoint` (an
+    /// [`Entry::Checkpoint`] of the engine now). True when they are on record: the recorder is
+    /// ok again, and the journal goes on from the checkpoint.
+    pub fn checkpoint(&mut self, checkpoint: &Entry) -> bool {
+        let Some(w) = self.writer.as_mut() else {
+            return false;
+        };
+        if self.state != RecorderState::Dropping {
+            return false;
+        }
+        let gap = Entry::Gap {
+            time: checkpoint.time().unwrap_or(0),
+            lost: self.lost - self.lost_in_gaps,
+            reason: self.reason.clone(),
+        };
+        let written = w
+            .push(&gap)
+            .and_then(|()| w.push(checkpoint))
+            .and_then(|()| w.flush());
+        if w.queued_records() < 2 {
+            // The gap is on record, with or without its checkpoint.
+            self.lost_in_gaps = self.lost;
+        }
+        match written {
+            Ok(()) => {
+                tracing::warn!(
+                    lost = self.lost,
+                    after_s = self.since.elapsed().as_secs_f64(),
+                    "the flight recorder writes again, from a checkpoint of the state; raising recorder_restored"
+                );
+                self.state = RecorderState::Ok;
+                self.reason.clear();
+                self.changes.push(RecorderChange::Restored);
+                true
+            }
+            Err(e) => {
+                w.discard_queued();
                 self.failures += 1;
-                self.missed = true;
-                tracing::error!(error = %e, "journal flush failed");
+                self.reason = e.to_string();
+                false
             }
         }
-        !std::mem::take(&mut self.missed)
     }
 
     /// Records written and time spent writing them, if there is a journal.

@@ -42,6 +42,11 @@ pub struct ReplayReport {
     pub last_time: Micros,
     /// Replay stopped at `--until` before the end of the journal.
     pub stopped_early: bool,
+    /// Gaps: places where the recorder dropped entries (it could not write them) and the
+    /// journal goes on from a checkpoint of the state.
+    pub gaps: u64,
+    /// Entries the recorder dropped, all gaps together.
+    pub lost: u64,
 }
 
 /// A state as `NET.place` / `global.place` names, active nets as `NET+`, running timers.
@@ -66,6 +71,8 @@ pub fn replay<'p>(
     let mut engine = Engine::new(project);
     let mut log = StepRecord::new(project);
     let mut report = ReplayReport::default();
+    // After a gap, the next checkpoint is where the replay starts over.
+    let mut after_gap = false;
     for (i, entry) in entries.iter().enumerate() {
         if let (Some(limit), Some(t)) = (until, entry.time()) {
             if t > limit {
@@ -88,6 +95,41 @@ pub fn replay<'p>(
             };
         match entry {
             Entry::Header { .. } | Entry::Refused { .. } | Entry::Resume { .. } => {}
+            Entry::Gap { lost, .. } => {
+                report.gaps += 1;
+                report.lost += lost;
+                after_gap = true;
+            }
+            Entry::Checkpoint {
+                time,
+                state,
+                deadlines,
+            } => {
+                if after_gap {
+                    after_gap = false;
+                    if !engine.restore(*time, state, deadlines) {
+                        report.divergence = Some(diverge(
+                            &engine,
+                            "the checkpoint is not of this project's size".into(),
+                            "(checkpoint)",
+                            *time,
+                            state,
+                        ));
+                        break;
+                    }
+                } else if engine.state() != state.as_slice()
+                    || engine.deadlines() != deadlines.as_slice()
+                {
+                    report.divergence = Some(diverge(
+                        &engine,
+                        "the state at the checkpoint differs".into(),
+                        "(checkpoint)",
+                        *time,
+                        state,
+                    ));
+                    break;
+                }
+            }
             Entry::Start { time, state } => {
                 engine.start(*time, &mut log);
                 log.clear();

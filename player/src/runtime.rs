@@ -15,7 +15,7 @@
 
 use crate::ack::Ledger;
 use crate::engine::{Args, Engine, Micros, Refusal, Sink, Stats};
-use crate::journal::{Entry, FlushPolicy, Journal, JournalWriter};
+use crate::journal::{Entry, FlushPolicy, Journal, JournalWriter, RecorderChange, Settlement};
 use crate::record::{marked_places, outcome_name, StepRecord};
 use petrel_ipc::{
     CallMsg, CallSender, EventReceiver, Heartbeat, HeartbeatPublisher, MarkingMsg,
@@ -49,6 +49,9 @@ pub struct PlayOptions {
     pub flush: FlushPolicy,
     /// Start a new journal segment past this size.
     pub rotate_bytes: u64,
+    /// Bytes of journal records kept in memory while the journal cannot be written (a full
+    /// disk); past it the recorder drops records and starts over from a checkpoint.
+    pub journal_backlog: usize,
     /// Restore the mission from the journal and carry on.
     pub resume: bool,
     /// The project directory, recorded in the journal header.
@@ -67,6 +70,7 @@ impl PlayOptions {
             journal: None,
             flush: FlushPolicy::EveryRecord,
             rotate_bytes: 64 << 20,
+            journal_backlog: crate::journal::DEFAULT_BACKLOG,
             resume: false,
             project_dir: String::new(),
         }
@@ -111,6 +115,10 @@ pub struct PlayReport {
     pub calls_failed: u64,
     /// Journal records written.
     pub journal_records: u64,
+    /// Attempts to write the journal that failed (a full disk...).
+    pub journal_failures: u64,
+    /// Journal entries the recorder had to drop.
+    pub journal_lost: u64,
     /// Time the reactor thread spent writing the journal.
     pub journal_busy: Duration,
     /// Steps restored from the journal by `--resume`.
@@ -220,6 +228,8 @@ struct Builtins {
     program_lost: Option<EventId>,
     call_failed: Option<EventId>,
     bad_message: Option<EventId>,
+    recorder_failed: Option<EventId>,
+    recorder_restored: Option<EventId>,
 }
 
 fn unix_ms() -> u64 {
@@ -371,7 +381,7 @@ impl<'p> PlayerLoop<'p> {
             None => None,
             Some(dir) => {
                 let header = Entry::Header {
-                    version: 1,
+                    version: crate::journal::FORMAT_VERSION,
                     project: project.name.clone(),
                     project_dir: opts.project_dir.clone(),
                     digest: crate::journal::project_digest(project),
@@ -385,7 +395,7 @@ impl<'p> PlayerLoop<'p> {
                 Some(w)
             }
         };
-        let mut journal = Journal::new(writer);
+        let mut journal = Journal::with_backlog(writer, opts.journal_backlog);
         let mut record = StepRecord::new(project);
         let mut failed = Vec::new();
         let mut report = PlayReport::default();
@@ -430,6 +440,8 @@ impl<'p> PlayerLoop<'p> {
                 program_lost: project.event_id("program_lost"),
                 call_failed: project.event_id("call_failed"),
                 bad_message: project.event_id("bad_message"),
+                recorder_failed: project.event_id("recorder_failed"),
+                recorder_restored: project.event_id("recorder_restored"),
             },
             report,
             ledger: Ledger::new(),
@@ -458,6 +470,10 @@ impl<'p> PlayerLoop<'p> {
         loop {
             self.process_queue();
             self.heartbeat_if_due();
+            if self.journal.has_changes() {
+                // The heartbeat's flush changed the recorder's state: tell the nets now.
+                continue;
+            }
             if let Some(limit) = self.opts.run_for {
                 if self.t0.elapsed() >= limit {
                     info!("run time over");
@@ -489,17 +505,16 @@ impl<'p> PlayerLoop<'p> {
                 self.check_liveness();
             }
         }
-        self.journal.flush();
-        if let Some((records, busy)) = self.journal.written() {
-            self.report.journal_records = records;
-            self.report.journal_busy = busy;
-        }
-        if self.journal.failures > 0 {
+        if self.journal.flush() != Settlement::Recorded {
             error!(
-                failures = self.journal.failures,
-                "the journal missed entries"
+                state = self.journal.state().as_str(),
+                reason = self.journal.reason(),
+                backlog = ?self.journal.backlog(),
+                lost = self.journal.lost,
+                "the player stops with journal records not written: the journal ends at its last good record"
             );
         }
+        self.count_journal();
         self.report.stats = self.engine.stats();
         info!(report = ?self.report, "player stopped");
         Ok(self.report)
@@ -513,6 +528,7 @@ impl<'p> PlayerLoop<'p> {
     /// Processes everything queued (by the start, a timer, an event), journals and publishes
     /// each step, and raises `call_failed` for the calls that could not be delivered.
     fn process_queue(&mut self) {
+        self.raise_recorder_changes();
         loop {
             let mut sink = RuntimeSink {
                 record: &mut self.record,
@@ -524,6 +540,10 @@ impl<'p> PlayerLoop<'p> {
                 if self.step_no == 0 {
                     self.publish_delta();
                     self.step_no += 1;
+                }
+                // Journaling these steps may have changed the recorder's state.
+                if self.raise_recorder_changes() {
+                    continue;
                 }
                 break;
             };
@@ -553,24 +573,57 @@ impl<'p> PlayerLoop<'p> {
         }
     }
 
+    /// Raises `recorder_failed` and `recorder_restored` for the recorder's changes of state;
+    /// true when it raised any.
+    fn raise_recorder_changes(&mut self) -> bool {
+        let changes = self.journal.take_changes();
+        for change in &changes {
+            match change {
+                RecorderChange::Failed(reason) => {
+                    let mut reason = reason.clone();
+                    petrel_ipc::wire::cut_text(&mut reason, petrel_ipc::wire::MAX_REASON_LEN);
+                    self.raise(self.builtins.recorder_failed, vec![Value::Text(reason)]);
+                }
+                RecorderChange::Restored => self.raise(self.builtins.recorder_restored, vec![]),
+            }
+        }
+        !changes.is_empty()
+    }
+
+    fn count_journal(&mut self) {
+        if let Some((records, busy)) = self.journal.written() {
+            self.report.journal_records = records;
+            self.report.journal_busy = busy;
+        }
+        self.report.journal_failures = self.journal.failures;
+        self.report.journal_lost = self.journal.lost;
+    }
+
     /// Publishes the heartbeat, with the live status and the acknowledgements, when its period
-    /// is over. The journal is flushed first: what it holds is then settled.
+    /// is over. The journal is flushed first: what it holds is then settled, what it still
+    /// keeps in memory stays pending, what it dropped is unrecorded.
     fn heartbeat_if_due(&mut self) {
         let instant = Instant::now();
         if instant < self.next_heartbeat {
             return;
         }
         self.next_heartbeat = instant + self.opts.heartbeat;
-        if self.journal.flush() {
-            self.ledger.settle();
-        } else {
-            // The old writer cannot take back what failed: those events are not on record.
-            self.ledger.lose_unsettled();
+        match self.journal.flush() {
+            Settlement::Recorded => self.ledger.settle(),
+            Settlement::Pending => {}
+            Settlement::Lost => self.ledger.lose_unsettled(),
         }
-        if let Some((records, busy)) = self.journal.written() {
-            self.report.journal_records = records;
-            self.report.journal_busy = busy;
+        // A recorder that dropped records goes on from a checkpoint of the engine, taken
+        // between two steps (the queue is empty after `process_queue`).
+        if self.journal.wants_checkpoint() && self.engine.queued() == 0 {
+            let checkpoint = Entry::Checkpoint {
+                time: self.engine.now(),
+                state: self.engine.state().to_vec(),
+                deadlines: self.engine.deadlines().to_vec(),
+            };
+            self.journal.checkpoint(&checkpoint);
         }
+        self.count_journal();
         for gone in self.ledger.prune(&self.ports.events.live_senders()) {
             self.ports.events.forget_sender(gone);
         }
@@ -581,10 +634,13 @@ impl<'p> PlayerLoop<'p> {
             progress: self.step_no,
             status: String::new(),
             acks: self.ledger.acks(),
-            recorder: petrel_ipc::Recorder::default(),
+            recorder: petrel_ipc::Recorder {
+                state: self.journal.state(),
+                reason: self.journal.reason().to_string(),
+            },
         };
         hb.bound();
-        let snapshot = StatusSnapshot::of(&self.engine, &self.report, &self.ledger);
+        let snapshot = StatusSnapshot::of(&self.engine, &self.report, &self.ledger, &self.journal);
         hb.status = status_json(&snapshot);
         if Heartbeat::max_encoded_len(hb.status.len()) > max {
             // Only a project past the largest body a service carries gets here (see `new`).
@@ -783,7 +839,18 @@ struct StatusSnapshot {
     /// Each sender: origin, last_seq, received, undecodable, missing, taken, refused, pending,
     /// unrecorded, settled_seq.
     senders: Vec<(String, [u64; 9])>,
+    /// The flight recorder: its state, why it fails, and its counters in [`RECORDER_FIELDS`]
+    /// order.
+    recorder: (&'static str, String, [u64; 4]),
 }
+
+/// The names of the recorder's counters in the status JSON's `recorder`.
+const RECORDER_FIELDS: [&str; 4] = [
+    "failures",
+    "lost_entries",
+    "backlog_records",
+    "backlog_bytes",
+];
 
 /// The names of the counters in the status JSON's `stats`, in [`StatusSnapshot::stats`] order.
 const STATS_FIELDS: [&str; 13] = [
@@ -816,7 +883,7 @@ const SENDER_FIELDS: [&str; 9] = [
 ];
 
 impl StatusSnapshot {
-    fn of(engine: &Engine, report: &PlayReport, ledger: &Ledger) -> Self {
+    fn of(engine: &Engine, report: &PlayReport, ledger: &Ledger, journal: &Journal) -> Self {
         let s = engine.stats();
         // Oldest first, so that two senders of one origin show the most recent one.
         let mut senders: Vec<(String, [u64; 9])> = ledger
@@ -841,7 +908,15 @@ impl StatusSnapshot {
             })
             .collect();
         senders.reverse();
+        let (records, bytes) = journal.backlog();
+        let mut reason = journal.reason().to_string();
+        petrel_ipc::wire::cut_text(&mut reason, petrel_ipc::wire::MAX_REASON_LEN);
         StatusSnapshot {
+            recorder: (
+                journal.state().as_str(),
+                reason,
+                [journal.failures, journal.lost, records as u64, bytes as u64],
+            ),
             project: engine.project().name.clone(),
             time_s: engine.now() as f64 / 1e6,
             over: engine.is_over(),
@@ -906,6 +981,14 @@ fn status_json(s: &StatusSnapshot) -> String {
         })
         .collect();
     doc.insert("senders".into(), senders.into());
+    let (state, reason, counts) = &s.recorder;
+    let mut recorder = serde_json::Map::new();
+    recorder.insert("state".into(), (*state).into());
+    recorder.insert("reason".into(), reason.clone().into());
+    for (k, v) in RECORDER_FIELDS.iter().zip(counts) {
+        recorder.insert(k.to_string(), (*v).into());
+    }
+    doc.insert("recorder".into(), recorder.into());
     serde_json::Value::Object(doc).to_string()
 }
 
@@ -944,6 +1027,11 @@ fn status_bound(project: &CompiledProject) -> usize {
         senders: (0..petrel_ipc::wire::MAX_ACKS)
             .map(|i| (origin(i), [u64::MAX; 9]))
             .collect(),
+        recorder: (
+            "dropping",
+            "\u{1}".repeat(petrel_ipc::wire::MAX_REASON_LEN),
+            [u64::MAX; 4],
+        ),
     };
     status_json(&worst).len()
 }
@@ -981,7 +1069,8 @@ mod tests {
             heartbeats_refused: u64::MAX,
             ..PlayReport::default()
         };
-        let json = status_json(&StatusSnapshot::of(&engine, &report, &ledger));
+        let journal = Journal::new(None);
+        let json = status_json(&StatusSnapshot::of(&engine, &report, &ledger, &journal));
         assert!(json.len() <= bound, "{} > {bound}", json.len());
         let doc: serde_json::Value = serde_json::from_str(&json).unwrap();
         assert_eq!(doc["marking"]["A"].as_array().map(Vec::len), Some(2));
