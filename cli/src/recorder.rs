@@ -84,6 +84,15 @@ pub fn replay(a: ReplayArgs) -> Outcome {
     let until_us = until.map(|s| (s * 1e6).round().max(0.0) as u64);
     let (engine, r) = petrel_player::replay::replay(&c, &read.entries, until_us);
     if let Some(d) = &r.divergence {
+        if d.kind == petrel_player::replay::DivergenceKind::Journal {
+            eprintln!(
+                "error: the journal does not hold together at entry {} (t = {:.6} s): {}",
+                d.entry,
+                d.time as f64 / 1e6,
+                d.what
+            );
+            return Outcome::Errors;
+        }
         eprintln!(
             "divergence at entry {} (t = {:.6} s), event `{}`: {}\n  recorded: {}\n  replayed: {}",
             d.entry,

@@ -939,6 +939,178 @@ pub fn cut_torn_tail(torn: &Damage) -> std::io::Result<()> {
     file.sync_all()
 }
 
+/// The lock file of a journal directory: held (an exclusive `flock`) by the one player that
+/// writes there, and holding its vehicle's name and process id.
+pub const LOCK_FILE: &str = "petrel.lock";
+
+/// Who holds (or held) a journal directory's lock.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct LockOwner {
+    /// The vehicle.
+    pub vehicle: String,
+    /// The player's process id.
+    pub pid: u32,
+}
+
+impl LockOwner {
+    fn parse(text: &str) -> Option<LockOwner> {
+        let mut vehicle = None;
+        let mut pid = None;
+        for line in text.lines() {
+            if let Some(v) = line.strip_prefix("vehicle=") {
+                vehicle = Some(v.to_string());
+            } else if let Some(p) = line.strip_prefix("pid=") {
+                pid = p.parse().ok();
+            }
+        }
+        Some(LockOwner {
+            vehicle: vehicle?,
+            pid: pid?,
+        })
+    }
+}
+
+/// A journal directory could not be locked.
+#[derive(Debug)]
+pub enum LockError {
+    /// Another player writes there.
+    InUse {
+        /// The journal directory.
+        dir: PathBuf,
+        /// Who, if its lock file says.
+        owner: Option<LockOwner>,
+    },
+    /// The directory or the lock file could not be created, read or locked.
+    Io(PathBuf, std::io::Error),
+}
+
+impl std::fmt::Display for LockError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            LockError::InUse { dir, owner } => {
+                write!(f, "the journal directory {} is in use by ", dir.display())?;
+                match owner {
+                    Some(o) => write!(f, "the player of vehicle `{}` (pid {})", o.vehicle, o.pid)?,
+                    None => write!(f, "another player")?,
+                }
+                write!(
+                    f,
+                    ": a journal directory holds one vehicle's mission; give this player another --journal"
+                )
+            }
+            LockError::Io(p, e) => write!(f, "cannot lock {}: {e}", p.display()),
+        }
+    }
+}
+
+impl std::error::Error for LockError {}
+
+/// The exclusive hold of a player on its journal directory ([`LOCK_FILE`]).
+///
+/// The lock is an `flock` on the lock file, which the kernel releases when the process dies,
+/// however it dies; the file itself stays. It names the vehicle and the process once
+/// [`claimed`](Self::claim), and is emptied when the hold is dropped in good order: a lock file
+/// that still names someone when it is acquired was left by a process that died (a stale
+/// lock, [`stale_owner`](Self::stale_owner)).
+#[derive(Debug)]
+pub struct JournalLock {
+    file: File,
+    path: PathBuf,
+    stale: Option<LockOwner>,
+    claimed: bool,
+}
+
+impl JournalLock {
+    /// Locks journal directory `dir` (created if needed), or says who holds it.
+    pub fn acquire(dir: &Path) -> Result<JournalLock, LockError> {
+        let io = |e: std::io::Error| LockError::Io(dir.to_path_buf(), e);
+        std::fs::create_dir_all(dir).map_err(io)?;
+        let path = dir.join(LOCK_FILE);
+        let mut file = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&path)
+            .map_err(io)?;
+        let mut text = String::new();
+        match file.try_lock() {
+            Ok(()) => {}
+            Err(std::fs::TryLockError::WouldBlock) => {
+                let _ = file.read_to_string(&mut text);
+                return Err(LockError::InUse {
+                    dir: dir.to_path_buf(),
+                    owner: LockOwner::parse(&text),
+                });
+            }
+            Err(std::fs::TryLockError::Error(e)) => return Err(io(e)),
+        }
+        // Unreadable content is as good as none: the lock is ours.
+        let _ = file.read_to_string(&mut text);
+        Ok(JournalLock {
+            file,
+            path,
+            stale: LockOwner::parse(&text),
+            claimed: false,
+        })
+    }
+
+    /// The owner named by a lock file found unlocked: a player that died holding it.
+    pub fn stale_owner(&self) -> Option<&LockOwner> {
+        self.stale.as_ref()
+    }
+
+    /// Writes this process's vehicle and pid into the lock file (until then, a refused player
+    /// leaves what the file said untouched).
+    pub fn claim(&mut self, vehicle: &str) -> std::io::Result<()> {
+        let text = format!("vehicle={vehicle}\npid={}\n", std::process::id());
+        self.file.set_len(0)?;
+        self.file.write_all_at(text.as_bytes(), 0)?;
+        self.file.sync_data()?;
+        self.claimed = true;
+        Ok(())
+    }
+
+    /// The lock file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl Drop for JournalLock {
+    fn drop(&mut self) {
+        if self.claimed {
+            // Released in good order: an empty lock file is nobody's.
+            let _ = self.file.set_len(0);
+        }
+    }
+}
+
+/// The header of a journal directory's first segment, if it has one that reads.
+pub fn first_header(dir: &Path) -> Option<Entry> {
+    let first = segments(dir).ok()?.into_iter().next()?;
+    let mut file = File::open(first).ok()?;
+    let mut head = [0u8; 16];
+    file.read_exact(&mut head).ok()?;
+    if &head[..8] != MAGIC {
+        return None;
+    }
+    let len = u32::from_le_bytes(head[8..12].try_into().ok()?);
+    if len > MAX_RECORD {
+        return None;
+    }
+    let crc = u32::from_le_bytes(head[12..16].try_into().ok()?);
+    let mut body = vec![0u8; len as usize];
+    file.read_exact(&mut body).ok()?;
+    if crc32fast::hash(&body) != crc {
+        return None;
+    }
+    match decode_entry(&body) {
+        Ok(header @ Entry::Header { .. }) => Some(header),
+        _ => None,
+    }
+}
+
 /// A stable digest of a compiled project (FNV-1a over its debug text), so a journal is only
 /// replayed with the project it recorded.
 pub fn project_digest(p: &petrel_nets::compiled::CompiledProject) -> u64 {

@@ -3,8 +3,11 @@
 //! The journal's inputs (the start, each submitted event with its time) are fed to a fresh
 //! engine; at each recorded step the engine takes its next event, and the event, the transitions
 //! fired and the state after must be the recorded ones. The first difference is a divergence,
-//! reported with both markings and the event that caused it. Recovery (`petrel play --resume`)
-//! is the same replay, after which the player carries on live.
+//! reported with both markings and the event that caused it. The journal itself must hold
+//! together: every segment's header names the same vehicle, project and mission start, and
+//! time never goes backwards from one entry to the next; segments spliced from another journal
+//! are reported like a divergence ([`DivergenceKind::Journal`]). Recovery (`petrel play
+//! --resume`) is the same replay, after which the player carries on live.
 
 use crate::engine::{Engine, Micros};
 use crate::journal::Entry;
@@ -12,9 +15,21 @@ use crate::record::{outcome_name, StepRecord};
 use petrel_nets::compiled::CompiledProject;
 use petrel_nets::semantics::Layout;
 
+/// What kind of difference a [`Divergence`] is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DivergenceKind {
+    /// The engine did not reproduce a recorded step or state.
+    Replay,
+    /// The journal does not hold together: a segment of another vehicle, project or mission,
+    /// or time going backwards (segments spliced from another journal).
+    Journal,
+}
+
 /// The first place where the replay differs from the journal.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Divergence {
+    /// What kind of difference.
+    pub kind: DivergenceKind,
     /// Index of the journal entry.
     pub entry: usize,
     /// Its mission time, microseconds.
@@ -73,6 +88,9 @@ pub fn replay<'p>(
     let mut report = ReplayReport::default();
     // After a gap, the next checkpoint is where the replay starts over.
     let mut after_gap = false;
+    // The journal's first header, and the time of the last entry that had one.
+    let mut first: Option<(&str, u64, u64)> = None;
+    let mut previous: Option<(usize, u64)> = None;
     for (i, entry) in entries.iter().enumerate() {
         if let (Some(limit), Some(t)) = (until, entry.time()) {
             if t > limit {
@@ -80,12 +98,25 @@ pub fn replay<'p>(
                 break;
             }
         }
+        if let Some(what) = inconsistency(entry, &mut first, &mut previous, i) {
+            report.divergence = Some(Divergence {
+                kind: DivergenceKind::Journal,
+                entry: i,
+                time: entry.time().unwrap_or(report.last_time),
+                event: "(journal)".into(),
+                what,
+                recorded: Vec::new(),
+                replayed: describe(project, engine.layout(), engine.state()),
+            });
+            break;
+        }
         report.entries = i + 1;
         if let Some(t) = entry.time() {
             report.last_time = t;
         }
         let diverge =
             |engine: &Engine, what: String, event: &str, time: u64, recorded: &[u64]| Divergence {
+                kind: DivergenceKind::Replay,
                 entry: i,
                 time,
                 event: event.to_string(),
@@ -154,6 +185,7 @@ pub fn replay<'p>(
                 let params = params.clone();
                 if let Err(r) = engine.submit_named(event, params) {
                     report.divergence = Some(Divergence {
+                        kind: DivergenceKind::Replay,
                         entry: i,
                         time: *time,
                         event: event.clone(),
@@ -213,4 +245,54 @@ pub fn replay<'p>(
         }
     }
     (engine, report)
+}
+
+/// What is inconsistent about entry `i` of a journal, given its first header and the previous
+/// entry with a time: a header that disagrees with the first one, or time going backwards.
+fn inconsistency<'e>(
+    entry: &'e Entry,
+    first: &mut Option<(&'e str, u64, u64)>,
+    previous: &mut Option<(usize, u64)>,
+    i: usize,
+) -> Option<String> {
+    if let Entry::Header {
+        vehicle,
+        digest,
+        started_unix_ms,
+        ..
+    } = entry
+    {
+        let Some((v, d, s)) = *first else {
+            *first = Some((vehicle, *digest, *started_unix_ms));
+            return None;
+        };
+        if vehicle != v {
+            return Some(format!(
+                "a segment of vehicle `{vehicle}` in the journal of vehicle `{v}`: segments of two journals were put together"
+            ));
+        }
+        if *digest != d {
+            return Some(
+                "a segment recorded with another project in this journal: segments of two journals were put together"
+                    .into(),
+            );
+        }
+        if *started_unix_ms != s {
+            return Some(format!(
+                "a segment of another mission of vehicle `{v}` (started at {started_unix_ms} ms since the Unix epoch, not {s}): segments of two journals were put together"
+            ));
+        }
+    }
+    let t = entry.time()?;
+    if let Some((j, before)) = *previous {
+        if t < before {
+            return Some(format!(
+                "time goes backwards: {:.6} s after {:.6} s at entry {j} (segments spliced from another journal?)",
+                t as f64 / 1e6,
+                before as f64 / 1e6
+            ));
+        }
+    }
+    *previous = Some((i, t));
+    None
 }

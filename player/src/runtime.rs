@@ -15,7 +15,9 @@
 
 use crate::ack::Ledger;
 use crate::engine::{Args, Engine, Micros, Refusal, Sink, Stats};
-use crate::journal::{Entry, FlushPolicy, Journal, JournalWriter, RecorderChange, Settlement};
+use crate::journal::{
+    Entry, FlushPolicy, Journal, JournalLock, JournalWriter, RecorderChange, Settlement,
+};
 use crate::record::{marked_places, outcome_name, StepRecord};
 use petrel_ipc::{
     CallMsg, CallSender, EventReceiver, Heartbeat, HeartbeatPublisher, MarkingMsg,
@@ -239,6 +241,59 @@ fn unix_ms() -> u64 {
         .unwrap_or(0)
 }
 
+/// Locks the journal directory for this player and checks that it may write there: a new
+/// mission needs a directory without a journal, a resumed one its own vehicle's journal.
+/// Returns the lock and the mission's start (wall clock, milliseconds since the Unix epoch):
+/// now for a new mission, the journal's for a resumed one.
+fn take_journal(
+    dir: &std::path::Path,
+    opts: &PlayOptions,
+) -> Result<(JournalLock, u64), PlayError> {
+    let mut lock = JournalLock::acquire(dir).map_err(|e| PlayError::Journal(e.to_string()))?;
+    let has_segments = crate::journal::segments(dir)
+        .map(|s| !s.is_empty())
+        .map_err(|e| PlayError::Journal(format!("cannot read {}: {e}", dir.display())))?;
+    let header = crate::journal::first_header(dir);
+    let start = match (&header, opts.resume) {
+        (
+            Some(Entry::Header {
+                vehicle,
+                started_unix_ms,
+                ..
+            }),
+            true,
+        ) => {
+            if *vehicle != opts.vehicle {
+                return Err(PlayError::Journal(format!(
+                    "{} holds the journal of vehicle `{vehicle}`, not `{}`: refusing to resume another vehicle's mission",
+                    dir.display(),
+                    opts.vehicle
+                )));
+            }
+            *started_unix_ms
+        }
+        // An unreadable first header is said by the replay, with the record it is.
+        (_, true) => unix_ms(),
+        (_, false) if has_segments => {
+            let whose = match &header {
+                Some(Entry::Header { vehicle, .. }) => format!("vehicle `{vehicle}`"),
+                _ => "an unknown vehicle".to_string(),
+            };
+            return Err(PlayError::Journal(format!(
+                "{} already holds the journal of a mission of {whose}: carry that mission on with --resume, or record this one elsewhere (--journal DIR)",
+                dir.display()
+            )));
+        }
+        (_, false) => unix_ms(),
+    };
+    if let Some(owner) = lock.stale_owner() {
+        warn!(lock = %lock.path().display(), vehicle = %owner.vehicle, pid = owner.pid, "took over the stale lock of a player that died without releasing it");
+    }
+    lock.claim(&opts.vehicle)
+        .map_err(|e| PlayError::Journal(format!("cannot write {}: {e}", lock.path().display())))?;
+    Ok((lock, start))
+}
+
 /// Rebuilds the engine from the journal (`--resume`): the mission time it reached, and the
 /// number of steps restored.
 fn resume<'p>(
@@ -327,6 +382,8 @@ pub struct PlayerLoop<'p> {
     step_no: u64,
     next_heartbeat: Instant,
     next_liveness: Instant,
+    /// The hold on the journal directory: released last, after the journal is closed.
+    _lock: Option<JournalLock>,
 }
 
 impl<'p> PlayerLoop<'p> {
@@ -345,6 +402,14 @@ impl<'p> PlayerLoop<'p> {
             Ok(_) => {}
             Err(e) => warn!(error = %e, "could not look for dead processes"),
         }
+        // The journal directory is this player's alone, and this vehicle's.
+        let (lock, mission_start_ms) = match &opts.journal {
+            Some(dir) => {
+                let (lock, start) = take_journal(dir, opts)?;
+                (Some(lock), start)
+            }
+            None => (None, unix_ms()),
+        };
         // Recovery first: the engine is rebuilt from the journal before anything else happens.
         let resumed = if opts.resume {
             Some(resume(project, opts)?)
@@ -386,7 +451,8 @@ impl<'p> PlayerLoop<'p> {
                     project_dir: opts.project_dir.clone(),
                     digest: crate::journal::project_digest(project),
                     vehicle: opts.vehicle.clone(),
-                    started_unix_ms: unix_ms(),
+                    // Every segment of a mission names its start: replay checks they agree.
+                    started_unix_ms: mission_start_ms,
                 };
                 let w = JournalWriter::open(dir, header, opts.flush, opts.rotate_bytes).map_err(
                     |e| PlayError::Journal(format!("cannot write {}: {e}", dir.display())),
@@ -451,6 +517,7 @@ impl<'p> PlayerLoop<'p> {
             step_no: 0,
             next_heartbeat: Instant::now(),
             next_liveness: Instant::now() + opts.liveness,
+            _lock: lock,
         })
     }
 

@@ -247,3 +247,89 @@ fn zeros_in_the_middle_are_damage() {
     let read = read_journal(dir.path()).unwrap();
     assert!(read.corrupt.is_some(), "{:?}", read.torn);
 }
+
+#[test]
+fn a_journal_directory_is_locked_by_one_player_and_a_dead_ones_lock_is_stale() {
+    use petrel_player::journal::{JournalLock, LockError, LOCK_FILE};
+    let dir = tempfile::tempdir().unwrap();
+    let mut first = JournalLock::acquire(dir.path()).unwrap();
+    assert!(first.stale_owner().is_none());
+    first.claim("auv1").unwrap();
+    match JournalLock::acquire(dir.path()) {
+        Err(LockError::InUse { owner: Some(o), .. }) => {
+            assert_eq!((o.vehicle.as_str(), o.pid), ("auv1", std::process::id()));
+        }
+        other => panic!("{other:?}"),
+    }
+    drop(first);
+    // Released in good order: nobody's.
+    let again = JournalLock::acquire(dir.path()).unwrap();
+    assert!(again.stale_owner().is_none());
+    drop(again);
+    // A lock file naming a process, found unlocked: its player died holding it.
+    std::fs::write(dir.path().join(LOCK_FILE), "vehicle=auv2\npid=4242\n").unwrap();
+    let taken = JournalLock::acquire(dir.path()).unwrap();
+    let stale = taken.stale_owner().unwrap();
+    assert_eq!((stale.vehicle.as_str(), stale.pid), ("auv2", 4242));
+    // Not claimed (a refused player): what the file said stays.
+    drop(taken);
+    let text = std::fs::read_to_string(dir.path().join(LOCK_FILE)).unwrap();
+    assert!(text.contains("auv2"), "{text}");
+}
+
+#[test]
+fn replay_reports_spliced_headers_and_time_going_backwards() {
+    use petrel_player::replay::{replay, DivergenceKind};
+    let manifest = "[project]\nname = \"t\"\nfiles = [\"a.pn\"]\nstart = [\"A\"]\n\n[events]\ngo = { category = \"nominal\" }\n";
+    let net = "net A {\n    place p = 1\n    transition t on go: p -> p\n}\n";
+    let (_, c, d, _) = petrel_nets::project::from_sources(manifest, &[("a.pn", net)]);
+    assert!(!d.has_errors(), "{d:?}");
+    let c = c.unwrap();
+    let mut engine = petrel_player::engine::Engine::new(&c);
+    engine.start(0, &mut petrel_player::engine::NullSink);
+    let start = Entry::Start {
+        time: 0,
+        state: engine.state().to_vec(),
+    };
+    let header = |vehicle: &str, started| Entry::Header {
+        version: 2,
+        project: "t".into(),
+        project_dir: ".".into(),
+        digest: 1,
+        vehicle: vehicle.into(),
+        started_unix_ms: started,
+    };
+    let resume = |time| Entry::Resume { time };
+    let cases = [
+        (
+            vec![header("a", 5), start.clone(), header("b", 5)],
+            "vehicle `b`",
+        ),
+        (
+            vec![header("a", 5), start.clone(), header("a", 6)],
+            "another mission",
+        ),
+        (
+            vec![
+                header("a", 5),
+                start.clone(),
+                resume(9),
+                header("a", 5),
+                resume(3),
+            ],
+            "backwards",
+        ),
+    ];
+    for (entries, what) in cases {
+        let (_, r) = replay(&c, &entries, None);
+        let d = r.divergence.expect("an inconsistency");
+        assert_eq!(d.kind, DivergenceKind::Journal);
+        assert!(d.what.contains(what), "{}", d.what);
+    }
+    let (_, r) = replay(
+        &c,
+        &[header("a", 5), start, resume(9), header("a", 5), resume(9)],
+        None,
+    );
+    assert!(r.divergence.is_none(), "{:?}", r.divergence);
+}

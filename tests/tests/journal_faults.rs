@@ -1,5 +1,6 @@
-//! The flight recorder against bad journals, through the real binaries: crafted records with
-//! valid checksums, a zero-filled tail (power loss).
+//! The flight recorder against bad journals and misuse, through the real binaries: crafted
+//! records with valid checksums, a zero-filled tail (power loss), two players on one journal
+//! directory, segments spliced from other missions.
 
 use petrel_tests::{
     ended_cleanly, journal_json, journal_record, journal_segments, petrel, petrel_bin, repo,
@@ -134,4 +135,83 @@ fn a_zero_filled_tail_is_a_torn_tail_and_the_mission_resumes() {
         "{}",
         text(&o)
     );
+}
+
+/// Regression (issue 10, item 7): two players could write into one journal directory, and a
+/// resume then restored the other vehicle's state.
+#[test]
+fn one_journal_directory_holds_one_vehicle() {
+    let work = Workdir::new();
+    let a = unique_vehicle("owner");
+    let b = unique_vehicle("intruder");
+    let mut first = Player::start_in(&work, &liveness_dir(), &a, &[]);
+    let journal = first.journal.clone();
+    let o = first.send("tick(1)", 1);
+    assert!(o.status.success(), "{}", text(&o));
+    let play_b = |extra: &[&str]| {
+        Command::new(petrel_bin())
+            .arg("play")
+            .arg(liveness_dir())
+            .args(["--vehicle", &b, "--run-for", "3"])
+            .arg("--journal")
+            .arg(&journal)
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    // While the first player writes, a second one is refused, naming the owner.
+    let o = play_b(&[]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains(&a) && err.contains(&first.child.id().to_string()),
+        "{}",
+        text(&o)
+    );
+    // The owner dies without cleaning up: its lock is stale. Another vehicle still may not
+    // write there, nor resume from it.
+    first.child.kill().unwrap();
+    first.child.wait().unwrap();
+    for extra in [&[][..], &["--resume"][..]] {
+        let o = play_b(extra);
+        assert_eq!(o.status.code(), Some(2), "{extra:?}: {}", text(&o));
+        assert!(
+            String::from_utf8_lossy(&o.stderr).contains(&a),
+            "{extra:?}: {}",
+            text(&o)
+        );
+    }
+    drop(first);
+    petrel_tests::forget_vehicle(&b);
+    // The owner itself resumes, taking its stale lock over with a warning.
+    let again = Player::start_in(&work, &liveness_dir(), &a, &["--resume"]);
+    let log = again.log.clone();
+    let s = again.wait_for(5.0, |s| s["stats"]["resumed_steps"].as_u64() > Some(0));
+    assert_eq!(s["stats"]["resumed_steps"], 1, "{s}");
+    assert!(again.stop().success());
+    let log = std::fs::read_to_string(log).unwrap();
+    assert!(log.contains("stale"), "{log}");
+}
+
+/// Regression (issue 10, item 7): a replay of segments spliced from other missions (another
+/// vehicle; the same vehicle's earlier mission, time going backwards) said "every recorded
+/// marking reproduced".
+#[test]
+fn spliced_segments_are_reported_as_errors() {
+    let (_wa, a, _) = recorded_mission("splicea", 3);
+    let (_wb, b, _) = recorded_mission("spliceb", 2);
+    // Another vehicle's segment after ours.
+    let other = journal_segments(&b).pop().unwrap();
+    std::fs::copy(&other, a.join("journal-000002.pj")).unwrap();
+    let o = petrel(&["replay", &a.display().to_string()]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("vehicle"), "{}", text(&o));
+    // Our own first segment again: the same header, time going backwards.
+    let own = journal_segments(&a)[0].clone();
+    std::fs::copy(&own, a.join("journal-000002.pj")).unwrap();
+    let o = petrel(&["replay", &a.display().to_string()]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("backwards"), "{}", text(&o));
 }
