@@ -125,7 +125,10 @@ pub fn replay<'p>(
                 replayed: describe(project, engine.layout(), engine.state()),
             };
         match entry {
-            Entry::Header { .. } | Entry::Refused { .. } | Entry::Resume { .. } => {}
+            Entry::Header { .. } | Entry::Refused { .. } => {}
+            // The player came back at this mission time: timers whose deadline passed while it
+            // was down expire now, as they did live.
+            Entry::Resume { time } => engine.advance_to(*time),
             Entry::Gap { lost, .. } => {
                 report.gaps += 1;
                 report.lost += lost;

@@ -248,6 +248,7 @@ fn unix_ms() -> u64 {
 fn take_journal(
     dir: &std::path::Path,
     opts: &PlayOptions,
+    now_ms: u64,
 ) -> Result<(JournalLock, u64), PlayError> {
     let mut lock = JournalLock::acquire(dir).map_err(|e| PlayError::Journal(e.to_string()))?;
     let has_segments = crate::journal::segments(dir)
@@ -273,7 +274,7 @@ fn take_journal(
             *started_unix_ms
         }
         // An unreadable first header is said by the replay, with the record it is.
-        (_, true) => unix_ms(),
+        (_, true) => now_ms,
         (_, false) if has_segments => {
             let whose = match &header {
                 Some(Entry::Header { vehicle, .. }) => format!("vehicle `{vehicle}`"),
@@ -284,7 +285,7 @@ fn take_journal(
                 dir.display()
             )));
         }
-        (_, false) => unix_ms(),
+        (_, false) => now_ms,
     };
     if let Some(owner) = lock.stale_owner() {
         warn!(lock = %lock.path().display(), vehicle = %owner.vehicle, pid = owner.pid, "took over the stale lock of a player that died without releasing it");
@@ -402,13 +403,15 @@ impl<'p> PlayerLoop<'p> {
             Ok(_) => {}
             Err(e) => warn!(error = %e, "could not look for dead processes"),
         }
+        // Mission time is wall-clock time since the mission started; a new mission starts now.
+        let (mut t0, now_ms) = (Instant::now(), unix_ms());
         // The journal directory is this player's alone, and this vehicle's.
         let (lock, mission_start_ms) = match &opts.journal {
             Some(dir) => {
-                let (lock, start) = take_journal(dir, opts)?;
+                let (lock, start) = take_journal(dir, opts, now_ms)?;
                 (Some(lock), start)
             }
-            None => (None, unix_ms()),
+            None => (None, now_ms),
         };
         // Recovery first: the engine is rebuilt from the journal before anything else happens.
         let resumed = if opts.resume {
@@ -466,9 +469,35 @@ impl<'p> PlayerLoop<'p> {
         let mut failed = Vec::new();
         let mut report = PlayReport::default();
         let (engine, base) = match resumed {
-            Some((engine, time, steps)) => {
+            Some((mut engine, last, steps)) => {
                 report.resumed_steps = steps;
+                // Mission time went on while the player was down: timers keep their wall-clock
+                // deadlines, and those that passed expire now, in deadline order. The resume
+                // entry says when, so that replay expires them at the same time.
+                t0 = Instant::now();
+                let wall = unix_ms()
+                    .saturating_sub(mission_start_ms)
+                    .saturating_mul(1000);
+                if wall < last {
+                    warn!(
+                        wall_s = wall as f64 / 1e6,
+                        journal_s = last as f64 / 1e6,
+                        "the wall clock is behind the journal's last entry: mission time goes on from the journal's"
+                    );
+                }
+                let time = wall.max(last);
+                let overdue = engine
+                    .deadlines()
+                    .iter()
+                    .flatten()
+                    .filter(|&&d| d <= time)
+                    .count();
                 journal.append(&Entry::Resume { time });
+                engine.advance_to(time);
+                info!(
+                    down_s = (time - last) as f64 / 1e6,
+                    overdue, "resumed at the mission's wall-clock time; overdue timers expire now"
+                );
                 (engine, time)
             }
             None => {
@@ -511,7 +540,7 @@ impl<'p> PlayerLoop<'p> {
             },
             report,
             ledger: Ledger::new(),
-            t0: Instant::now(),
+            t0,
             base,
             previous: vec![0u64; words],
             step_no: 0,
@@ -521,7 +550,8 @@ impl<'p> PlayerLoop<'p> {
         })
     }
 
-    /// Mission time now: it goes on from where the journal left it.
+    /// Mission time now: wall-clock time since the mission started, read from the monotonic
+    /// clock within a run (so it never goes backwards), from the wall clock across a resume.
     fn now(&self) -> Micros {
         self.base + self.t0.elapsed().as_micros().min(u64::MAX as u128) as u64
     }

@@ -1,13 +1,14 @@
 //! The flight recorder against bad journals and misuse, through the real binaries: crafted
 //! records with valid checksums, a zero-filled tail (power loss), two players on one journal
-//! directory, segments spliced from other missions.
+//! directory, segments spliced from other missions, and a timer across a SIGKILL.
 
 use petrel_tests::{
     ended_cleanly, journal_json, journal_record, journal_segments, petrel, petrel_bin, repo,
-    unique_vehicle, Player, Workdir,
+    unique_vehicle, Player, TempProject, Workdir,
 };
 use std::path::Path;
 use std::process::Command;
+use std::time::{Duration, Instant};
 
 fn liveness_dir() -> std::path::PathBuf {
     repo().join("tests/data/liveness")
@@ -214,4 +215,61 @@ fn spliced_segments_are_reported_as_errors() {
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("backwards"), "{}", text(&o));
+}
+
+/// Regression (issue 10, item 10): mission time paused while the player was down, so a 4 s
+/// timer fired 4 s after the resume however long the player had been dead. Mission time is
+/// wall-clock time since the mission started: a deadline that passed while the player was down
+/// expires at once on resume, and the journal says so (replay reproduces it).
+#[test]
+fn a_timer_fires_at_its_wall_clock_deadline_across_a_sigkill() {
+    let manifest = "[project]\nname = \"timers\"\nfiles = [\"t.pn\"]\nstart = [\"T\"]\n\n[events]\ngo = { category = \"nominal\" }\nlate = { category = \"mission\" }\n\n[timers]\ndeadline = { event = \"late\" }\n";
+    let net = "net T {\n    place idle = 1\n    place armed\n    place fired\n\n    transition arm on go: idle -> armed {\n        start deadline after 4s\n    }\n    transition ring on late: armed -> fired\n}\n";
+    let project = TempProject::new(&[("petrel.toml", manifest), ("t.pn", net)]);
+    let vehicle = unique_vehicle("timer");
+    let mut player = Player::start(project.path(), &vehicle);
+    let o = player.send("go", 1);
+    assert!(o.status.success(), "{}", text(&o));
+    // The timer started before the acknowledgement: its deadline is at most 4 s from now.
+    let acknowledged = Instant::now();
+    player.child.kill().unwrap(); // SIGKILL
+    player.child.wait().unwrap();
+    let work = player.work.clone();
+    let journal = player.journal.clone();
+    drop(player);
+    // Stay down past the deadline (a wait, not a measurement).
+    while acknowledged.elapsed() < Duration::from_millis(4500) {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let player = Player::start_in(&work, project.path(), &vehicle, &["--resume"]);
+    let s = player.wait_for(10.0, |s| s["marking"]["T"] == serde_json::json!(["fired"]));
+    assert_eq!(s["marking"]["T"], serde_json::json!(["fired"]), "{s}");
+    assert!(player.stop().success());
+    let (entries, o) = journal_json(&journal);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let resume = entries
+        .iter()
+        .position(|e| e["kind"] == "resume")
+        .expect("a resume entry");
+    let resumed_at = entries[resume]["time"].as_f64().unwrap();
+    let go = entries
+        .iter()
+        .find(|e| e["kind"] == "step" && e["event"] == "go")
+        .expect("the go step");
+    let deadline = go["time"].as_f64().unwrap() + 4.0;
+    assert!(
+        resumed_at >= deadline,
+        "mission time went on while the player was down: resumed at {resumed_at} s, deadline {deadline} s"
+    );
+    let late = entries[resume..]
+        .iter()
+        .find(|e| e["kind"] == "step" && e["event"] == "late")
+        .expect("the timer's step after the resume");
+    assert_eq!(
+        late["time"].as_f64(),
+        Some(resumed_at),
+        "the overdue timer expired at the resume"
+    );
+    let o = petrel(&["replay", &journal.display().to_string()]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
 }
