@@ -443,8 +443,19 @@ impl JournalWriter {
             }
             if end > done {
                 let bytes = &self.queued[done..end];
-                if let Err(e) = self.file.write_all_at(bytes, self.written) {
-                    // No partial record stays in the file: cut back to the last good one.
+                if let Err((e, wrote)) = write_at_tracked(&self.file, bytes, self.written) {
+                    // Keep the complete records that reached the file (not under `Sync`: they
+                    // are not on the disk), and cut the rest: no partial record stays.
+                    if self.policy != FlushPolicy::Sync {
+                        let mut kept = 0;
+                        while k < j && kept + self.lengths[k] <= wrote {
+                            kept += self.lengths[k];
+                            k += 1;
+                            self.records += 1;
+                        }
+                        self.written += kept as u64;
+                        done += kept;
+                    }
                     self.tail_dirty = self.file.set_len(self.written).is_err();
                     break Err(e);
                 }
@@ -503,6 +514,26 @@ impl JournalWriter {
     pub fn dir(&self) -> &Path {
         &self.dir
     }
+}
+
+/// Writes all of `bytes` at `offset`; on an error, also says how many bytes were written
+/// before it (a full disk takes what it has room for).
+fn write_at_tracked(file: &File, bytes: &[u8], offset: u64) -> Result<(), (std::io::Error, usize)> {
+    let mut done = 0;
+    while done < bytes.len() {
+        match file.write_at(&bytes[done..], offset + done as u64) {
+            Ok(0) => {
+                return Err((
+                    std::io::Error::new(std::io::ErrorKind::WriteZero, "the file took no byte"),
+                    done,
+                ))
+            }
+            Ok(n) => done += n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err((e, done)),
+        }
+    }
+    Ok(())
 }
 
 /// What the journal's [`flush`](Journal::flush) means for the events taken since the last one.

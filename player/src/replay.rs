@@ -89,7 +89,7 @@ pub fn replay<'p>(
     // After a gap, the next checkpoint is where the replay starts over.
     let mut after_gap = false;
     // The journal's first header, and the time of the last entry that had one.
-    let mut first: Option<(&str, u64, u64)> = None;
+    let mut first: Option<(&str, u64, Option<u64>)> = None;
     let mut previous: Option<(usize, u64)> = None;
     for (i, entry) in entries.iter().enumerate() {
         if let (Some(limit), Some(t)) = (until, entry.time()) {
@@ -254,19 +254,23 @@ pub fn replay<'p>(
 /// entry with a time: a header that disagrees with the first one, or time going backwards.
 fn inconsistency<'e>(
     entry: &'e Entry,
-    first: &mut Option<(&'e str, u64, u64)>,
+    first: &mut Option<(&'e str, u64, Option<u64>)>,
     previous: &mut Option<(usize, u64)>,
     i: usize,
 ) -> Option<String> {
     if let Entry::Header {
+        version,
         vehicle,
         digest,
         started_unix_ms,
         ..
     } = entry
     {
+        // Before format 2, a resumed segment's header held the resume's time, not the
+        // mission's start: only the vehicle and the project can be compared.
+        let start = (*version >= 2).then_some(*started_unix_ms);
         let Some((v, d, s)) = *first else {
-            *first = Some((vehicle, *digest, *started_unix_ms));
+            *first = Some((vehicle, *digest, start));
             return None;
         };
         if vehicle != v {
@@ -280,10 +284,12 @@ fn inconsistency<'e>(
                     .into(),
             );
         }
-        if *started_unix_ms != s {
-            return Some(format!(
-                "a segment of another mission of vehicle `{v}` (started at {started_unix_ms} ms since the Unix epoch, not {s}): segments of two journals were put together"
-            ));
+        if let (Some(a), Some(b)) = (start, s) {
+            if a != b {
+                return Some(format!(
+                    "a segment of another mission of vehicle `{v}` (started at {a} ms since the Unix epoch, not {b}): segments of two journals were put together"
+                ));
+            }
         }
     }
     let t = entry.time()?;
