@@ -214,26 +214,80 @@ fn a_shadow_follows_the_vehicle_and_raises_an_alarm_on_divergence() {
         );
         std::fs::write(dir.path().join(f), text).unwrap();
     }
+    // A shadow's standard error, read as it comes: the test waits on what it says, not on
+    // time (each shadow stops on SIGTERM; --run-for only bounds a test gone wrong).
+    struct Shadow {
+        child: std::process::Child,
+        lines: std::sync::mpsc::Receiver<String>,
+        text: std::sync::Arc<std::sync::Mutex<String>>,
+    }
+    impl Shadow {
+        fn wait_for(&self, what: &str) -> bool {
+            let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+            while std::time::Instant::now() < deadline {
+                if self.text.lock().unwrap().contains(what) {
+                    return true;
+                }
+                let _ = self
+                    .lines
+                    .recv_timeout(std::time::Duration::from_millis(100));
+            }
+            false
+        }
+        fn stop(mut self) -> (Option<i32>, String) {
+            let _ = Command::new("kill")
+                .args(["-TERM", &self.child.id().to_string()])
+                .status();
+            let status = self.child.wait().unwrap();
+            // The reader ends with the process's standard error.
+            while self.lines.recv().is_ok() {}
+            let text = self.text.lock().unwrap().clone();
+            (status.code(), text)
+        }
+    }
     let spawn_shadow = |project: &Path| {
-        Command::new(petrel_bin())
+        let mut child = Command::new(petrel_bin())
             .arg("play")
             .arg(project)
-            .args(["--vehicle", &vehicle, "--shadow", "--run-for", "3"])
+            .args(["--vehicle", &vehicle, "--shadow", "--run-for", "120"])
+            // Its "synchronised" line is an info log.
+            .env("RUST_LOG", "info")
             .stderr(std::process::Stdio::piped())
             .spawn()
-            .unwrap()
+            .unwrap();
+        let stderr = child.stderr.take().unwrap();
+        let (tx, lines) = std::sync::mpsc::channel();
+        let text = std::sync::Arc::new(std::sync::Mutex::new(String::new()));
+        let sink = text.clone();
+        std::thread::spawn(move || {
+            use std::io::BufRead;
+            for line in std::io::BufReader::new(stderr)
+                .lines()
+                .map_while(Result::ok)
+            {
+                sink.lock().unwrap().push_str(&format!("{line}\n"));
+                let _ = tx.send(line);
+            }
+        });
+        Shadow { child, lines, text }
     };
     let same = spawn_shadow(&uav());
     let different = spawn_shadow(dir.path());
-    std::thread::sleep(std::time::Duration::from_millis(500));
+    // Both follow the vehicle before it moves.
+    for shadow in [&same, &different] {
+        assert!(
+            shadow.wait_for("shadow synchronised"),
+            "{}",
+            shadow.text.lock().unwrap()
+        );
+    }
     send_all(&player, &EVENTS[..4]);
-    let same = same.wait_with_output().unwrap();
-    let different = different.wait_with_output().unwrap();
-    let same_err = String::from_utf8_lossy(&same.stderr);
-    let diff_err = String::from_utf8_lossy(&different.stderr);
-    assert_eq!(same.status.code(), Some(0), "{same_err}");
+    different.wait_for("ALARM step");
+    let (same_code, same_err) = same.stop();
+    let (diff_code, diff_err) = different.stop();
+    assert_eq!(same_code, Some(0), "{same_err}");
     assert!(same_err.contains("0 divergence alarm"), "{same_err}");
-    assert_eq!(different.status.code(), Some(1), "{diff_err}");
+    assert_eq!(diff_code, Some(1), "{diff_err}");
     assert!(
         diff_err.contains("ALARM step")
             && diff_err.contains("(event airborne)")
