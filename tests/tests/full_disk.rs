@@ -64,19 +64,19 @@ fn a_full_disk_loses_nothing_acknowledged() {
     let vehicle = unique_vehicle("full");
     let mut player = Player::start_journaled(&work, project.path(), &vehicle, &journal, &[]);
 
-    // Fill the disk, 20 events a send; every send that exits 0 says its events are safe.
+    // Fill the disk, 100 events a send; every send that exits 0 says its events are safe.
     let mut safe: Vec<(String, usize)> = Vec::new();
     let mut failed = None;
-    for _ in 0..100 {
-        let o = player.send_with("tick(1)", &["--count", "20", "--timeout", "1"]);
+    for _ in 0..60 {
+        let o = player.send_with("tick(1)", &["--count", "100", "--timeout", "1"]);
         if o.status.success() {
-            safe.push((origin(&o), 20));
+            safe.push((origin(&o), 100));
         } else {
             failed = Some(o);
             break;
         }
     }
-    let o = failed.expect("2,000 events fill a 64 KiB journal");
+    let o = failed.expect("6,000 events fill a 64 KiB journal");
     assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     assert!(text(&o).contains("not on record"), "{}", text(&o));
     assert!(!safe.is_empty(), "the disk had room for a few events");
@@ -176,8 +176,8 @@ fn past_its_backlog_the_recorder_drops_records_and_goes_on_from_a_checkpoint() {
         &["--journal-backlog-mb", "0.02"],
     );
     let mut dropping = None;
-    for _ in 0..100 {
-        let _ = player.send_with("tick(1)", &["--count", "50", "--timeout", "1"]);
+    for _ in 0..60 {
+        let _ = player.send_with("tick(1)", &["--count", "200", "--timeout", "1"]);
         let s = player.status().unwrap_or_default();
         if s["recorder"]["state"] == "dropping" {
             dropping = Some(s);
