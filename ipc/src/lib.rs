@@ -65,8 +65,8 @@ pub use iceoryx2;
 
 pub use liveness::{
     cleanup_dead_nodes, dead_nodes, is_program_alive, list_nodes, program_status,
-    remove_vehicle_files, wait_acknowledged, CleanupReport, IsolatedVehicle, LivenessError,
-    NodeInfo, NodeStatus, ProgramChange, ProgramStatus, ProgramWatch,
+    remove_vehicle_files, wait_acknowledged, Acknowledgement, CleanupReport, IsolatedVehicle,
+    LivenessError, NodeInfo, NodeStatus, ProgramChange, ProgramStatus, ProgramWatch,
 };
 pub use naming::{NameError, Role, Vehicle};
 pub use participant::{Participant, ServiceFailure, SetupError};
@@ -77,4 +77,7 @@ pub use port::{
     SignalsSubscriber, Wakeups,
 };
 pub use reactor::{FdSource, Reactor, ReactorError, Ready, Source, WaitStrategy};
-pub use wire::{CallMsg, EventMsg, Heartbeat, MarkingMsg, Origin, SignalsMsg, Value, WireError};
+pub use wire::{
+    Ack, AckRefusal, CallMsg, EventMsg, Heartbeat, MarkingMsg, Origin, Recorder, RecorderState,
+    SignalsMsg, Value, WireError,
+};

@@ -390,40 +390,66 @@ impl Drop for IsolatedVehicle {
     }
 }
 
-/// Waits up to `grace` until the player's heartbeat says it has taken message `seq` of the
-/// sender `origin` (the sender's [`Origin`](crate::Origin) as text). True when it has.
+/// What the player said of one sender's events, as [`wait_acknowledged`] last heard it.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Acknowledgement {
+    /// The player's latest account of the sender; `None` when no heartbeat of the player
+    /// named it (no player, or one that never took anything from this sender).
+    pub ack: Option<crate::wire::Ack>,
+    /// The state of the player's flight recorder, as its latest heartbeat said.
+    pub recorder: crate::wire::Recorder,
+    /// Whether any heartbeat of the player was heard.
+    pub heard: bool,
+}
+
+impl Acknowledgement {
+    /// True when every message of the sender up to `seq` is settled: refused, or taken and on
+    /// the flight record, or counted as unrecorded.
+    pub fn settled(&self, seq: u64) -> bool {
+        self.ack.as_ref().is_some_and(|a| a.settles(seq))
+    }
+
+    /// True when every message up to `seq` is settled and the flight recorder lost none of the
+    /// sender's events: what the player took survives a crash of the player.
+    pub fn is_safe(&self, seq: u64) -> bool {
+        self.settled(seq) && self.ack.as_ref().is_some_and(|a| a.unrecorded == 0)
+    }
+}
+
+/// Waits up to `grace` until the player's heartbeat says that every message of sender
+/// `sender` (its [`Sender::sender_id`](crate::Sender::sender_id)) up to `seq` is settled, and
+/// returns what it last said.
 ///
 /// A sender's shared memory goes with its process: a message the player has not taken yet is
 /// lost if its sender exits. Every sender that leaves (`petrel send`, a program's
-/// `Program::close`, the CAN data server) waits here first. The
-/// player's heartbeat status is a JSON object whose `senders.<origin>.last_seq` is the newest
-/// sequence number taken from that sender.
+/// `Program::close`, the CAN data server) waits here first. The acknowledgement is the typed
+/// [`Ack`](crate::wire::Ack) the player's heartbeat carries for each sender, and a message is
+/// settled only once the player's flight recorder holds it (or, when the recorder had to drop
+/// it, counts it as unrecorded): [`Acknowledgement::is_safe`] tells the two apart.
 pub fn wait_acknowledged(
     beats: &crate::HeartbeatSubscriber,
-    origin: &str,
+    sender: u64,
     seq: u64,
     grace: Duration,
-) -> bool {
+) -> Acknowledgement {
     let deadline = std::time::Instant::now() + grace;
-    let mut taken = 0u64;
+    let mut heard = Acknowledgement::default();
     loop {
         // A heartbeat that cannot be read is one acknowledgement fewer: the next one comes
         // 100 ms later.
         let _ = beats.drain(|r| {
             if let Ok(rcv) = r {
                 if rcv.origin.as_str() == "player" {
-                    let doc: serde_json::Value =
-                        serde_json::from_str(&rcv.msg.status).unwrap_or_default();
-                    let last = doc["senders"][origin]["last_seq"].as_u64().unwrap_or(0);
-                    taken = taken.max(last);
+                    heard.heard = true;
+                    heard.recorder = rcv.msg.recorder.clone();
+                    if let Some(a) = rcv.msg.ack_for(sender) {
+                        heard.ack = Some(a.clone());
+                    }
                 }
             }
         });
-        if taken >= seq {
-            return true;
-        }
-        if std::time::Instant::now() >= deadline {
-            return false;
+        if heard.settled(seq) || std::time::Instant::now() >= deadline {
+            return heard;
         }
         std::thread::sleep(Duration::from_millis(5));
     }

@@ -275,6 +275,22 @@ impl Participant {
         self.sender(self.vehicle.heartbeat_service(), HEARTBEAT)
     }
 
+    /// Opens a heartbeat publisher that may send bodies of up to `max_body_len` bytes (at most
+    /// [`MAX_BODY_LEN`](crate::wire::MAX_BODY_LEN)) rather than the service's default of 1,024:
+    /// for the player, whose heartbeat carries its status and acknowledgements, sized from its
+    /// project. The limit is the publisher's own (its shared memory grows by powers of two as
+    /// needed); receivers read any body up to [`MAX_BODY_LEN`](crate::wire::MAX_BODY_LEN).
+    pub fn heartbeat_publisher_sized(
+        &self,
+        max_body_len: usize,
+    ) -> Result<HeartbeatPublisher, SetupError> {
+        let spec = ServiceSpec {
+            max_body_len: max_body_len.clamp(HEARTBEAT.max_body_len, crate::wire::MAX_BODY_LEN),
+            ..HEARTBEAT
+        };
+        self.sender(self.vehicle.heartbeat_service(), spec)
+    }
+
     /// A subscriber to heartbeats (from the next heartbeat each sender sends).
     pub fn heartbeat_subscriber(&self) -> Result<HeartbeatSubscriber, SetupError> {
         self.receiver(self.vehicle.heartbeat_service(), HEARTBEAT)
@@ -416,6 +432,12 @@ impl Participant {
             .buffer_size(spec.subscriber_buffer)
             .create()
             .map_err(|e| failed(ServiceFailure::Subscriber(e)))?;
-        Ok(Receiver::new(service.clone(), spec, subscriber, listener))
+        Ok(Receiver::new(
+            service.clone(),
+            spec,
+            subscriber,
+            listener,
+            factory,
+        ))
     }
 }

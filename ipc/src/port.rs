@@ -721,6 +721,7 @@ pub struct Receiver<M: Message> {
     spec: ServiceSpec,
     subscriber: Subscriber<ipc::Service, [u8], MsgHeader>,
     listener: Listener<ipc::Service>,
+    factory: publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>,
     stats: Cell<ReceiverStats>,
     senders: RefCell<HashMap<u64, SenderAccount>>,
     pending_wakeups: Cell<Wakeups>,
@@ -753,12 +754,14 @@ impl<M: Message> Receiver<M> {
         spec: ServiceSpec,
         subscriber: Subscriber<ipc::Service, [u8], MsgHeader>,
         listener: Listener<ipc::Service>,
+        factory: publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>,
     ) -> Self {
         Receiver {
             service,
             spec,
             subscriber,
             listener,
+            factory,
             stats: Cell::new(ReceiverStats::default()),
             senders: RefCell::new(HashMap::new()),
             pending_wakeups: Cell::new(Wakeups::default()),
@@ -793,6 +796,24 @@ impl<M: Message> Receiver<M> {
         let mut v: Vec<_> = self.senders.borrow().values().copied().collect();
         v.sort_by_key(|a| (a.origin.bytes(), a.sender));
         v
+    }
+
+    /// The ids of the senders connected to the service now ([`Sender::sender_id`]), in no
+    /// particular order. A sender whose process died stays listed until its node is cleaned up.
+    pub fn live_senders(&self) -> Vec<u64> {
+        let mut ids = Vec::new();
+        self.factory.dynamic_config().list_publishers(|p| {
+            ids.push(fold_id(p.publisher_id.value()));
+            iceoryx2::prelude::CallbackProgression::Continue
+        });
+        ids
+    }
+
+    /// Forgets what this receiver knows of sender `sender` (a sender that left): its account
+    /// no longer shows in [`senders`](Self::senders). Should it send again, its sequence
+    /// numbers are accounted from scratch.
+    pub fn forget_sender(&self, sender: u64) {
+        self.senders.borrow_mut().remove(&sender);
     }
 
     /// True when a sample waits in the buffer (a shared-memory read, no system call).

@@ -168,6 +168,18 @@ pub fn builtin_events() -> &'static [EventDecl] {
                 &[("name", Type::Text)],
                 "an invariant of the manifest stopped holding after a step",
             ),
+            ev(
+                "recorder_failed",
+                Category::Safety,
+                &[("reason", Type::Text)],
+                "the flight recorder cannot write its journal (a full disk...): events are processed but not acknowledged",
+            ),
+            ev(
+                "recorder_restored",
+                Category::Safety,
+                &[],
+                "the flight recorder writes its journal again",
+            ),
         ]
     })
 }

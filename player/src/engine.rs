@@ -486,6 +486,26 @@ impl<'p> Engine<'p> {
         }
     }
 
+    /// Puts the engine in a recorded state between two steps (a journal's checkpoint): time
+    /// `now`, `state` of [`Layout::words`](petrel_nets::semantics::Layout) words, the timers'
+    /// `deadlines`; the queue is emptied and the engine counts as started. False (and nothing
+    /// changed) when the state or the deadlines are not of this project's size.
+    pub fn restore(&mut self, now: Micros, state: &[u64], deadlines: &[Option<Micros>]) -> bool {
+        if state.len() != self.state.len() || deadlines.len() != self.deadlines.len() {
+            return false;
+        }
+        for i in 0..self.queues.len() {
+            while let Some(Queued { params, .. }) = self.queues[i].pop_front() {
+                self.recycle(params);
+            }
+        }
+        self.now = now;
+        self.state.copy_from_slice(state);
+        self.deadlines.copy_from_slice(deadlines);
+        self.started = true;
+        true
+    }
+
     /// Processes `event` at once, as a step the vehicle took: whatever is queued is dropped
     /// first (the vehicle reports the steps of its own emitted and timer events), parameters
     /// are neutral values of the declared types (they steer no firing), and what the step

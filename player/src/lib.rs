@@ -4,12 +4,14 @@
 //! - [`record`]: the record of one step (event, firings, actions), which every reader of the
 //!   player's steps goes through.
 //! - [`script`]: missions as unit tests, in virtual time (`petrel run --script`).
-//! - [`runtime`]: the player process on iceoryx2 (`petrel play`).
+//! - [`runtime`]: the player process on iceoryx2 (`petrel play`); [`ack`], its ledger of what
+//!   it took from each sender, refused and recorded (the acknowledgements of its heartbeat).
 //! - [`journal`], [`replay`]: the flight recorder and its replay (`--resume` too).
 //! - [`shadow`]: the ground-station copy that follows a vehicle's steps.
 //!
 //! The command line is the `petrel-cli` crate (binary `petrel`).
 
+pub mod ack;
 pub mod engine;
 pub mod journal;
 pub mod record;

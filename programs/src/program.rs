@@ -97,8 +97,8 @@ pub struct ProgramStats {
     /// Times a player that had received events from this process was found gone (stopped,
     /// killed or not yet replaced).
     pub player_losses: u64,
-    /// At [`Program::close`]: the player had not acknowledged the last events delivered (they
-    /// may be lost).
+    /// At [`Program::close`]: the player had not acknowledged the last events delivered as on
+    /// its flight record (they may be lost), or its recorder lost some of this program's events.
     pub unacknowledged: bool,
 }
 
@@ -617,12 +617,12 @@ impl Program {
     /// Whether the player acknowledged every host's last delivered event by `deadline` (250 ms
     /// at least from now).
     fn wait_acknowledged(&self, deadline: Instant) -> bool {
-        let pending: Vec<(String, u64)> = self
+        let pending: Vec<(u64, u64)> = self
             .hosts
             .iter()
             .filter_map(|h| {
                 let sender = h.events.as_ref()?;
-                (h.last_seq > 0).then(|| (sender.origin().to_string(), h.last_seq))
+                (h.last_seq > 0).then(|| (sender.sender_id(), h.last_seq))
             })
             .collect();
         if pending.is_empty() {
@@ -632,11 +632,11 @@ impl Program {
             return false;
         };
         let floor = Instant::now() + Duration::from_millis(250);
-        pending.iter().all(|(origin, seq)| {
+        pending.iter().all(|(sender, seq)| {
             let left = deadline
                 .max(floor)
                 .saturating_duration_since(Instant::now());
-            petrel_ipc::wait_acknowledged(&beats, origin, *seq, left)
+            petrel_ipc::wait_acknowledged(&beats, *sender, *seq, left).is_safe(*seq)
         })
     }
 
