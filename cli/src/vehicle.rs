@@ -37,6 +37,11 @@ pub struct PlayArgs {
     /// alarm the moment this copy's marking differs from the vehicle's.
     #[arg(long, conflicts_with_all = ["resume"])]
     shadow: bool,
+    /// Share the vehicle's files with this Unix group (name or number), so that operator
+    /// accounts in it can `petrel send` and `petrel status` (with PETREL_RUNTIME_DIR set to the
+    /// vehicle's base directory): see docs/security.md. Default: PETREL_GROUP, or none.
+    #[arg(long, value_name = "GROUP")]
+    group: Option<String>,
 }
 
 /// Runs the player (or, with `--shadow`, the ground-station copy) until SIGINT or SIGTERM.
@@ -55,6 +60,7 @@ pub fn play(a: PlayArgs) -> Outcome {
     opts.wait = strategy;
     opts.project_dir = dir.display().to_string();
     opts.resume = a.resume;
+    opts.group = a.group.clone();
     opts.rotate_bytes = a.rotate_mb.saturating_mul(1 << 20);
     opts.flush = match a.flush.parse() {
         Ok(f) => f,
