@@ -4,11 +4,11 @@
 //! strategy, on the events service, the next timer deadline, the heartbeat and the liveness
 //! check. On each wake-up it moves time forward, drains incoming events into the engine
 //! (refusing malformed ones, and built-in events that other processes send, with a
-//! `bad_message` event), turns dead programs into `program_lost`, processes the queue, sends
-//! calls (an absent program gives `call_failed`), journals every input and step, and publishes
-//! marking deltas and a heartbeat carrying the live status. The heartbeat is the
-//! acknowledgement senders wait for, and it goes out only after the journal is flushed: an
-//! acknowledged event is on record.
+//! `bad_message` event), turns dead programs into
+//! `program_lost`, processes the queue, sends calls (an absent program gives `call_failed`),
+//! journals every input and step, and publishes marking deltas and a heartbeat carrying the
+//! live status. The heartbeat is the acknowledgement senders wait for, and it goes out only
+//! after the journal is flushed: an acknowledged event is on record.
 
 use crate::engine::{Args, Engine, Micros, Refusal, Sink, Stats};
 use crate::journal::{Entry, FlushPolicy, Journal, JournalWriter};
