@@ -42,6 +42,11 @@ pub struct PlayArgs {
     /// alarm the moment this copy's marking differs from the vehicle's.
     #[arg(long, conflicts_with_all = ["resume"])]
     shadow: bool,
+    /// Share the vehicle's files with this Unix group (name or number), so that operator
+    /// accounts in it can `petrel send` and `petrel status` (with PETREL_RUNTIME_DIR set to the
+    /// vehicle's base directory): see docs/security.md. Default: PETREL_GROUP, or none.
+    #[arg(long, value_name = "GROUP")]
+    group: Option<String>,
 }
 
 /// Runs the player (or, with `--shadow`, the ground-station copy) until SIGINT or SIGTERM.
@@ -60,6 +65,7 @@ pub fn play(a: PlayArgs) -> Outcome {
     opts.wait = strategy;
     opts.project_dir = dir.display().to_string();
     opts.resume = a.resume;
+    opts.group = a.group.clone();
     opts.rotate_bytes = a.rotate_mb.saturating_mul(1 << 20);
     if !(a.journal_backlog_mb.is_finite() && a.journal_backlog_mb >= 0.0) {
         return Outcome::Usage(format!(

@@ -20,6 +20,7 @@ use std::cell::{Cell, RefCell};
 use std::collections::HashMap;
 use std::fmt;
 use std::marker::PhantomData;
+use std::sync::Arc;
 
 use iceoryx2::port::listener::{Listener, ListenerWaitError};
 use iceoryx2::port::notifier::Notifier;
@@ -29,6 +30,7 @@ use iceoryx2::port::{LoanError, ReceiveError};
 use iceoryx2::prelude::{ipc, EventId, PortFactory};
 use iceoryx2::service::port_factory::publish_subscribe;
 
+use crate::access::Session;
 use crate::wire::{self, Message, MsgHeader, MsgKind, Origin, WireError, WIRE_VERSION};
 
 /// Event id a sender notifies after delivering a sample.
@@ -304,6 +306,8 @@ pub struct Sender<M: Message> {
     next_seq: Cell<u64>,
     stats: Cell<SenderStats>,
     _kind: PhantomData<fn(&M)>,
+    /// The process's membership of the vehicle, kept while the port lives.
+    _session: Arc<Session>,
 }
 
 /// Sends events to the player (programs, CAN bridge, tools).
@@ -340,6 +344,7 @@ impl<M: Message> Sender<M> {
         publisher: Publisher<ipc::Service, [u8], MsgHeader>,
         notifier: Notifier<ipc::Service>,
         factory: publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>,
+        session: Arc<Session>,
     ) -> Self {
         let sender_id = fold_id(publisher.id().value());
         Sender {
@@ -353,6 +358,7 @@ impl<M: Message> Sender<M> {
             next_seq: Cell::new(1),
             stats: Cell::new(SenderStats::default()),
             _kind: PhantomData,
+            _session: session,
         }
     }
 
@@ -726,6 +732,8 @@ pub struct Receiver<M: Message> {
     senders: RefCell<HashMap<u64, SenderAccount>>,
     pending_wakeups: Cell<Wakeups>,
     _kind: PhantomData<fn() -> M>,
+    /// The process's membership of the vehicle, kept while the port lives.
+    _session: Arc<Session>,
 }
 
 /// Receives the events of the vehicle (the player).
@@ -755,6 +763,7 @@ impl<M: Message> Receiver<M> {
         subscriber: Subscriber<ipc::Service, [u8], MsgHeader>,
         listener: Listener<ipc::Service>,
         factory: publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>,
+        session: Arc<Session>,
     ) -> Self {
         Receiver {
             service,
@@ -766,6 +775,7 @@ impl<M: Message> Receiver<M> {
             senders: RefCell::new(HashMap::new()),
             pending_wakeups: Cell::new(Wakeups::default()),
             _kind: PhantomData,
+            _session: session,
         }
     }
 

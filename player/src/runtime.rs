@@ -3,7 +3,8 @@
 //! [`play`] builds a [`PlayerLoop`] and runs it. One reactor thread waits, with the chosen
 //! strategy, on the events service, the next timer deadline, the heartbeat and the liveness
 //! check. On each wake-up it moves time forward, drains incoming events into the engine
-//! (refusing malformed ones with a `bad_message` event), turns dead programs into
+//! (refusing malformed ones, and built-in events that other processes send, with a
+//! `bad_message` event), turns dead programs into
 //! `program_lost`, processes the queue, sends calls (an absent program gives `call_failed`),
 //! journals every input and step, and publishes marking deltas and a heartbeat carrying the
 //! live status (JSON, for people and tools) and, typed, the acknowledgement of each sender
@@ -58,6 +59,9 @@ pub struct PlayOptions {
     pub resume: bool,
     /// The project directory, recorded in the journal header.
     pub project_dir: String,
+    /// The Unix group (name or number) given the vehicle's files, for operator accounts
+    /// (`petrel play --group`); `None`: the user's alone (or `PETREL_GROUP`'s).
+    pub group: Option<String>,
 }
 
 impl PlayOptions {
@@ -75,6 +79,7 @@ impl PlayOptions {
             journal_backlog: crate::journal::DEFAULT_BACKLOG,
             resume: false,
             project_dir: String::new(),
+            group: None,
         }
     }
 }
@@ -351,6 +356,30 @@ fn resume<'p>(
     Ok((engine, r.last_time, r.steps))
 }
 
+/// Why an event that arrived on the events service names a built-in event it may not: `None`
+/// when it may.
+///
+/// Built-in events (`program_lost`, `call_failed`, `safety_violation`, `livelock`,
+/// `bad_message`) tell the nets what the player itself saw, and the player raises them without
+/// the events service: one arriving there comes from another process, whatever origin it
+/// claims (`player` included), and is refused. The one exception is `call_failed` from the CAN
+/// data server, which reports the CAN commands it could not carry out as the failed calls they
+/// are (see `petrel_can_bridge::runtime`).
+fn builtin_refusal(name: &str, origin: &str) -> Option<String> {
+    if !petrel_nets::model::builtin_events()
+        .iter()
+        .any(|b| b.name.text == name)
+    {
+        return None;
+    }
+    if name == "call_failed" && origin == Role::CanBridge.node_name() {
+        return None;
+    }
+    Some(format!(
+        "`{name}` is a built-in event: only the player raises it (refused from `{origin}`)"
+    ))
+}
+
 /// Submits an event raised by the player itself, journaled like any input.
 fn raise(engine: &mut Engine, journal: &mut Journal, event: Option<EventId>, params: Vec<Value>) {
     let Some(e) = event else { return };
@@ -400,7 +429,13 @@ impl<'p> PlayerLoop<'p> {
     /// `--resume`, joins the vehicle, opens the journal and starts the mission (or carries on
     /// the restored one).
     pub fn new(project: &'p CompiledProject, opts: &PlayOptions) -> Result<Self, PlayError> {
-        let vehicle = Vehicle::new(&opts.vehicle).map_err(|e| PlayError::Vehicle(e.to_string()))?;
+        let mut vehicle =
+            Vehicle::new(&opts.vehicle).map_err(|e| PlayError::Vehicle(e.to_string()))?;
+        if let Some(group) = &opts.group {
+            let group =
+                petrel_ipc::Group::lookup(group).map_err(|e| PlayError::Setup(e.to_string()))?;
+            vehicle = vehicle.with_group(group);
+        }
         match petrel_ipc::cleanup_dead_nodes(&vehicle, Duration::from_millis(500)) {
             Ok(r) if !r.cleaned.is_empty() => {
                 info!(
@@ -785,6 +820,23 @@ impl<'p> PlayerLoop<'p> {
                     let (sender, who, seq, missed) = (rcv.sender, rcv.origin, rcv.seq, rcv.missed);
                     let origin = rcv.origin.to_string();
                     let time = engine.now();
+                    if let Some(reason) = builtin_refusal(&rcv.msg.name, &origin) {
+                        report.bad_messages += 1;
+                        warn!(from = %origin, seq = rcv.seq, %reason, "event refused");
+                        journal.append(&Entry::Refused {
+                            time,
+                            what: rcv.msg.name.clone(),
+                            reason: reason.clone(),
+                            origin: origin.clone(),
+                        });
+                        raise(
+                            engine,
+                            journal,
+                            bad_message,
+                            vec![Value::Text(origin), Value::Text(reason)],
+                        );
+                        return;
+                    }
                     let record = Entry::Submit {
                         time,
                         event: rcv.msg.name.clone(),
