@@ -13,6 +13,7 @@ pub mod fmt;
 pub mod manifest;
 pub mod model;
 pub mod names;
+pub mod paths;
 pub mod pnml;
 pub mod project;
 pub mod pt;
