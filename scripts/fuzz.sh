@@ -53,7 +53,12 @@ run() {
     for t in "${targets[@]}"; do
         [ -n "$only" ] && [ "$t" != "$only" ] && continue
         mkdir -p "corpus/$t" "artifacts/$t"
-        [ -z "$(ls -A "corpus/$t")" ] && ./seed.sh "$t"
+        if [ -z "$(ls -A "corpus/$t")" ]; then
+            ./seed.sh "$t"
+        elif [ -d "regressions/$t" ]; then
+            # A corpus of an earlier run: the crashes found since are replayed all the same.
+            cp regressions/"$t"/* "corpus/$t/"
+        fi
         local log
         log=$(mktemp)
         local status=0
