@@ -45,7 +45,7 @@ impl fmt::Display for TimeBackwards {
             self.line,
             s(self.replayed_at_us),
             s(self.time_us),
-            s(self.replayed_at_us - self.time_us),
+            s(self.replayed_at_us.saturating_sub(self.time_us)),
             s(self.replayed_at_us)
         )
     }
