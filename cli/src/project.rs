@@ -99,8 +99,8 @@ pub struct VerifyArgs {
     /// Output format.
     #[arg(long, value_enum, default_value = "human")]
     format: Format,
-    /// Stop with an error beyond this many states.
-    #[arg(long)]
+    /// Stop with an error beyond this many states (at least 1).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     max_states: Option<u64>,
 }
 
@@ -264,9 +264,8 @@ pub fn fmt(a: FmtArgs) -> Outcome {
         if text != source.text {
             unformatted.push(source.name.clone());
             if !check_only {
-                let path = dir.join(&file.path);
-                if let Err(e) = std::fs::write(&path, &text) {
-                    return Outcome::Usage(format!("cannot write {}: {e}", path.display()));
+                if let Err(e) = project::write_net_file(dir, &file.path, &text) {
+                    return Outcome::Usage(format!("cannot write {}: {e}", source.name));
                 }
             }
         }

@@ -12,7 +12,7 @@ pub struct ReplayArgs {
     #[arg(long)]
     project: Option<PathBuf>,
     /// Stop at this mission time (seconds) and print the state there.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::common::seconds)]
     until: Option<f64>,
 }
 
@@ -81,7 +81,8 @@ pub fn replay(a: ReplayArgs) -> Outcome {
         );
         return Outcome::Errors;
     }
-    let until_us = until.map(|s| (s * 1e6).round().max(0.0) as u64);
+    // `seconds` bounds it: the product is a whole number of microseconds a u64 holds.
+    let until_us = until.map(|s| (s * 1e6).round() as u64);
     let (engine, r) = petrel_player::replay::replay(&c, &read.entries, until_us);
     if let Some(d) = &r.divergence {
         if d.kind == petrel_player::replay::DivergenceKind::Journal {

@@ -15,7 +15,7 @@ pub struct PlayArgs {
     #[arg(long, default_value = "block")]
     wait: String,
     /// Stop after this many seconds (for demos and tests).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::common::seconds)]
     run_for: Option<f64>,
     /// The flight recorder's directory (default: journal/<vehicle>).
     #[arg(long)]
@@ -28,7 +28,7 @@ pub struct PlayArgs {
     #[arg(long, default_value = "record")]
     flush: String,
     /// Start a new journal segment past this many megabytes.
-    #[arg(long, default_value_t = 64)]
+    #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u64).range(1..))]
     rotate_mb: u64,
     /// While the journal cannot be written (a full disk), keep up to this many megabytes of
     /// its records in memory (the events they hold are not acknowledged until written); past
@@ -87,10 +87,13 @@ pub fn play(a: PlayArgs) -> Outcome {
     }
     let run_for = a.run_for;
     if let Some(secs) = run_for {
-        if !(secs.is_finite() && secs >= 0.0) {
-            return Outcome::Usage(format!("--run-for takes a number of seconds, not {secs}"));
+        // `from_secs_f64` panics past what a Duration holds: ask, never assume.
+        match std::time::Duration::try_from_secs_f64(secs) {
+            Ok(d) => opts.run_for = Some(d),
+            Err(_) => {
+                return Outcome::Usage(format!("--run-for takes a number of seconds, not {secs}"))
+            }
         }
-        opts.run_for = Some(std::time::Duration::from_secs_f64(secs));
     }
     if a.shadow {
         return match petrel_player::shadow::shadow(&c, &opts) {
@@ -164,7 +167,7 @@ pub struct SendArgs {
     #[arg(long)]
     vehicle: Option<String>,
     /// Send the event this many times, as fast as possible (a stress test of the vehicle).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
     count: u64,
     /// How long to wait for the player's verdict on the events, in seconds.
     #[arg(long, default_value_t = 10.0)]

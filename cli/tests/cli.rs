@@ -347,7 +347,7 @@ fn check_reports_errors_in_the_can_rules_like_net_errors() {
     let dir = copy_project(&bench);
     // The DBC sits beside the bench project.
     std::fs::copy(
-        repo().join("can_bridge/tests/data/auv.dbc"),
+        repo().join("can_bridge/tests/data/auv/auv.dbc"),
         dir.path().join("auv.dbc"),
     )
     .unwrap();

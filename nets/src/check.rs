@@ -2072,11 +2072,14 @@ impl<'p> Checker<'p> {
             Some(v) => Some(c::Arg::Literal(v)),
             None => {
                 let found = match a {
+                    Expr::Int(..) if p.ty == Type::Float => {
+                        "an int that no float holds exactly (above 2^53)"
+                    }
                     Expr::Int(..) => "an int",
                     Expr::Float(..) => "a float",
                     Expr::Bool(..) => "a bool",
                     Expr::Text(..) => "a text",
-                    Expr::List(..) => "a list that is not a list of numbers",
+                    Expr::List(..) => "a list that is not a list of numbers (each exactly a float)",
                     Expr::Var(_) | Expr::SelfParam(_) => "a name",
                 };
                 self.mismatch(what, p, a.span(), &format!("this is {found}"));
@@ -2261,7 +2264,11 @@ pub fn resolve_formula(
 pub fn literal(e: &Expr, ty: Type) -> Option<c::Value> {
     Some(match (e, ty) {
         (Expr::Int(v, _), Type::Int) => c::Value::Int(*v),
-        (Expr::Int(v, _), Type::Float) => c::Value::Float(*v as f64),
+        // An integer where a float is expected converts only when the float holds it exactly
+        // (every integer up to 2^53 does; 2^53 + 1 would silently become 2^53).
+        (Expr::Int(v, _), Type::Float) if (*v as f64) as i128 == i128::from(*v) => {
+            c::Value::Float(*v as f64)
+        }
         (Expr::Float(v, _), Type::Float) => c::Value::Float(*v),
         (Expr::Bool(b, _), Type::Bool) => c::Value::Bool(*b),
         (Expr::Text(s, _), Type::Text) => c::Value::Text(s.clone()),

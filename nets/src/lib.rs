@@ -14,6 +14,7 @@ pub mod formula;
 pub mod manifest;
 pub mod model;
 pub mod names;
+pub mod paths;
 pub mod pnml;
 pub mod project;
 pub mod pt;

@@ -319,10 +319,14 @@ pub fn parse_manifest(file: FileId, text: &str, diags: &mut Diagnostics) -> Opti
         ..Manifest::default()
     };
     for f in &raw.project.files {
-        m.files.push(FileRef {
+        let file = FileRef {
             path: f.get_ref().clone(),
             span: r.span(f.span()),
-        });
+        };
+        if let Err(why) = crate::paths::check_relative(&file.path) {
+            r.diags.push(outside_project(&file, &why));
+        }
+        m.files.push(file);
     }
     for s in &raw.project.start {
         m.start.push(r.name(s, "net", text));
@@ -569,6 +573,20 @@ pub fn parse_manifest(file: FileId, text: &str, diags: &mut Diagnostics) -> Opti
         .as_ref()
         .map(|list| places(&r, list));
     Some(m)
+}
+
+/// E0109: a net file path of the manifest that would leave the project directory.
+pub(crate) fn outside_project(f: &FileRef, why: &crate::paths::PathProblem) -> Diagnostic {
+    Diagnostic::error(
+        "E0109",
+        f.span,
+        format!(
+            "net file `{}` is outside the project directory: {why}",
+            f.path.escape_debug()
+        ),
+    )
+    .label("not a path inside the project")
+    .help("net files live in the project directory: name them relative to it, without `..`, and not through a link that leads out")
 }
 
 fn toml_str(s: &str) -> String {

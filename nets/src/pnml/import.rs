@@ -269,6 +269,28 @@ impl Rebuild<'_, '_> {
         );
     }
 
+    /// E0508: a net file path that would leave the project directory the import writes.
+    fn confined(&mut self, path: &str, span: Span) {
+        // A missing `path` is reported by `req`, and `project::write` refuses an empty one.
+        if path.is_empty() {
+            return;
+        }
+        if let Err(why) = crate::paths::check_relative(path) {
+            self.diags.push(
+                Diagnostic::error(
+                    "E0508",
+                    span,
+                    format!(
+                        "net file path `{}` is outside the project directory: {why}",
+                        path.escape_debug()
+                    ),
+                )
+                .label("this path")
+                .help("the imported project's net files go in its directory: paths relative to it, without `..`"),
+            );
+        }
+    }
+
     fn req<'n>(&mut self, n: &'n Node, key: &str) -> &'n str {
         match n.attr(key) {
             Some(v) => v,
@@ -358,10 +380,9 @@ impl Rebuild<'_, '_> {
             ..Manifest::default()
         };
         for f in n.children("file") {
-            m.files.push(FileRef {
-                path: self.req(f, "path").to_string(),
-                span: f.span,
-            });
+            let path = self.req(f, "path").to_string();
+            self.confined(&path, f.span);
+            m.files.push(FileRef { path, span: f.span });
         }
         for s in n.children("start") {
             m.start.push(self.name(s, "net"));
@@ -617,8 +638,10 @@ impl Rebuild<'_, '_> {
                     end_comments: texts(n, "end-comment"),
                 });
             }
+            let path = self.req(f, "path").to_string();
+            self.confined(&path, f.span);
             files.push(NetFile {
-                path: self.req(f, "path").to_string(),
+                path,
                 nets,
                 end_comments: texts(f, "end-comment"),
             });
