@@ -337,10 +337,16 @@ struct Parser<'d> {
     pending: Vec<String>,
     /// Nesting of guards being parsed: bounded, so no text can exhaust the stack.
     depth: usize,
+    /// Nesting of list literals being parsed: bounded likewise (`[[[...]]]` recurses).
+    lists: usize,
 }
 
 /// Deepest nesting of parentheses in a guard.
 const MAX_GUARD_DEPTH: usize = 64;
+
+/// Deepest nesting of list literals: no value of Petrel nests deeper than one list, and a
+/// hostile text (a PNML block's action) must not be able to exhaust the stack.
+const MAX_LIST_DEPTH: usize = 64;
 
 /// Words that start an item of a net.
 const ITEM_WORDS: [&str; 4] = ["place", "transition", "children", "net"];
@@ -1123,8 +1129,18 @@ impl Parser<'_> {
             }
             Tok::Ident(_) => return Ok(Expr::Var(self.name("a value", "")?)),
             Tok::LBracket => {
+                if self.lists >= MAX_LIST_DEPTH {
+                    return Err(self.error(
+                        "a simpler value",
+                        &format!("lists nest at most {MAX_LIST_DEPTH} levels deep"),
+                    ));
+                }
                 self.bump();
-                let (items, end) = self.args(Tok::RBracket)?;
+                self.lists += 1;
+                let inner = self.args(Tok::RBracket);
+                // Counted back on every path, errors included, so later lists start afresh.
+                self.lists -= 1;
+                let (items, end) = inner?;
                 return Ok(Expr::List(items, t.span.to(end)));
             }
             _ => {
@@ -1159,6 +1175,7 @@ pub fn parse_file(file: FileId, path: &str, text: &str, diags: &mut Diagnostics)
         diags,
         pending: Vec::new(),
         depth: 0,
+        lists: 0,
     };
     p.file(path)
 }
@@ -1172,6 +1189,7 @@ pub fn parse_action(file: FileId, text: &str, diags: &mut Diagnostics) -> Option
         diags,
         pending: Vec::new(),
         depth: 0,
+        lists: 0,
     };
     let action = p.action().ok()?;
     if !p.at(&Tok::Eof) {
@@ -1179,4 +1197,40 @@ pub fn parse_action(file: FileId, text: &str, diags: &mut Diagnostics) -> Option
         return None;
     }
     Some(action)
+}
+
+/// Parses a guard written alone (the text after `if`), as PNML's Petrel blocks carry them.
+pub fn parse_guard(file: FileId, text: &str, diags: &mut Diagnostics) -> Option<Guard> {
+    let mut p = Parser {
+        toks: lex(file, text, diags),
+        pos: 0,
+        diags,
+        pending: Vec::new(),
+        depth: 0,
+        lists: 0,
+    };
+    let guard = p.guard().ok()?;
+    if !p.at(&Tok::Eof) {
+        p.error(
+            "the end of the guard",
+            "write one guard only: join conditions with `and`, `or`",
+        );
+        return None;
+    }
+    Some(guard)
+}
+
+/// Parses arguments written alone (`"r1", 0.5, self.speed`, without parentheses; empty text for
+/// none), as PNML's Petrel blocks carry the arguments of instances and `children` lines.
+pub fn parse_args(file: FileId, text: &str, diags: &mut Diagnostics) -> Option<Vec<Expr>> {
+    let mut p = Parser {
+        toks: lex(file, text, diags),
+        pos: 0,
+        diags,
+        pending: Vec::new(),
+        depth: 0,
+        lists: 0,
+    };
+    // The end of the text closes the list as `)` would.
+    p.args(Tok::Eof).ok().map(|(args, _)| args)
 }
