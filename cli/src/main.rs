@@ -74,7 +74,8 @@ enum Command {
     Run(script::RunArgs),
     /// Rewrite the project's net files in canonical layout (running it twice changes nothing).
     Fmt(project::FmtArgs),
-    /// Print the project's nets as Graphviz DOT.
+    /// Print the project's nets as Graphviz DOT (each instance of a template drawn apart), or
+    /// with --tree the tree of nets and their activations.
     Dot(project::DotArgs),
     /// Export the project as PNML (ISO/IEC 15909-2); events and actions travel in a
     /// `<toolspecific tool="petrel">` block.

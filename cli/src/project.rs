@@ -175,6 +175,14 @@ fn verify_pnml(file: &Path, format: Format, max_states: Option<u64>) -> Outcome 
     let interactive = interactive(format);
     let mut clean = true;
     let mut docs = Vec::new();
+    // A Petrel export is a mission's skeleton: say so before its findings are misread.
+    if format == Format::Human && nets.iter().any(|n| n.petrel_export) {
+        eprintln!(
+            "note: {}: {}",
+            file.display(),
+            petrel_nets::pnml::SKELETON_NOTE
+        );
+    }
     for net in &nets {
         let opts = reach::ExploreOptions {
             max_states,
@@ -199,7 +207,7 @@ fn verify_pnml(file: &Path, format: Format, max_states: Option<u64>) -> Outcome 
             }
             (Ok(r), Format::Json) => {
                 clean &= r.safe && !r.deadlock;
-                docs.push(reach::to_json(net, &r));
+                docs.push(with_skeleton_note(net, reach::to_json(net, &r)));
             }
             (Err(e), Format::Human) => {
                 clean = false;
@@ -207,7 +215,7 @@ fn verify_pnml(file: &Path, format: Format, max_states: Option<u64>) -> Outcome 
             }
             (Err(e), Format::Json) => {
                 clean = false;
-                docs.push(reach::error_to_json(net, &e));
+                docs.push(with_skeleton_note(net, reach::error_to_json(net, &e)));
             }
         }
     }
@@ -227,6 +235,21 @@ fn verify_pnml(file: &Path, format: Format, max_states: Option<u64>) -> Outcome 
     } else {
         Outcome::Errors
     }
+}
+
+/// A JSON report of a PNML net with `petrel_export` (whether the file is a Petrel export), and
+/// for an export the `note` that only its P/T skeleton was analysed.
+fn with_skeleton_note(
+    net: &petrel_nets::pt::PtNet,
+    mut doc: serde_json::Value,
+) -> serde_json::Value {
+    if let Some(map) = doc.as_object_mut() {
+        map.insert("petrel_export".into(), net.petrel_export.into());
+        if net.petrel_export {
+            map.insert("note".into(), petrel_nets::pnml::SKELETON_NOTE.into());
+        }
+    }
+    doc
 }
 
 /// `petrel fmt`.
@@ -289,21 +312,32 @@ pub fn fmt(a: FmtArgs) -> Outcome {
 pub struct DotArgs {
     /// The project directory.
     dir: PathBuf,
-    /// Only this net (and the global places it uses).
+    /// Only this net (and the global places it uses); a template's name draws all its
+    /// instances.
     #[arg(long)]
     net: Option<String>,
+    /// Draw the tree of nets only: one box per net, `children` lines as solid arrows,
+    /// `activate` actions as dashed ones.
+    #[arg(long, conflicts_with = "net")]
+    tree: bool,
     /// Write to this file instead of standard output.
     #[arg(short, long)]
     output: Option<PathBuf>,
 }
 
-/// Prints the project's nets as Graphviz DOT.
+/// Prints the project's nets, or their tree, as Graphviz DOT.
 pub fn dot(a: DotArgs) -> Outcome {
     let checked = match require_clean(&a.dir, Scope::default(), "dot") {
         Ok(c) => c,
         Err(o) => return o,
     };
-    match petrel_nets::dot::project_to_dot(&checked.loaded.project, a.net.as_deref()) {
+    let project = &checked.loaded.project;
+    let drawing = if a.tree {
+        Ok(petrel_nets::dot::project_tree_dot(project))
+    } else {
+        petrel_nets::dot::project_to_dot(project, a.net.as_deref())
+    };
+    match drawing {
         Ok(text) => match write_output(a.output.as_deref(), &text) {
             Ok(()) => Outcome::Clean,
             Err(o) => o,

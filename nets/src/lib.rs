@@ -11,6 +11,7 @@ pub mod dot;
 pub mod duration;
 pub mod fmt;
 pub mod formula;
+pub mod instances;
 pub mod manifest;
 pub mod model;
 pub mod names;

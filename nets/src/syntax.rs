@@ -1232,3 +1232,39 @@ pub fn parse_action(file: FileId, text: &str, diags: &mut Diagnostics) -> Option
     }
     Some(action)
 }
+
+/// Parses a guard written alone (the text after `if`), as PNML's Petrel blocks carry them.
+pub fn parse_guard(file: FileId, text: &str, diags: &mut Diagnostics) -> Option<Guard> {
+    let mut p = Parser {
+        toks: lex(file, text, diags),
+        pos: 0,
+        diags,
+        pending: Vec::new(),
+        depth: 0,
+        list_depth: 0,
+    };
+    let guard = p.guard().ok()?;
+    if !p.at(&Tok::Eof) {
+        p.error(
+            "the end of the guard",
+            "write one guard only: join conditions with `and`, `or`",
+        );
+        return None;
+    }
+    Some(guard)
+}
+
+/// Parses arguments written alone (`"r1", 0.5, self.speed`, without parentheses; empty text for
+/// none), as PNML's Petrel blocks carry the arguments of instances and `children` lines.
+pub fn parse_args(file: FileId, text: &str, diags: &mut Diagnostics) -> Option<Vec<Expr>> {
+    let mut p = Parser {
+        toks: lex(file, text, diags),
+        pos: 0,
+        diags,
+        pending: Vec::new(),
+        depth: 0,
+        list_depth: 0,
+    };
+    // The end of the text closes the list as `)` would.
+    p.args(Tok::Eof).ok().map(|(args, _)| args)
+}
