@@ -343,13 +343,17 @@ fn verify_and_check_report_each_flaw_with_its_trace() {
     assert_eq!(o.status.code(), Some(1));
     let out = stdout(&o);
     for line in [
-        "error: A.begin would put a second token in global.busy, after go → done → go",
-        "error: dead marking: A{stuck}, after spare",
-        "error: immediate transitions loop forever: A.wob → A.ble, after go → more",
-        "warning: on done, A.end fires and A.stop does not (written order), after go → done",
+        "error[E0601]: A.begin would put a second token in global.busy, after go → done → go",
+        "error[E0602]: dead marking: A{stuck}, after spare",
+        "error[E0603]: immediate transitions loop forever: A.wob → A.ble, after go → more",
+        "warning[W0601]: on done, A.end fires and A.stop does not (written order), after go → done",
         "nets never activated: Unused",
     ] {
         assert!(out.contains(line), "missing `{line}` in:\n{out}");
+    }
+    // Each finding is also shown where it is, as `petrel check` shows its own.
+    for at in ["a.pn:9:16", "a.pn:15:16", "a.pn:6:11", "a.pn:21:5"] {
+        assert!(out.contains(at), "missing `{at}` in:\n{out}");
     }
 
     // `check` runs the same verification and points at the transitions.
