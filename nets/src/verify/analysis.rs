@@ -33,6 +33,14 @@ pub(super) fn ends(p: &CompiledProject, l: &Layout, g: &Graph) -> Vec<bool> {
         .collect()
 }
 
+/// Whether a dead marking `s` is intended: a catastrophic event ended the mission, a final
+/// marking holds, or (alone, `--net`) the net is no longer active: it finished.
+pub(super) fn intended_end(p: &CompiledProject, l: &Layout, g: &Graph, s: &[u64]) -> bool {
+    l.is_over(s)
+        || (g.alone && !l.is_active(s, 0))
+        || p.finals.iter().any(|f| holds_marking(l, s, f))
+}
+
 /// The dead markings: states where the environment can deliver nothing.
 pub(super) fn dead_markings(
     p: &CompiledProject,
@@ -45,10 +53,8 @@ pub(super) fn dead_markings(
         .map(|&i| {
             let s = &g.states[i as usize];
             let after_catastrophic = l.is_over(s);
-            // Alone (`--net`), the net's end is to be inactive: it finished.
             let net_done = g.alone && !l.is_active(s, 0);
-            let intended =
-                after_catastrophic || net_done || p.finals.iter().any(|f| holds_marking(l, s, f));
+            let intended = intended_end(p, l, g, s);
             (
                 DeadFinding {
                     marking: describe(s),

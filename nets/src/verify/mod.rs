@@ -353,13 +353,57 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
     // Each finding at a state: its trace keeps the events that matter to it.
     let m = minimize::Minimizer::new(p, &sem, &env, &g);
     let at = |i: u32, keep: &dyn Fn(&[u64]) -> bool| m.trace(i, keep);
+    // Which graph state a replayed state is (built only when a finding needs it).
+    let index: std::cell::OnceCell<HashMap<&[u64], u32>> = std::cell::OnceCell::new();
+    let index_of = |s: &[u64]| -> Option<u32> {
+        index
+            .get_or_init(|| {
+                g.states
+                    .iter()
+                    .enumerate()
+                    .map(|(k, st)| (st.as_slice(), k as u32))
+                    .collect()
+            })
+            .get(s)
+            .copied()
+    };
+    // The nets a finding at `target` is about: the active ones not at an end of theirs. An
+    // event matters when, without it, those nets would not be where they are.
+    let concerned = |target: &[u64]| -> Vec<NetId> {
+        (0..p.nets.len() as NetId)
+            .filter(|&n| l.is_active(target, n) && !analysis::end_for_net(p, l, target, n))
+            .collect()
+    };
+    let same_places = |s: &[u64], target: &[u64], nets: &[NetId]| {
+        nets.iter().all(|&n| {
+            l.is_active(s, n)
+                && (0..p.nets[n as usize].places.len() as u32).all(|k| {
+                    l.is_marked(s, n, PlaceRef::Local(k))
+                        == l.is_marked(target, n, PlaceRef::Local(k))
+                })
+        })
+    };
+    let dead: Vec<bool> = {
+        let mut v = vec![false; g.states.len()];
+        for &i in &g.dead {
+            v[i as usize] = true;
+        }
+        v
+    };
     report.dead_markings = analysis::dead_markings(p, l, &g, &describe)
         .into_iter()
         .map(|(mut f, i)| {
             // Hundreds of ends after a catastrophic event need no minimal trace each.
             if !f.after_catastrophic {
                 let target = g.states[i as usize].clone();
-                f.trace = at(i, &|s| s == target.as_slice());
+                let nets = concerned(&target);
+                let intended = f.intended;
+                // Still a dead marking of the same kind, the nets it is about where they are.
+                f.trace = at(i, &|s| {
+                    index_of(s).is_some_and(|k| dead[k as usize])
+                        && analysis::intended_end(p, l, &g, s) == intended
+                        && same_places(s, &target, &nets)
+                });
             }
             f
         })
@@ -378,32 +422,25 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
         })
         .collect();
     let ends = analysis::ends(p, l, &g);
-    // Which graph state a replayed state is (built only when a finding needs it).
-    let index: std::cell::OnceCell<HashMap<&[u64], u32>> = std::cell::OnceCell::new();
-    let index_of = |s: &[u64]| -> Option<u32> {
-        index
-            .get_or_init(|| {
-                g.states
-                    .iter()
-                    .enumerate()
-                    .map(|(k, st)| (st.as_slice(), k as u32))
-                    .collect()
-            })
-            .get(s)
-            .copied()
-    };
     report.no_progress =
         analysis::progress(p, l, &g, &ends, &describe).map(|(mut f, first, stays, reach)| {
-            // Any state from which no end is reachable will do for the first trace; the
-            // state the mission stays in is kept exactly.
+            // Any state from which no end is reachable will do for the first trace; for the
+            // state the mission stays in, the nets not at an end must be where they are.
             f.trace = at(first, &|s| index_of(s).is_some_and(|k| !reach[k as usize]));
             let target = g.states[stays as usize].clone();
-            f.stays_in_trace = at(stays, &|s| s == target.as_slice());
+            let nets = concerned(&target);
+            f.stays_in_trace = at(stays, &|s| {
+                index_of(s).is_some_and(|k| !reach[k as usize]) && same_places(s, &target, &nets)
+            });
             f
         });
     let (stuck, can) = analysis::stuck_nets(p, l, &g, &describe);
     report.stuck_nets = stuck
         .into_iter()
+        // A net stuck in a dead marking with nothing to wait for: the dead marking says it all.
+        .filter(|(f, i, _)| {
+            !dead[*i as usize] || !f.waits_for.is_empty() || f.resource_cycle.is_some()
+        })
         .map(|(mut f, i, net)| {
             // Any state where this net is active and can never fire again.
             f.trace = at(i, &|s| {
