@@ -42,6 +42,9 @@ pub struct VerifyOptions {
     pub progress: Option<Box<dyn FnMut(u64, f64)>>,
     /// Keep every reachable stable state in [`Report::reachable`] (for cross-checks).
     pub keep_states: bool,
+    /// Skip what issue 13 added over the graph: progress, stuck nets, starvation and the
+    /// minimization of traces (to measure what they cost; `petrel verify` always runs them).
+    pub skip_liveness: bool,
 }
 
 /// Why a verification could not finish.
@@ -352,7 +355,14 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
     };
     // Each finding at a state: its trace keeps the events that matter to it.
     let m = minimize::Minimizer::new(p, &sem, &env, &g);
-    let at = |i: u32, keep: &dyn Fn(&[u64]) -> bool| m.trace(i, keep);
+    let skip = opts.skip_liveness;
+    let at = |i: u32, keep: &dyn Fn(&[u64]) -> bool| {
+        if skip {
+            g.trace(i)
+        } else {
+            m.trace(i, keep)
+        }
+    };
     // Which graph state a replayed state is (built only when a finding needs it).
     let index: std::cell::OnceCell<HashMap<&[u64], u32>> = std::cell::OnceCell::new();
     let index_of = |s: &[u64]| -> Option<u32> {
@@ -422,37 +432,42 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
         })
         .collect();
     let ends = analysis::ends(p, l, &g);
-    report.no_progress =
-        analysis::progress(p, l, &g, &ends, &describe).map(|(mut f, first, stays, reach)| {
-            // Any state from which no end is reachable will do for the first trace; for the
-            // state the mission stays in, the nets not at an end must be where they are.
-            f.trace = at(first, &|s| index_of(s).is_some_and(|k| !reach[k as usize]));
-            let target = g.states[stays as usize].clone();
-            let nets = concerned(&target);
-            f.stays_in_trace = at(stays, &|s| {
-                index_of(s).is_some_and(|k| !reach[k as usize]) && same_places(s, &target, &nets)
+    if !opts.skip_liveness {
+        report.no_progress =
+            analysis::progress(p, l, &g, &ends, &describe).map(|(mut f, first, stays, reach)| {
+                // Any state from which no end is reachable will do for the first trace; for the
+                // state the mission stays in, the nets not at an end must be where they are.
+                f.trace = at(first, &|s| index_of(s).is_some_and(|k| !reach[k as usize]));
+                let target = g.states[stays as usize].clone();
+                let nets = concerned(&target);
+                f.stays_in_trace = at(stays, &|s| {
+                    index_of(s).is_some_and(|k| !reach[k as usize])
+                        && same_places(s, &target, &nets)
+                });
+                f
             });
-            f
-        });
-    let (stuck, can) = analysis::stuck_nets(p, l, &g, &describe);
-    report.stuck_nets = stuck
-        .into_iter()
-        // A net stuck in a dead marking with nothing to wait for: the dead marking says it all.
-        .filter(|(f, i, _)| {
-            !dead[*i as usize] || !f.waits_for.is_empty() || f.resource_cycle.is_some()
-        })
-        .map(|(mut f, i, net)| {
-            // Any state where this net is active and can never fire again.
-            f.trace = at(i, &|s| {
-                l.is_active(s, net)
-                    && index_of(s).is_some_and(|k| !can[net as usize][k as usize])
-                    && !analysis::end_for_net(p, l, s, net)
-            });
-            f
-        })
-        .collect();
+        let (stuck, can) = analysis::stuck_nets(p, l, &g, &describe);
+        report.stuck_nets = stuck
+            .into_iter()
+            // A net stuck in a dead marking with nothing to wait for: the dead marking says it all.
+            .filter(|(f, i, _)| {
+                !dead[*i as usize] || !f.waits_for.is_empty() || f.resource_cycle.is_some()
+            })
+            .map(|(mut f, i, net)| {
+                // Any state where this net is active and can never fire again.
+                f.trace = at(i, &|s| {
+                    l.is_active(s, net)
+                        && index_of(s).is_some_and(|k| !can[net as usize][k as usize])
+                        && !analysis::end_for_net(p, l, s, net)
+                });
+                f
+            })
+            .collect();
+    }
     let components = analysis::components(&g);
-    report.starvation = analysis::starvation(p, l, &g, &components);
+    if !opts.skip_liveness {
+        report.starvation = analysis::starvation(p, l, &g, &components);
+    }
     report.event_loops = analysis::event_loops(p, &g, &components);
     report.unsafe_places = g.unsafe_places.clone();
     report.livelocks = g.livelocks.clone();
