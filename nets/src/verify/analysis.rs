@@ -93,20 +93,46 @@ pub(super) fn invariants(
     out
 }
 
-/// The states from which an end is reachable along `keep` edges (backward breadth first from
-/// the ends).
-fn can_reach(n: usize, g: &Graph, targets: &[bool], keep: &dyn Fn(usize) -> bool) -> Vec<bool> {
-    let mut back: Vec<Vec<u32>> = vec![Vec::new(); n];
-    for (k, e) in g.edges.iter().enumerate() {
-        if keep(k) {
-            back[e.to as usize].push(e.from);
+/// The graph's edges reversed, as one flat list per target state (built once, walked by every
+/// backward search).
+pub(super) struct Reverse {
+    start: Vec<u32>,
+    /// (source state, edge index), grouped by target state.
+    from: Vec<(u32, u32)>,
+}
+
+impl Reverse {
+    pub fn new(g: &Graph) -> Reverse {
+        let n = g.states.len();
+        let mut start = vec![0u32; n + 1];
+        for e in &g.edges {
+            start[e.to as usize + 1] += 1;
         }
+        for k in 0..n {
+            start[k + 1] += start[k];
+        }
+        let mut next = start.clone();
+        let mut from = vec![(0u32, 0u32); g.edges.len()];
+        for (k, e) in g.edges.iter().enumerate() {
+            let slot = &mut next[e.to as usize];
+            from[*slot as usize] = (e.from, k as u32);
+            *slot += 1;
+        }
+        Reverse { start, from }
     }
+}
+
+/// The states from which a target is reachable along `keep` edges (backward breadth first from
+/// the targets).
+fn can_reach(rev: &Reverse, targets: &[bool], keep: &dyn Fn(usize) -> bool) -> Vec<bool> {
     let mut reach = targets.to_vec();
-    let mut queue: VecDeque<u32> = (0..n as u32).filter(|&i| reach[i as usize]).collect();
+    let mut queue: VecDeque<u32> = (0..reach.len() as u32)
+        .filter(|&i| reach[i as usize])
+        .collect();
     while let Some(j) = queue.pop_front() {
-        for &i in &back[j as usize] {
-            if !reach[i as usize] {
+        let (a, b) = (rev.start[j as usize], rev.start[j as usize + 1]);
+        for &(i, k) in &rev.from[a as usize..b as usize] {
+            if !reach[i as usize] && keep(k as usize) {
                 reach[i as usize] = true;
                 queue.push_back(i);
             }
@@ -124,6 +150,7 @@ pub(super) fn progress(
     p: &CompiledProject,
     l: &Layout,
     g: &Graph,
+    rev: &Reverse,
     ends: &[bool],
     describe: &dyn Fn(&[u64]) -> Vec<String>,
 ) -> Option<(ProgressFinding, u32, u32, Vec<bool>)> {
@@ -136,7 +163,7 @@ pub(super) fn progress(
         let e = g.labels[g.edges[k].label as usize].event;
         e == NO_EVENT || !p.progress_excludes.contains(&p.events[e as usize].category)
     };
-    let reach = can_reach(n, g, ends, &allowed);
+    let reach = can_reach(rev, ends, &allowed);
     let failing: Vec<usize> = (0..n).filter(|&i| !reach[i]).collect();
     let &first = failing.first()?;
     // Where the mission stays: a failing state whose loop (allowed edges only) has no way out.
@@ -229,6 +256,7 @@ pub(super) fn stuck_nets(
     p: &CompiledProject,
     l: &Layout,
     g: &Graph,
+    rev: &Reverse,
     describe: &dyn Fn(&[u64]) -> Vec<String>,
 ) -> (Vec<Stuck>, Vec<Vec<bool>>) {
     let n = g.states.len();
@@ -246,7 +274,7 @@ pub(super) fn stuck_nets(
             // A net with no transition never fires: it is a store of places, not stuck.
             vec![true; n]
         } else {
-            can_reach(n, g, fires, &|_| true)
+            can_reach(rev, fires, &|_| true)
         });
     }
     for net in 0..p.nets.len() {

@@ -433,8 +433,9 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
         .collect();
     let ends = analysis::ends(p, l, &g);
     if !opts.skip_liveness {
-        report.no_progress =
-            analysis::progress(p, l, &g, &ends, &describe).map(|(mut f, first, stays, reach)| {
+        let rev = analysis::Reverse::new(&g);
+        report.no_progress = analysis::progress(p, l, &g, &rev, &ends, &describe).map(
+            |(mut f, first, stays, reach)| {
                 // Any state from which no end is reachable will do for the first trace; for the
                 // state the mission stays in, the nets not at an end must be where they are.
                 f.trace = at(first, &|s| index_of(s).is_some_and(|k| !reach[k as usize]));
@@ -445,8 +446,9 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
                         && same_places(s, &target, &nets)
                 });
                 f
-            });
-        let (stuck, can) = analysis::stuck_nets(p, l, &g, &describe);
+            },
+        );
+        let (stuck, can) = analysis::stuck_nets(p, l, &g, &rev, &describe);
         report.stuck_nets = stuck
             .into_iter()
             // A net stuck in a dead marking with nothing to wait for: the dead marking says it all.
