@@ -314,6 +314,15 @@ fn run_plays_the_mission_scripts_in_virtual_time_as_json_lines() {
             for key in ["time", "event", "fired", "marking", "actions"] {
                 assert!(step.get(key).is_some(), "{key} missing in {line}");
             }
+            for key in ["line", "reason", "timers"] {
+                assert!(step.get(key).is_some(), "{key} missing in {line}");
+            }
+            // One vocabulary: the journal's words (and `start` for the first line).
+            let outcome = step["outcome"].as_str().unwrap_or_default();
+            assert!(
+                ["start", "processed", "unused", "refused"].contains(&outcome),
+                "{line}"
+            );
         }
         assert!(stderr(&o).contains("expectations met"), "{}", stderr(&o));
     }
@@ -339,6 +348,29 @@ fn run_plays_the_mission_scripts_in_virtual_time_as_json_lines() {
         stderr(&o)
     );
     assert!(stderr(&o).contains("bad.script:2:"), "{}", stderr(&o));
+    // `expect always` is checked after every later step; its failure names the `expect` line
+    // and the step that broke it.
+    std::fs::write(
+        &bad,
+        "0 start_mission\nexpect always MISSION.rolling\n8 rotation_speed\n",
+    )
+    .unwrap();
+    let o = petrel(&["run", &uav(), "--script", &bad.display().to_string(), "-q"]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = stderr(&o);
+    assert!(
+        err.contains("bad.script:2: expectation failed: expected always MISSION.rolling (from line 2 on)\n  found: broken at 8 by the step of `rotation_speed` (timed line 3)"),
+        "{err}"
+    );
+    // An outcome expected after a `wait` is an error of the script: a wait sends no event.
+    std::fs::write(&bad, "0 start_mission\n5 wait\nexpect refused\n").unwrap();
+    let o = petrel(&["run", &uav(), "--script", &bad.display().to_string()]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("bad.script:3: `expect refused` checks the event of the last timed line, and line 2 is a `wait`"),
+        "{}",
+        stderr(&o)
+    );
 }
 
 #[test]

@@ -3,7 +3,8 @@
 //! - [`engine`]: sans-I/O; events in, actions out, time injected.
 //! - [`record`]: the record of one step (event, firings, actions), which every reader of the
 //!   player's steps goes through.
-//! - [`script`]: missions as unit tests, in virtual time (`petrel run --script`).
+//! - [`script`]: missions as unit tests, in virtual time (`petrel run --script`); [`expect`]:
+//!   what a script's `expect` lines say and how they are checked.
 //! - [`runtime`]: the player process on iceoryx2 (`petrel play`).
 //! - [`journal`], [`replay`]: the flight recorder and its replay (`--resume` too).
 //! - [`shadow`]: the ground-station copy that follows a vehicle's steps.
@@ -11,6 +12,7 @@
 //! The command line is the `petrel-cli` crate (binary `petrel`).
 
 pub mod engine;
+pub mod expect;
 pub mod journal;
 pub mod record;
 pub mod replay;
