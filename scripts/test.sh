@@ -22,6 +22,19 @@ log=$(mktemp)
 trap 'rm -f "$log"' EXIT
 cargo test --workspace --locked 2>&1 | tee "$log"
 
+# Fuzzing: every target of fuzz/ built with libFuzzer on the stable toolchain and run a few
+# seconds from a corpus seeded with the repository's files and every input that once crashed
+# it (scripts/fuzz.sh; docs/testing.md has the long run). A crash fails the suite.
+echo "== fuzz targets, ${PETREL_FUZZ_SECONDS:-5} s each"
+fuzz_build=$(mktemp)
+if ! scripts/fuzz.sh build >"$fuzz_build" 2>&1; then
+    cat "$fuzz_build"
+    exit 1
+fi
+tail -n 1 "$fuzz_build"
+rm -f "$fuzz_build"
+scripts/fuzz.sh run "${PETREL_FUZZ_SECONDS:-5}" 2>&1 | tee -a "$log"
+
 # Real SocketCAN: this kernel has none, so the CAN bridge's socket tests run on a real vcan0
 # inside a qemu VM (scripts/vcan-vm.sh installs and caches what it needs; on a machine whose
 # kernel has vcan it runs them directly). A failure inside fails the suite.

@@ -30,7 +30,7 @@ fn data(path: &str) -> std::path::PathBuf {
 }
 
 fn setup() -> (Arc<Dbc>, petrel_can_bridge::CanConfig) {
-    let dbc = Arc::new(Dbc::load(&data("auv.dbc")).expect("the bench DBC"));
+    let dbc = Arc::new(Dbc::load(&data("auv/auv.dbc")).expect("the bench DBC"));
     let (_, compiled, _) =
         petrel_nets::project::load_and_check(&data("auv")).expect("the bench project");
     let project = compiled.expect("the bench project checks");

@@ -349,6 +349,13 @@ impl<R: BufRead> LogReader<R> {
     }
 }
 
+impl<R> LogReader<R> {
+    /// The 1-based number of the line last read (0 before the first).
+    pub fn line(&self) -> usize {
+        self.line
+    }
+}
+
 impl<R: BufRead> Iterator for LogReader<R> {
     type Item = Result<LogRecord, LogError>;
 
@@ -376,6 +383,17 @@ impl<R: BufRead> Iterator for LogReader<R> {
 /// Reads a whole log held in memory; the first malformed line is the error.
 pub fn read_log(text: &str) -> Result<Vec<LogRecord>, LogError> {
     LogReader::new(text.as_bytes()).collect()
+}
+
+/// Reads a whole log held in memory, each record with its 1-based line number (for warnings
+/// that name the line); the first malformed line is the error.
+pub fn read_log_lines(text: &str) -> Result<Vec<(usize, LogRecord)>, LogError> {
+    let mut reader = LogReader::new(text.as_bytes());
+    let mut out = Vec::new();
+    while let Some(r) = reader.next() {
+        out.push((reader.line(), r?));
+    }
+    Ok(out)
 }
 
 /// Writes records as log lines.

@@ -444,6 +444,7 @@ pub fn run<B: Bus>(
     let own_beat = participant.heartbeat_publisher()?;
     let t0 = std::time::Instant::now();
     let mut next_beat = clock.now_us();
+    let mut heartbeats_refused = 0u64;
     // Latest values of the decoded signals, for the programs.
     let signals = participant.signals_publisher()?;
     let mut published_updates = 0u64;
@@ -508,7 +509,11 @@ pub fn run<B: Bus>(
             let msg = signals_msg(lp.core.signals(), lp.core.dbc());
             match signals.send(&msg) {
                 // Latest-value service: nobody reading is not an error.
-                Ok(_) | Err(petrel_ipc::SendError::NoReceiver { .. }) => {}
+                Ok(_)
+                | Err(
+                    petrel_ipc::SendError::NoReceiver { .. }
+                    | petrel_ipc::SendError::Refused { .. },
+                ) => {}
                 Err(e) => tracing::warn!("signals not published: {e}"),
             }
         }
@@ -563,9 +568,23 @@ pub fn run<B: Bus>(
                 period_ms: (HEARTBEAT_PERIOD_US / 1000) as u32,
                 progress: lp.core.counters().frames,
                 status: lp.status_json(),
+                ..petrel_ipc::Heartbeat::default()
             };
-            // Latest-value service: a heartbeat nobody reads is not an error.
-            let _ = own_beat.send(&hb);
+            // Latest-value service: a heartbeat nobody reads is not an error; any other
+            // failure is said once, not at every period.
+            match own_beat.send(&hb) {
+                Ok(_)
+                | Err(
+                    petrel_ipc::SendError::NoReceiver { .. }
+                    | petrel_ipc::SendError::Refused { .. },
+                ) => {}
+                Err(e) => {
+                    heartbeats_refused += 1;
+                    if heartbeats_refused == 1 {
+                        tracing::error!("the data server's heartbeat could not be published: {e}");
+                    }
+                }
+            }
         }
     }
     // Last chance for waiting events and frames.
@@ -585,12 +604,16 @@ pub fn run<B: Bus>(
     }
     lp.deliver();
     if lp.last_seq > 0 {
-        let origin = lp.events.origin().to_string();
-        lp.report.unacknowledged =
-            !petrel_ipc::wait_acknowledged(&beats, &origin, lp.last_seq, lp.opts.ack_grace);
+        let heard = petrel_ipc::wait_acknowledged(
+            &beats,
+            lp.events.sender_id(),
+            lp.last_seq,
+            lp.opts.ack_grace,
+        );
+        lp.report.unacknowledged = !heard.is_safe(lp.last_seq);
         if lp.report.unacknowledged {
             tracing::warn!(
-                "the player did not acknowledge the last events within {:?}: they may be lost",
+                "the player did not acknowledge the last events as on record within {:?}: they may be lost",
                 lp.opts.ack_grace
             );
         }

@@ -10,8 +10,7 @@ use crate::bus::{MemoryHub, SocketCanBus, SocketCanOptions};
 use crate::clock::{Clock, ManualClock, SystemClock};
 use crate::config::CanConfig;
 use crate::dbc::Dbc;
-use crate::event::EventOut;
-use crate::replay::{replay_text, Pacing};
+use crate::replay::{replay_counted, Pacing, Replayed};
 use crate::runtime::{run, RunReport, RuntimeError, RuntimeOptions};
 use crate::sim::SimFaults;
 use petrel_ipc::{Vehicle, WaitStrategy};
@@ -125,9 +124,9 @@ pub fn serve(
     result.map_err(|e| ServeError::Runtime(e.to_string()))
 }
 
-/// Replays a recorded `candump -L` log through the bridge as fast as possible and returns the
-/// events it gives, in order.
-pub fn replay_log(log: &Path, config: CanConfig, dbc: Dbc) -> Result<Vec<EventOut>, ServeError> {
+/// Replays a recorded `candump -L` log through the bridge as fast as possible: the events it
+/// gives, in order, and what the replay went through (counters, time going back).
+pub fn replay_log(log: &Path, config: CanConfig, dbc: Dbc) -> Result<Replayed, ServeError> {
     let text = std::fs::read_to_string(log)
         .map_err(|e| ServeError::Io(format!("cannot read {}: {e}", log.display())))?;
     let start = text
@@ -135,7 +134,7 @@ pub fn replay_log(log: &Path, config: CanConfig, dbc: Dbc) -> Result<Vec<EventOu
         .find_map(|l| crate::log::parse_line(l.trim()).ok())
         .map_or(0, |r| r.time_us);
     let mut core = BridgeCore::new(Arc::new(dbc), config, start);
-    replay_text(
+    replay_counted(
         &mut core,
         &text,
         Pacing::AsFastAsPossible,

@@ -10,7 +10,7 @@ use proptest::prelude::*;
 fn auv() -> Dbc {
     Dbc::load(std::path::Path::new(concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/tests/data/auv.dbc"
+        "/tests/data/auv/auv.dbc"
     )))
     .expect("the bench DBC loads")
 }

@@ -42,7 +42,7 @@ fn the_bench_configuration_checks_clean() {
     let (c, diags) = check(&common::can_toml()).unwrap();
     assert!(diags.is_empty(), "{diags:?}");
     assert_eq!(c.rules.len(), 6);
-    assert_eq!(c.dbc_path.as_deref(), Some("../auv.dbc"));
+    assert_eq!(c.dbc_path.as_deref(), Some("auv.dbc"));
     assert_eq!(c.interface.as_deref(), Some("vcan0"));
     assert_eq!(c.bus.state_event.as_deref(), Some("bus_fault"));
     let hb = c.heartbeat.as_ref().unwrap();

@@ -16,7 +16,7 @@ pub struct BridgeArgs {
     #[arg(long)]
     bus: Option<String>,
     /// On the memory bus: the simulated vehicle's hull leaks once it is this deep (metres).
-    #[arg(long, value_name = "METRES")]
+    #[arg(long, value_name = "METRES", value_parser = crate::common::finite)]
     sim_leak_at: Option<f64>,
     /// Record every frame in and out to this candump -L log.
     #[arg(long)]
@@ -38,6 +38,7 @@ pub fn bridge(a: BridgeArgs) -> Outcome {
         Scope {
             can: true,
             quick_verify: false,
+            vehicle: false,
         },
         "bridge",
     ) {
@@ -55,9 +56,30 @@ pub fn bridge(a: BridgeArgs) -> Outcome {
     };
     if let Some(log) = a.replay {
         return match replay_can(&log, config, dbc) {
-            Ok(events) => {
+            Ok(replayed) => {
+                // Standard output stays one JSON event a line; what the replay went through
+                // goes to standard error.
+                let s = &replayed.summary;
+                for b in &s.backwards {
+                    eprintln!("warning: {}:{b}", log.display());
+                }
+                if s.time_backwards > s.backwards.len() as u64 {
+                    eprintln!(
+                        "warning: {}: time goes back {} more times",
+                        log.display(),
+                        s.time_backwards - s.backwards.len() as u64
+                    );
+                }
+                if s.counters.wrong_length > 0 {
+                    eprintln!(
+                        "warning: {}: {} frames had another length than the DBC gives their message: dropped, their signals not updated",
+                        log.display(),
+                        s.counters.wrong_length
+                    );
+                }
+                eprintln!("{}: {s}", log.display());
                 let mut text = String::new();
-                for e in events {
+                for e in replayed.events {
                     let params: Vec<serde_json::Value> =
                         e.params.iter().map(|v| v.to_json()).collect();
                     let doc = serde_json::json!({"time_us": e.time_us, "event": e.name, "params": params});

@@ -84,6 +84,9 @@ pub struct Scope {
     pub can: bool,
     /// The quick verification (reachable states, up to [`QUICK_VERIFY_STATES`]).
     pub quick_verify: bool,
+    /// The vehicle file (vehicle.toml, when the project has one), against the project's
+    /// programs and events.
+    pub vehicle: bool,
 }
 
 /// A project read and checked: what every command starts from.
@@ -96,11 +99,13 @@ pub struct Checked {
     pub diagnostics: Diagnostics,
     /// The CAN data server's configuration and DBC, when asked for and present.
     pub can: Option<(petrel_can_bridge::CanConfig, petrel_can_bridge::Dbc)>,
+    /// The vehicle file, when asked for, present and free of errors.
+    pub vehicle: Option<crate::up::file::VehicleFile>,
 }
 
 /// What `petrel check` means: the project (syntax, names, types, markings), then, within
-/// `scope`, its can.toml and DBC against the project's events and the quick verification.
-/// Nothing is printed.
+/// `scope`, its can.toml and DBC against the project's events, its vehicle.toml, and the quick
+/// verification. Nothing is printed.
 pub fn check_project(dir: &Path, scope: Scope) -> Result<Checked, Outcome> {
     let (mut loaded, compiled, mut d) = project::load_and_check(dir)?;
     let mut can = None;
@@ -109,13 +114,39 @@ pub fn check_project(dir: &Path, scope: Scope) -> Result<Checked, Outcome> {
             .map_err(|e| Outcome::Usage(format!("cannot read the project's CAN files: {e}")))?;
         d.sort();
     }
+    let mut vehicle = None;
+    if scope.vehicle {
+        // The file's own structure is checked even when the project has errors; its programs
+        // and events only against a project that compiled.
+        let can_program = can
+            .as_ref()
+            .and_then(|(config, _)| config.commands.program.as_deref());
+        vehicle = crate::up::file::load(
+            dir,
+            compiled.as_ref(),
+            can_program,
+            &mut loaded.sources,
+            &mut d,
+        )
+        .map_err(|e| {
+            Outcome::Usage(format!(
+                "cannot read {}: {e}",
+                dir.join(crate::up::file::VEHICLE_TOML).display()
+            ))
+        })?;
+        d.sort();
+    }
     if let (Some(c), true) = (&compiled, scope.quick_verify) {
         let opts = verify::VerifyOptions {
             max_states: Some(QUICK_VERIFY_STATES),
             ..Default::default()
         };
+        use petrel_nets::check::{apply_allows, AllowPass};
         match verify::verify(c, opts) {
-            Ok(report) => d.extend(verify::diagnostics(&loaded.project, &report)),
+            Ok(report) => {
+                d.extend(verify::diagnostics(&loaded.project, &report));
+                apply_allows(&loaded.project, &mut d, AllowPass::Final);
+            }
             Err(e) => d.push(Diagnostic {
                 severity: Severity::Warning,
                 ..Diagnostic::global(
@@ -132,6 +163,7 @@ pub fn check_project(dir: &Path, scope: Scope) -> Result<Checked, Outcome> {
         compiled,
         diagnostics: d,
         can,
+        vehicle,
     })
 }
 
@@ -165,6 +197,48 @@ pub fn vehicle_of(
     let name = vehicle.unwrap_or_else(|| c.name.clone());
     petrel_ipc::Vehicle::new(&name)
         .map_err(|e| Outcome::Usage(format!("bad vehicle name `{name}`: {e}")))
+}
+
+/// Reads an operator event as a script line holds it (`start_mission`,
+/// `payload_failure("camera")`), checked against the project: its name and parameters. The
+/// one reading of `petrel send` and of vehicle.toml's `[[send]]`, so the operator types what
+/// scripts hold.
+pub fn operator_event(
+    text: &str,
+    c: &CompiledProject,
+) -> Result<(String, Vec<petrel_nets::compiled::Value>), String> {
+    let script =
+        petrel_player::script::parse_script(&format!("0 {text}"), c).map_err(|errors| {
+            errors
+                .into_iter()
+                .map(|(_, e)| e)
+                .collect::<Vec<_>>()
+                .join("; ")
+        })?;
+    match script.lines.into_iter().next() {
+        Some((
+            _,
+            petrel_player::script::Line::At {
+                event: Some(event), ..
+            },
+        )) if !text.trim().is_empty() => Ok(event),
+        _ => Err(format!("`{text}` is not an event")),
+    }
+}
+
+/// Reads an option that is a number of seconds (`--until`, `--run-for`): finite, from 0 to
+/// what mission time in microseconds holds; `nan`, `inf` and negative numbers are refused
+/// with the option's usage, not clamped.
+pub fn seconds(text: &str) -> Result<f64, String> {
+    petrel_player::script::parse_time(text)
+}
+
+/// Reads an option that is a finite number (`--sim-leak-at`): `nan` and `inf` are refused.
+pub fn finite(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        _ => Err(format!("`{text}` is not a finite number")),
+    }
 }
 
 /// Parses a wait strategy option (`block`, `spin`, `spin-then-block:<microseconds>`).

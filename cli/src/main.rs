@@ -2,7 +2,7 @@
 //!
 //! One module per family of commands: [`project`] (check, verify, fmt, dot, export, import),
 //! [`script`] (run), [`vehicle`] (play, send, status), [`recorder`] (replay, journal),
-//! [`bridge`]; [`common`] holds what they share, first of all the one way a project is loaded
+//! [`bridge`], [`up`] (a whole vehicle from its vehicle.toml); [`common`] holds what they share, first of all the one way a project is loaded
 //! and checked ([`common::check_project`]). A new command is a new module and one line in
 //! [`Command`].
 //!
@@ -14,6 +14,7 @@ mod common;
 mod project;
 mod recorder;
 mod script;
+mod up;
 mod vehicle;
 
 use clap::{Parser, Subcommand};
@@ -47,6 +48,16 @@ enum Command {
     /// The CAN data server: frames from the vehicle bus become events for the player (by the
     /// rules of the project's can.toml), calls to the commands program become frames.
     Bridge(bridge::BridgeArgs),
+    /// Bring a vehicle up from the project's vehicle.toml: start the player, the data server
+    /// and the programs in order, show their status, make the timed sends, restart what fails
+    /// (by policy), and stop everything on Ctrl-C, at the mission's end, at --until or at
+    /// --timeout. Exits 1 if any process failed.
+    Up(up::UpArgs),
+    /// Internal to `petrel up`, not for people: starts PROGRAM with ARGS in place of this
+    /// process, every signal unblocked (`petrel up` keeps its stop signals blocked, and a
+    /// blocked mask would pass to the program through exec).
+    #[command(name = "__exec", hide = true)]
+    Exec(up::ExecArgs),
     /// Replay a journal through the engine and check every recorded marking.
     Replay(recorder::ReplayArgs),
     /// Print a journal for people (text) or for plotting (json, csv).
@@ -64,7 +75,8 @@ enum Command {
     Run(script::RunArgs),
     /// Rewrite the project's net files in canonical layout (running it twice changes nothing).
     Fmt(project::FmtArgs),
-    /// Print the project's nets as Graphviz DOT.
+    /// Print the project's nets as Graphviz DOT (each instance of a template drawn apart), or
+    /// with --tree the tree of nets and their activations.
     Dot(project::DotArgs),
     /// Export the project as PNML (ISO/IEC 15909-2); events and actions travel in a
     /// `<toolspecific tool="petrel">` block.
@@ -98,6 +110,8 @@ fn main() -> ExitCode {
         Command::Replay(a) => recorder::replay(a),
         Command::Journal { command } => recorder::journal(command),
         Command::Bridge(a) => bridge::bridge(a),
+        Command::Up(a) => up::up(a),
+        Command::Exec(a) => up::exec(a),
     };
     match outcome {
         Outcome::Clean => ExitCode::SUCCESS,

@@ -23,13 +23,15 @@ pub struct CheckArgs {
     no_verify: bool,
 }
 
-/// Checks a project: syntax, names, types, markings, can.toml, and the quick verification.
+/// Checks a project: syntax, names, types, markings, can.toml, vehicle.toml, and the quick
+/// verification.
 pub fn check(a: CheckArgs) -> Outcome {
     let checked = match check_project(
         &a.dir,
         Scope {
             can: true,
             quick_verify: !a.no_verify,
+            vehicle: true,
         },
     ) {
         Ok(c) => c,
@@ -62,6 +64,20 @@ pub fn check(a: CheckArgs) -> Outcome {
                     c.timers.len(),
                     d.warning_count()
                 ));
+                if let Some(v) = &checked.vehicle {
+                    let names: Vec<String> = v
+                        .processes
+                        .iter()
+                        .map(|p| format!("{} ({})", p.name, p.kind.as_str()))
+                        .collect();
+                    out(&format!(
+                        "vehicle.toml: {} processes ({}), {} computers, {} timed sends\n",
+                        v.processes.len(),
+                        names.join(", "),
+                        v.computers.len(),
+                        v.sends.len()
+                    ));
+                }
             }
         }
     }
@@ -83,8 +99,8 @@ pub struct VerifyArgs {
     /// Output format.
     #[arg(long, value_enum, default_value = "human")]
     format: Format,
-    /// Stop with an error beyond this many states.
-    #[arg(long)]
+    /// Stop with an error beyond this many states (at least 1).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     max_states: Option<u64>,
 }
 
@@ -109,6 +125,7 @@ pub fn verify(a: VerifyArgs) -> Outcome {
                 eprint!("\r{states} states, {rate:.0} states/s   ");
             }) as Box<dyn FnMut(u64, f64)>
         }),
+        ..Default::default()
     };
     let r = match verify::verify(&c, opts) {
         Ok(r) => r,
@@ -158,6 +175,14 @@ fn verify_pnml(file: &Path, format: Format, max_states: Option<u64>) -> Outcome 
     let interactive = interactive(format);
     let mut clean = true;
     let mut docs = Vec::new();
+    // A Petrel export is a mission's skeleton: say so before its findings are misread.
+    if format == Format::Human && nets.iter().any(|n| n.petrel_export) {
+        eprintln!(
+            "note: {}: {}",
+            file.display(),
+            petrel_nets::pnml::SKELETON_NOTE
+        );
+    }
     for net in &nets {
         let opts = reach::ExploreOptions {
             max_states,
@@ -182,7 +207,7 @@ fn verify_pnml(file: &Path, format: Format, max_states: Option<u64>) -> Outcome 
             }
             (Ok(r), Format::Json) => {
                 clean &= r.safe && !r.deadlock;
-                docs.push(reach::to_json(net, &r));
+                docs.push(with_skeleton_note(net, reach::to_json(net, &r)));
             }
             (Err(e), Format::Human) => {
                 clean = false;
@@ -190,7 +215,7 @@ fn verify_pnml(file: &Path, format: Format, max_states: Option<u64>) -> Outcome 
             }
             (Err(e), Format::Json) => {
                 clean = false;
-                docs.push(reach::error_to_json(net, &e));
+                docs.push(with_skeleton_note(net, reach::error_to_json(net, &e)));
             }
         }
     }
@@ -210,6 +235,21 @@ fn verify_pnml(file: &Path, format: Format, max_states: Option<u64>) -> Outcome 
     } else {
         Outcome::Errors
     }
+}
+
+/// A JSON report of a PNML net with `petrel_export` (whether the file is a Petrel export), and
+/// for an export the `note` that only its P/T skeleton was analysed.
+fn with_skeleton_note(
+    net: &petrel_nets::pt::PtNet,
+    mut doc: serde_json::Value,
+) -> serde_json::Value {
+    if let Some(map) = doc.as_object_mut() {
+        map.insert("petrel_export".into(), net.petrel_export.into());
+        if net.petrel_export {
+            map.insert("note".into(), petrel_nets::pnml::SKELETON_NOTE.into());
+        }
+    }
+    doc
 }
 
 /// `petrel fmt`.
@@ -247,9 +287,8 @@ pub fn fmt(a: FmtArgs) -> Outcome {
         if text != source.text {
             unformatted.push(source.name.clone());
             if !check_only {
-                let path = dir.join(&file.path);
-                if let Err(e) = std::fs::write(&path, &text) {
-                    return Outcome::Usage(format!("cannot write {}: {e}", path.display()));
+                if let Err(e) = project::write_net_file(dir, &file.path, &text) {
+                    return Outcome::Usage(format!("cannot write {}: {e}", source.name));
                 }
             }
         }
@@ -273,21 +312,32 @@ pub fn fmt(a: FmtArgs) -> Outcome {
 pub struct DotArgs {
     /// The project directory.
     dir: PathBuf,
-    /// Only this net (and the global places it uses).
+    /// Only this net (and the global places it uses); a template's name draws all its
+    /// instances.
     #[arg(long)]
     net: Option<String>,
+    /// Draw the tree of nets only: one box per net, `children` lines as solid arrows,
+    /// `activate` actions as dashed ones.
+    #[arg(long, conflicts_with = "net")]
+    tree: bool,
     /// Write to this file instead of standard output.
     #[arg(short, long)]
     output: Option<PathBuf>,
 }
 
-/// Prints the project's nets as Graphviz DOT.
+/// Prints the project's nets, or their tree, as Graphviz DOT.
 pub fn dot(a: DotArgs) -> Outcome {
     let checked = match require_clean(&a.dir, Scope::default(), "dot") {
         Ok(c) => c,
         Err(o) => return o,
     };
-    match petrel_nets::dot::project_to_dot(&checked.loaded.project, a.net.as_deref()) {
+    let project = &checked.loaded.project;
+    let drawing = if a.tree {
+        Ok(petrel_nets::dot::project_tree_dot(project))
+    } else {
+        petrel_nets::dot::project_to_dot(project, a.net.as_deref())
+    };
+    match drawing {
         Ok(text) => match write_output(a.output.as_deref(), &text) {
             Ok(()) => Outcome::Clean,
             Err(o) => o,

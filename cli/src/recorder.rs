@@ -12,7 +12,7 @@ pub struct ReplayArgs {
     #[arg(long)]
     project: Option<PathBuf>,
     /// Stop at this mission time (seconds) and print the state there.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::common::seconds)]
     until: Option<f64>,
 }
 
@@ -81,9 +81,19 @@ pub fn replay(a: ReplayArgs) -> Outcome {
         );
         return Outcome::Errors;
     }
-    let until_us = until.map(|s| (s * 1e6).round().max(0.0) as u64);
+    // `seconds` bounds it: the product is a whole number of microseconds a u64 holds.
+    let until_us = until.map(|s| (s * 1e6).round() as u64);
     let (engine, r) = petrel_player::replay::replay(&c, &read.entries, until_us);
     if let Some(d) = &r.divergence {
+        if d.kind == petrel_player::replay::DivergenceKind::Journal {
+            eprintln!(
+                "error: the journal does not hold together at entry {} (t = {:.6} s): {}",
+                d.entry,
+                d.time as f64 / 1e6,
+                d.what
+            );
+            return Outcome::Errors;
+        }
         eprintln!(
             "divergence at entry {} (t = {:.6} s), event `{}`: {}\n  recorded: {}\n  replayed: {}",
             d.entry,
@@ -107,10 +117,17 @@ pub fn replay(a: ReplayArgs) -> Outcome {
         .into_iter()
         .map(|(n, p)| format!("{n}{{{}}}", p.join(", ")))
         .collect();
+    if r.gaps > 0 {
+        eprintln!(
+            "warning: the flight recorder dropped {} entries (in {} gap(s)) it could not write; the replay went on from the checkpoint after each gap",
+            r.lost, r.gaps
+        );
+    }
     out(&format!(
-        "replayed {} entries, {} steps: every recorded marking reproduced{}\nstate at t = {:.6} s: {}\n",
+        "replayed {} entries, {} steps: every recorded marking reproduced{}{}\nstate at t = {:.6} s: {}\n",
         r.entries,
         r.steps,
+        if r.gaps > 0 { " (from a checkpoint after each gap)" } else { "" },
         if r.stopped_early { " (stopped at --until)" } else { "" },
         match until {
             Some(u) if r.stopped_early => u,
@@ -195,6 +212,24 @@ fn journal_show(journal: &Path, format: &str) -> Outcome {
                 vec![],
                 origin.clone(),
                 reason.clone(),
+                vec![],
+                vec![],
+            ),
+            Entry::Gap { lost, reason, .. } => (
+                "gap",
+                String::new(),
+                vec![],
+                String::new(),
+                format!("{lost} entries lost: {reason}"),
+                vec![],
+                vec![],
+            ),
+            Entry::Checkpoint { .. } => (
+                "checkpoint",
+                String::new(),
+                vec![],
+                String::new(),
+                String::new(),
                 vec![],
                 vec![],
             ),

@@ -15,7 +15,7 @@ pub struct PlayArgs {
     #[arg(long, default_value = "block")]
     wait: String,
     /// Stop after this many seconds (for demos and tests).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::common::seconds)]
     run_for: Option<f64>,
     /// The flight recorder's directory (default: journal/<vehicle>).
     #[arg(long)]
@@ -28,8 +28,13 @@ pub struct PlayArgs {
     #[arg(long, default_value = "record")]
     flush: String,
     /// Start a new journal segment past this many megabytes.
-    #[arg(long, default_value_t = 64)]
+    #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u64).range(1..))]
     rotate_mb: u64,
+    /// While the journal cannot be written (a full disk), keep up to this many megabytes of
+    /// its records in memory (the events they hold are not acknowledged until written); past
+    /// it the recorder drops records, and the journal goes on from a checkpoint of the state.
+    #[arg(long, default_value_t = 32.0)]
+    journal_backlog_mb: f64,
     /// Restore the mission from the journal (after a crash) and carry on.
     #[arg(long)]
     resume: bool,
@@ -37,6 +42,11 @@ pub struct PlayArgs {
     /// alarm the moment this copy's marking differs from the vehicle's.
     #[arg(long, conflicts_with_all = ["resume"])]
     shadow: bool,
+    /// Share the vehicle's files with this Unix group (name or number), so that operator
+    /// accounts in it can `petrel send` and `petrel status` (with PETREL_RUNTIME_DIR set to the
+    /// vehicle's base directory): see docs/security.md. Default: PETREL_GROUP, or none.
+    #[arg(long, value_name = "GROUP")]
+    group: Option<String>,
 }
 
 /// Runs the player (or, with `--shadow`, the ground-station copy) until SIGINT or SIGTERM.
@@ -55,7 +65,15 @@ pub fn play(a: PlayArgs) -> Outcome {
     opts.wait = strategy;
     opts.project_dir = dir.display().to_string();
     opts.resume = a.resume;
+    opts.group = a.group.clone();
     opts.rotate_bytes = a.rotate_mb.saturating_mul(1 << 20);
+    if !(a.journal_backlog_mb.is_finite() && a.journal_backlog_mb >= 0.0) {
+        return Outcome::Usage(format!(
+            "--journal-backlog-mb takes a number of megabytes, not {}",
+            a.journal_backlog_mb
+        ));
+    }
+    opts.journal_backlog = (a.journal_backlog_mb * (1u64 << 20) as f64) as usize;
     opts.flush = match a.flush.parse() {
         Ok(f) => f,
         Err(e) => return Outcome::Usage(e),
@@ -69,10 +87,13 @@ pub fn play(a: PlayArgs) -> Outcome {
     }
     let run_for = a.run_for;
     if let Some(secs) = run_for {
-        if !(secs.is_finite() && secs >= 0.0) {
-            return Outcome::Usage(format!("--run-for takes a number of seconds, not {secs}"));
+        // `from_secs_f64` panics past what a Duration holds: ask, never assume.
+        match std::time::Duration::try_from_secs_f64(secs) {
+            Ok(d) => opts.run_for = Some(d),
+            Err(_) => {
+                return Outcome::Usage(format!("--run-for takes a number of seconds, not {secs}"))
+            }
         }
-        opts.run_for = Some(std::time::Duration::from_secs_f64(secs));
     }
     if a.shadow {
         return match petrel_player::shadow::shadow(&c, &opts) {
@@ -99,9 +120,9 @@ pub fn play(a: PlayArgs) -> Outcome {
                 0.0
             };
             eprintln!(
-                "player stopped: {} messages ({} refused before the engine), {} events received, {} processed, {} unused, {} refused; {} calls sent, {} failed; journal: {} records, {:.1} us each{}",
+                "player stopped: {} messages ({} refused before the engine), {} events received, {} processed, {} unused, {} refused; {} calls sent, {} failed; journal: {} records, {:.1} us each, {} failed writes, {} entries lost{}",
                 r.messages, r.bad_messages, s.received, s.processed, s.unused, s.refused, r.calls_sent, r.calls_failed,
-                r.journal_records, per_record,
+                r.journal_records, per_record, r.journal_failures, r.journal_lost,
                 if r.resumed_steps > 0 { format!("; resumed after {} steps", r.resumed_steps) } else { String::new() }
             );
             Outcome::Clean
@@ -146,39 +167,32 @@ pub struct SendArgs {
     #[arg(long)]
     vehicle: Option<String>,
     /// Send the event this many times, as fast as possible (a stress test of the vehicle).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
     count: u64,
+    /// How long to wait for the player's verdict on the events, in seconds.
+    #[arg(long, default_value_t = 10.0)]
+    timeout: f64,
 }
 
-/// Sends an event to a running player, as the operator, and waits for its acknowledgement.
+/// Sends an event to a running player, as the operator, and waits for the player's verdict:
+/// taken (and on the flight record), refused (and why), or not acknowledged. Exits 0 only when
+/// every event was taken and is on record.
 pub fn send(a: SendArgs) -> Outcome {
     let (event, vehicle, count) = (a.event.as_str(), a.vehicle, a.count);
+    if !(a.timeout.is_finite() && a.timeout >= 0.0) {
+        return Outcome::Usage(format!(
+            "--timeout takes a number of seconds, not {}",
+            a.timeout
+        ));
+    }
+    let timeout = std::time::Duration::from_secs_f64(a.timeout);
     let c = match compiled(&a.dir, "send") {
         Ok(c) => c,
         Err(o) => return o,
     };
-    // The same reading as a script line, so the operator types what scripts hold.
-    let script = match petrel_player::script::parse_script(&format!("0 {event}"), &c) {
-        Ok(s) => s,
-        Err(errors) => {
-            return Outcome::Usage(
-                errors
-                    .into_iter()
-                    .map(|(_, e)| e)
-                    .collect::<Vec<_>>()
-                    .join("; "),
-            )
-        }
-    };
-    let Some((
-        _,
-        petrel_player::script::Line::At {
-            event: Some((name, params)),
-            ..
-        },
-    )) = script.lines.first()
-    else {
-        return Outcome::Usage(format!("`{event}` is not an event"));
+    let (name, params) = match crate::common::operator_event(event, &c) {
+        Ok(e) => e,
+        Err(e) => return Outcome::Usage(e),
     };
     let (v, me, beats) = match join_as_tool(&c, vehicle, "send") {
         Ok(x) => x,
@@ -188,7 +202,7 @@ pub fn send(a: SendArgs) -> Outcome {
         Ok(s) => s,
         Err(e) => return Outcome::Usage(e.to_string()),
     };
-    let msg = petrel_ipc::EventMsg::new(name.clone(), params.clone());
+    let msg = petrel_ipc::EventMsg::new(name.clone(), params);
     let (mut delivered, mut refused, mut absent, mut last_seq) = (0u64, 0u64, 0u64, 0u64);
     for _ in 0..count {
         match sender.send(&msg) {
@@ -201,9 +215,10 @@ pub fn send(a: SendArgs) -> Outcome {
             Err(e) => return Outcome::Usage(format!("cannot send: {e}")),
         }
     }
+    let origin = sender.origin().to_string();
     if absent > 0 {
         out(&format!(
-            "sent {count}: {delivered} delivered, {refused} refused, {absent} with no player\n"
+            "sent {count} as {origin}: {delivered} delivered, {refused} refused, {absent} with no player\n"
         ));
         eprintln!(
             "no player is running for vehicle `{}`: start one with `petrel play`",
@@ -212,26 +227,125 @@ pub fn send(a: SendArgs) -> Outcome {
         return Outcome::Errors;
     }
     // Shared memory dies with its process: stay until the player says (in its heartbeat) that
-    // it has taken our last event, so nothing delivered is lost when we exit.
-    let origin = sender.origin().to_string();
-    let acknowledged = delivered == 0
-        || petrel_ipc::wait_acknowledged(
-            &beats,
-            &origin,
-            last_seq,
-            std::time::Duration::from_secs(10),
-        );
+    // every event we delivered is settled, so nothing delivered is lost when we exit.
+    let heard = if delivered > 0 {
+        petrel_ipc::wait_acknowledged(&beats, sender.sender_id(), last_seq, timeout)
+    } else {
+        petrel_ipc::Acknowledgement::default()
+    };
     out(&format!(
-        "sent {count}: {delivered} delivered, {refused} refused (player's buffer full), {absent} with no player\n"
+        "sent {count} as {origin}: {delivered} delivered, {refused} refused (player's buffer full), {absent} with no player\n"
     ));
-    if !acknowledged {
-        eprintln!("the player did not acknowledge the events within 10 s: they may be lost");
-        return Outcome::Errors;
+    let verdict = Verdict::of(&heard, delivered);
+    out(&verdict.text(&origin, &name));
+    let mut safe = refused == 0 && verdict.is_clean();
+    if verdict.not_on_record > 0 {
+        let why = match heard.recorder.state {
+            petrel_ipc::RecorderState::Failing | petrel_ipc::RecorderState::Dropping => format!(
+                "the flight recorder is {} ({})",
+                heard.recorder.state.as_str(),
+                heard.recorder.reason
+            ),
+            _ => "the flight recorder had not written them".to_string(),
+        };
+        eprintln!(
+            "{} event(s) were taken by the player but are not on record ({why}): they would not survive a crash of the player",
+            verdict.not_on_record
+        );
+    }
+    if verdict.unacknowledged > 0 {
+        eprintln!(
+            "the player did not acknowledge {} event(s) within {:.1} s: they may be lost",
+            verdict.unacknowledged,
+            timeout.as_secs_f64()
+        );
+    }
+    if verdict.refused > 0 {
+        eprintln!(
+            "the player refused {} event(s): see the reasons above",
+            verdict.refused
+        );
     }
     if refused > 0 {
-        Outcome::Errors
-    } else {
+        eprintln!("{refused} event(s) were refused by the transport: the player's buffer was full");
+        safe = false;
+    }
+    if safe {
         Outcome::Clean
+    } else {
+        Outcome::Errors
+    }
+}
+
+/// The player's verdict on the events one `petrel send` delivered.
+struct Verdict {
+    delivered: u64,
+    /// Taken, and on the flight record.
+    on_record: u64,
+    /// Refused by the player.
+    refused: u64,
+    /// Taken, but not on the flight record (pending, or dropped by the recorder).
+    not_on_record: u64,
+    /// Never acknowledged.
+    unacknowledged: u64,
+    /// The latest refusals: sequence number and the player's reason.
+    refusals: Vec<(u64, String)>,
+}
+
+impl Verdict {
+    fn of(heard: &petrel_ipc::Acknowledgement, delivered: u64) -> Self {
+        let Some(ack) = &heard.ack else {
+            return Verdict {
+                delivered,
+                on_record: 0,
+                refused: 0,
+                not_on_record: 0,
+                unacknowledged: delivered,
+                refusals: Vec::new(),
+            };
+        };
+        // The sender is this process's own: every count of its account is about our events.
+        let not_on_record = ack.unrecorded + ack.pending;
+        Verdict {
+            delivered,
+            on_record: ack.taken.saturating_sub(not_on_record),
+            refused: ack.refused,
+            not_on_record,
+            unacknowledged: delivered.saturating_sub(ack.taken + ack.refused),
+            refusals: ack
+                .refusals
+                .iter()
+                .map(|r| (r.seq, r.reason.clone()))
+                .collect(),
+        }
+    }
+
+    fn is_clean(&self) -> bool {
+        self.on_record == self.delivered
+            && self.refused == 0
+            && self.not_on_record == 0
+            && self.unacknowledged == 0
+    }
+
+    /// One line per event for a single event; a summary and the refusals otherwise.
+    fn text(&self, origin: &str, event: &str) -> String {
+        let mut text = format!(
+            "verdict of the player on the {} event(s) of {origin}: {} taken and on record, {} refused, {} taken but not on record, {} unacknowledged\n",
+            self.delivered, self.on_record, self.refused, self.not_on_record, self.unacknowledged
+        );
+        for (seq, reason) in &self.refusals {
+            text.push_str(&format!(
+                "  `{event}` #{seq} refused by the player: {reason}\n"
+            ));
+        }
+        let unlisted = self.refused.saturating_sub(self.refusals.len() as u64);
+        if unlisted > 0 {
+            text.push_str(&format!(
+                "  and {unlisted} more refused by the player (the heartbeat lists the latest {})\n",
+                self.refusals.len()
+            ));
+        }
+        text
     }
 }
 
@@ -326,6 +440,18 @@ pub fn status(a: StatusArgs) -> Outcome {
         }
     }
     text.push_str(&format!("  counters: {}\n", doc["stats"]));
+    let recorder = &doc["recorder"];
+    match recorder["state"].as_str() {
+        Some("ok") => text.push_str("  flight recorder: ok\n"),
+        Some("none") | None => text.push_str("  flight recorder: none (--no-journal)\n"),
+        Some(state) => text.push_str(&format!(
+            "  flight recorder: {}: {} ({} records waiting in memory, {} entries lost); events are processed but not acknowledged\n",
+            state.to_uppercase(),
+            recorder["reason"].as_str().unwrap_or("?"),
+            recorder["backlog_records"],
+            recorder["lost_entries"],
+        )),
+    }
     if let Some(b) = &bridge_doc {
         text.push_str(&format!(
             "  CAN data server on `{}`: bus {}, {} frames ({} unknown, {} of a wrong length, {} error frames), {} events sent ({} waiting), {} commands ({} failed)\n",

@@ -169,6 +169,91 @@ fn dot_draws_the_mission_with_shared_global_places() {
 }
 
 #[test]
+fn dot_draws_each_instance_and_the_tree_of_nets() {
+    let language = repo()
+        .join("nets/tests/data/language")
+        .display()
+        .to_string();
+    let o = petrel(&["dot", &language]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let dot = stdout(&o);
+    assert!(
+        dot.contains("cluster_R1") && dot.contains("cluster_R2"),
+        "{dot}"
+    );
+    assert!(dot.contains("arrowhead=odot"), "{dot}");
+
+    let o = petrel(&["dot", &language, "--net", "ROBOT"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(!stdout(&o).contains("cluster_SYNC"));
+
+    let o = petrel(&["dot", &language, "--tree"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let tree = stdout(&o);
+    assert!(tree.contains("language: tree of nets"), "{tree}");
+    assert!(tree.contains("\"PHASES\" -> \"PHASES/TRANSIT\";"), "{tree}");
+    assert!(
+        tree.contains("\"SYNC\" -> \"PLAN\" [style=dashed, label=\"activate\"];"),
+        "{tree}"
+    );
+
+    // The tree is of the whole project: it does not take a net.
+    let o = petrel(&["dot", &language, "--tree", "--net", "R1"]);
+    assert_eq!(o.status.code(), Some(2));
+}
+
+#[test]
+fn verify_says_when_a_pnml_file_is_a_petrel_export() {
+    let out = tempfile::tempdir().unwrap();
+    let pnml = out.path().join("language.pnml").display().to_string();
+    let language = repo()
+        .join("nets/tests/data/language")
+        .display()
+        .to_string();
+    let o = petrel(&["export", "--pnml", &language, "-o", &pnml]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+
+    // The skeleton has no emptiness test: `SYNC.raise` marks `alarm` again and again.
+    let o = petrel(&["verify", &pnml]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = stderr(&o);
+    assert!(
+        err.starts_with(&format!("note: {pnml}: this file is a Petrel export")),
+        "{err}"
+    );
+    assert!(
+        err.contains("only its P/T skeleton is analysed")
+            && err.contains("no emptiness tests")
+            && err.contains("petrel verify DIR"),
+        "{err}"
+    );
+    assert!(err.contains("unbounded"), "{err}");
+
+    let o = petrel(&["verify", &pnml, "--format", "json"]);
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON");
+    assert_eq!(doc["petrel_export"], true);
+    assert!(doc["note"]
+        .as_str()
+        .is_some_and(|n| n.contains("P/T skeleton")));
+    assert!(
+        !stderr(&o).contains("note:"),
+        "JSON says it in the document"
+    );
+
+    // A plain P/T net gets no note.
+    let plain = repo()
+        .join("nets/tests/data/mcc/Sudoku-PT-AN01.pnml")
+        .display()
+        .to_string();
+    let o = petrel(&["verify", &plain]);
+    assert!(!stderr(&o).contains("Petrel export"), "{}", stderr(&o));
+    let o = petrel(&["verify", &plain, "--format", "json"]);
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON");
+    assert_eq!(doc["petrel_export"], false);
+    assert!(doc.get("note").is_none());
+}
+
+#[test]
 fn export_then_import_gives_back_the_same_project() {
     let out = tempfile::tempdir().unwrap();
     let pnml = out.path().join("uav.pnml");
@@ -379,7 +464,7 @@ fn check_reports_errors_in_the_can_rules_like_net_errors() {
     let dir = copy_project(&bench);
     // The DBC sits beside the bench project.
     std::fs::copy(
-        repo().join("can_bridge/tests/data/auv.dbc"),
+        repo().join("can_bridge/tests/data/auv/auv.dbc"),
         dir.path().join("auv.dbc"),
     )
     .unwrap();

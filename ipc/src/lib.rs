@@ -24,6 +24,8 @@
 //!   [`HeartbeatPublisher`], [`HeartbeatSubscriber`]), buffer sizes, accounting of every message.
 //! - [`reactor`] holds [`Reactor`] and [`WaitStrategy`] (block, spin, spin then block).
 //! - [`liveness`] tells nodes alive and dead, cleanup of dead ones, program status.
+//! - [`access`] puts a vehicle's files where only its user (and an optional group) can reach
+//!   them, and removes them when its last process leaves.
 //!
 //! ```no_run
 //! use petrel_ipc::{EventMsg, Participant, Reactor, Role, Value, Vehicle, WaitStrategy};
@@ -52,6 +54,7 @@
 
 #![warn(missing_docs)]
 
+pub mod access;
 pub mod liveness;
 pub mod naming;
 mod participant;
@@ -63,10 +66,11 @@ pub mod wire;
 /// dependency of your own, so that every crate of Petrel agrees on the version).
 pub use iceoryx2;
 
+pub use access::{AccessError, Group, GROUP_ENV, RUNTIME_DIR_ENV};
 pub use liveness::{
     cleanup_dead_nodes, dead_nodes, is_program_alive, list_nodes, program_status,
-    remove_vehicle_files, wait_acknowledged, CleanupReport, IsolatedVehicle, LivenessError,
-    NodeInfo, NodeStatus, ProgramChange, ProgramStatus, ProgramWatch,
+    remove_vehicle_files, wait_acknowledged, Acknowledgement, CleanupReport, IsolatedVehicle,
+    LivenessError, NodeInfo, NodeStatus, ProgramChange, ProgramStatus, ProgramWatch,
 };
 pub use naming::{NameError, Role, Vehicle};
 pub use participant::{Participant, ServiceFailure, SetupError};
@@ -77,4 +81,7 @@ pub use port::{
     SignalsSubscriber, Wakeups,
 };
 pub use reactor::{FdSource, Reactor, ReactorError, Ready, Source, WaitStrategy};
-pub use wire::{CallMsg, EventMsg, Heartbeat, MarkingMsg, Origin, SignalsMsg, Value, WireError};
+pub use wire::{
+    Ack, AckRefusal, CallMsg, EventMsg, Heartbeat, MarkingMsg, Origin, Recorder, RecorderState,
+    SignalsMsg, Value, WireError,
+};

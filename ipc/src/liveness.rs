@@ -2,12 +2,13 @@
 //!
 //! Every [`Participant`](crate::Participant) is an iceoryx2 node named after its role
 //! (`player`, `program/PLN`, ...). A process killed without warning (SIGKILL, a crash) leaves
-//! its node's files in `/dev/shm` and `/tmp/iceoryx2`; iceoryx2 sees that the node's owner is
-//! gone (its file lock was released) and reports it dead until someone removes the stale
-//! resources. `petrel play` calls [`cleanup_dead_nodes`] at start; the player turns a dead
+//! its node's files in `/dev/shm` and the vehicle's directory; iceoryx2 sees that the node's
+//! owner is gone (its file lock was released) and reports it dead until someone removes the
+//! stale resources. `petrel play` calls [`cleanup_dead_nodes`] at start; the player turns a dead
 //! program into a `program_lost(name)` event with [`program_status`].
 //!
-//! Only nodes of the given [`Vehicle`] are seen: its file prefix keeps the others apart.
+//! Only nodes of the given [`Vehicle`] are seen: its directory and session keep the others
+//! apart ([`access`](crate::access)).
 
 use std::fmt;
 use std::time::Duration;
@@ -62,6 +63,8 @@ pub enum LivenessError {
         /// Names of its nodes.
         nodes: Vec<String>,
     },
+    /// The vehicle's files could not be reached (see [`access`](crate::access)).
+    Access(crate::AccessError),
     /// A file could not be removed.
     Io {
         /// The file.
@@ -76,8 +79,10 @@ impl fmt::Display for LivenessError {
         match self {
             LivenessError::List { vehicle, error } => write!(
                 f,
-                "cannot list the processes of vehicle `{vehicle}` ({error:?}); check the permissions of /tmp/iceoryx2"
+                "cannot list the processes of vehicle `{vehicle}` ({error:?}); check the permissions of its directory (`{}` set, or the default)",
+                crate::RUNTIME_DIR_ENV
             ),
+            LivenessError::Access(e) => e.fmt(f),
             LivenessError::InUse { vehicle, nodes } => write!(
                 f,
                 "vehicle `{vehicle}` still has nodes ({}); stop its processes and clean up dead ones first",
@@ -89,6 +94,12 @@ impl fmt::Display for LivenessError {
 }
 
 impl std::error::Error for LivenessError {}
+
+impl From<crate::AccessError> for LivenessError {
+    fn from(e: crate::AccessError) -> Self {
+        LivenessError::Access(e)
+    }
+}
 
 fn info_of<V: NodeView>(view: &V, status: NodeStatus) -> NodeInfo {
     let details = view.details().as_ref();
@@ -107,7 +118,8 @@ fn visit(
     vehicle: &Vehicle,
     mut f: impl FnMut(NodeState<ipc::Service>),
 ) -> Result<(), LivenessError> {
-    Node::<ipc::Service>::list(vehicle.config(), |state| {
+    let session = vehicle.session()?;
+    Node::<ipc::Service>::list(session.config(), |state| {
         f(state);
         CallbackProgression::Continue
     })
@@ -305,10 +317,11 @@ impl ProgramWatch {
     }
 }
 
-/// Removes every file the vehicle's prefix still names once no node of the vehicle exists
-/// (iceoryx2 keeps a 16-byte global management segment per prefix in `/dev/shm` after the last
-/// node is gone). For tests and tools with a throw-away prefix; returns the number of files
-/// removed.
+/// Removes what iceoryx2 left of the vehicle (its shared memory in `/dev/shm`, its part of the
+/// vehicle's directory, the node counter iceoryx2 never removes) once no node of the vehicle
+/// exists. The vehicle's last process does as much when it leaves ([`access`](crate::access));
+/// this is for tests and tools that want it done now. Returns the number of files and
+/// directories removed.
 ///
 /// Refuses with [`LivenessError::InUse`] while any node of the vehicle, alive or dead, exists.
 /// Do not call it while a process of the vehicle may be starting.
@@ -320,48 +333,12 @@ pub fn remove_vehicle_files(vehicle: &Vehicle) -> Result<usize, LivenessError> {
             nodes: nodes.into_iter().map(|n| n.name).collect(),
         });
     }
-    let mut removed = 0;
-    let root = vehicle.config().global.root_path().to_string();
-    for dir in [
-        std::path::PathBuf::from("/dev/shm"),
-        std::path::PathBuf::from(root),
-    ] {
-        removed += remove_prefixed(&dir, vehicle.prefix())?;
-    }
-    Ok(removed)
-}
-
-fn remove_prefixed(dir: &std::path::Path, prefix: &str) -> Result<usize, LivenessError> {
-    let io = |path: &std::path::Path, e: std::io::Error| LivenessError::Io {
-        path: path.display().to_string(),
-        error: e.to_string(),
-    };
-    let entries = match std::fs::read_dir(dir) {
-        Ok(entries) => entries,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(0),
-        Err(e) => return Err(io(dir, e)),
-    };
-    let mut removed = 0;
-    for entry in entries {
-        let entry = entry.map_err(|e| io(dir, e))?;
-        let path = entry.path();
-        let file_type = entry.file_type().map_err(|e| io(&path, e))?;
-        if file_type.is_dir() {
-            removed += remove_prefixed(&path, prefix)?;
-        } else if entry.file_name().to_string_lossy().starts_with(prefix) {
-            match std::fs::remove_file(&path) {
-                Ok(()) => removed += 1,
-                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-                Err(e) => return Err(io(&path, e)),
-            }
-        }
-    }
-    Ok(removed)
+    Ok(vehicle.session()?.clear())
 }
 
 /// A vehicle with a file prefix of its own ([`Vehicle::isolated`]) whose files are removed when
 /// it is dropped, pass or fail: for tests and throw-away tools, so that nothing is left in
-/// `/dev/shm` or iceoryx2's directory. Drop it after the processes that use it are gone.
+/// `/dev/shm` or the vehicle's directory. Drop it after the processes that use it are gone.
 #[derive(Debug)]
 pub struct IsolatedVehicle(Vehicle);
 
@@ -390,40 +367,66 @@ impl Drop for IsolatedVehicle {
     }
 }
 
-/// Waits up to `grace` until the player's heartbeat says it has taken message `seq` of the
-/// sender `origin` (the sender's [`Origin`](crate::Origin) as text). True when it has.
+/// What the player said of one sender's events, as [`wait_acknowledged`] last heard it.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Acknowledgement {
+    /// The player's latest account of the sender; `None` when no heartbeat of the player
+    /// named it (no player, or one that never took anything from this sender).
+    pub ack: Option<crate::wire::Ack>,
+    /// The state of the player's flight recorder, as its latest heartbeat said.
+    pub recorder: crate::wire::Recorder,
+    /// Whether any heartbeat of the player was heard.
+    pub heard: bool,
+}
+
+impl Acknowledgement {
+    /// True when every message of the sender up to `seq` is settled: refused, or taken and on
+    /// the flight record, or counted as unrecorded.
+    pub fn settled(&self, seq: u64) -> bool {
+        self.ack.as_ref().is_some_and(|a| a.settles(seq))
+    }
+
+    /// True when every message up to `seq` is settled and the flight recorder lost none of the
+    /// sender's events: what the player took survives a crash of the player.
+    pub fn is_safe(&self, seq: u64) -> bool {
+        self.settled(seq) && self.ack.as_ref().is_some_and(|a| a.unrecorded == 0)
+    }
+}
+
+/// Waits up to `grace` until the player's heartbeat says that every message of sender
+/// `sender` (its [`Sender::sender_id`](crate::Sender::sender_id)) up to `seq` is settled, and
+/// returns what it last said.
 ///
 /// A sender's shared memory goes with its process: a message the player has not taken yet is
 /// lost if its sender exits. Every sender that leaves (`petrel send`, a program's
-/// `Program::close`, the CAN data server) waits here first. The
-/// player's heartbeat status is a JSON object whose `senders.<origin>.last_seq` is the newest
-/// sequence number taken from that sender.
+/// `Program::close`, the CAN data server) waits here first. The acknowledgement is the typed
+/// [`Ack`](crate::wire::Ack) the player's heartbeat carries for each sender, and a message is
+/// settled only once the player's flight recorder holds it (or, when the recorder had to drop
+/// it, counts it as unrecorded): [`Acknowledgement::is_safe`] tells the two apart.
 pub fn wait_acknowledged(
     beats: &crate::HeartbeatSubscriber,
-    origin: &str,
+    sender: u64,
     seq: u64,
     grace: Duration,
-) -> bool {
+) -> Acknowledgement {
     let deadline = std::time::Instant::now() + grace;
-    let mut taken = 0u64;
+    let mut heard = Acknowledgement::default();
     loop {
         // A heartbeat that cannot be read is one acknowledgement fewer: the next one comes
         // 100 ms later.
         let _ = beats.drain(|r| {
             if let Ok(rcv) = r {
                 if rcv.origin.as_str() == "player" {
-                    let doc: serde_json::Value =
-                        serde_json::from_str(&rcv.msg.status).unwrap_or_default();
-                    let last = doc["senders"][origin]["last_seq"].as_u64().unwrap_or(0);
-                    taken = taken.max(last);
+                    heard.heard = true;
+                    heard.recorder = rcv.msg.recorder.clone();
+                    if let Some(a) = rcv.msg.ack_for(sender) {
+                        heard.ack = Some(a.clone());
+                    }
                 }
             }
         });
-        if taken >= seq {
-            return true;
-        }
-        if std::time::Instant::now() >= deadline {
-            return false;
+        if heard.settled(seq) || std::time::Instant::now() >= deadline {
+            return heard;
         }
         std::thread::sleep(Duration::from_millis(5));
     }

@@ -1,16 +1,21 @@
 //! Names and isolation: which iceoryx2 services and nodes belong to one vehicle.
 //!
-//! A [`Vehicle`] names every service of one vehicle and carries the iceoryx2 configuration
-//! whose `global.prefix` keeps its files apart from every other vehicle's (and every other test
-//! run's) on the same machine. A [`Role`] names the node a process creates, so that liveness
-//! questions ("is program PLN alive?") can be answered from the node list.
+//! A [`Vehicle`] names every service of one vehicle, and its prefix keeps its files apart from
+//! every other vehicle's (and every other test run's) on the same machine: the prefix names
+//! the vehicle's own directory and session (see [`access`](crate::access), which also says who
+//! may use them). A [`Role`] names the node a process creates, so that liveness questions ("is
+//! program PLN alive?") can be answered from the node list.
 
 use std::fmt;
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::{SystemTime, UNIX_EPOCH};
 
 use iceoryx2::config::Config;
 use iceoryx2::prelude::{FileName, SemanticString};
+
+use crate::access::{AccessError, Group, Session};
 
 /// Longest vehicle name accepted.
 pub const MAX_VEHICLE_NAME_LEN: usize = 32;
@@ -125,11 +130,18 @@ pub fn check_program_name(name: &str) -> Result<(), NameError> {
 /// Every process of one vehicle must build its `Vehicle` with the same name and prefix; two
 /// vehicles (or two test runs) with different prefixes never see each other's services or nodes,
 /// even when their names are equal.
+///
+/// Building one does nothing on disk. The first use (joining, listing nodes) opens the
+/// vehicle's session ([`access`](crate::access)): its directory, its shared-memory prefix, and
+/// a lock saying this process is in; clones share it, and the last handle of the last process
+/// of the vehicle to go removes the vehicle's files.
 #[derive(Debug, Clone)]
 pub struct Vehicle {
     name: String,
     prefix: String,
     config: Config,
+    group: Option<Group>,
+    session: Arc<Mutex<Option<Arc<Session>>>>,
 }
 
 static ISOLATED_COUNTER: AtomicU32 = AtomicU32::new(0);
@@ -146,7 +158,8 @@ impl Vehicle {
     }
 
     /// The vehicle `name` with an explicit prefix, starting from an iceoryx2 configuration (for
-    /// instance one read with `Config::from_file`); its `global.prefix` is replaced by `prefix`.
+    /// instance one read with `Config::from_file`); its `global.prefix` is replaced by `prefix`,
+    /// and its root path and prefix by the session's when the vehicle is used.
     pub fn with_config(name: &str, prefix: &str, mut config: Config) -> Result<Self, NameError> {
         check_name("vehicle", name, MAX_VEHICLE_NAME_LEN, &[])?;
         check_name("prefix", prefix, MAX_PREFIX_LEN, &['.'])?;
@@ -159,7 +172,56 @@ impl Vehicle {
             name: name.to_owned(),
             prefix: prefix.to_owned(),
             config,
+            group: None,
+            session: Arc::new(Mutex::new(None)),
         })
+    }
+
+    /// The same vehicle, its files shared with `group` (for operator accounts): see
+    /// [`access`](crate::access). Without it, a process takes the group of `PETREL_GROUP`, or
+    /// the one the vehicle's directory already has. Give it before the vehicle is first used.
+    pub fn with_group(mut self, group: Group) -> Self {
+        self.group = Some(group);
+        self
+    }
+
+    /// The group given with [`with_group`](Self::with_group).
+    pub fn group(&self) -> Option<&Group> {
+        self.group.as_ref()
+    }
+
+    /// This process's membership of the vehicle, opened on first use.
+    pub(crate) fn session(&self) -> Result<Arc<Session>, AccessError> {
+        let mut slot = self.session.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(s) = slot.as_ref() {
+            return Ok(s.clone());
+        }
+        let session = Arc::new(Session::open(self)?);
+        *slot = Some(session.clone());
+        Ok(session)
+    }
+
+    /// The iceoryx2 configuration every node of this vehicle uses: [`config`](Self::config)
+    /// with the vehicle's directory as its root path and the session's prefix. Opens the
+    /// session.
+    pub fn effective_config(&self) -> Result<Config, AccessError> {
+        Ok(self.session()?.config().clone())
+    }
+
+    /// The vehicle's directory (iceoryx2's root path). Opens the session.
+    pub fn runtime_dir(&self) -> Result<PathBuf, AccessError> {
+        Ok(self.session()?.dir().to_path_buf())
+    }
+
+    /// The prefix of the session's files in `/dev/shm` (`pt<12 hex>_`). Opens the session.
+    pub fn shm_prefix(&self) -> Result<String, AccessError> {
+        Ok(self.session()?.shm_prefix().to_owned())
+    }
+
+    /// The group the vehicle's files are shared with, as the session found or made it. Opens
+    /// the session.
+    pub fn shared_gid(&self) -> Result<Option<u32>, AccessError> {
+        Ok(self.session()?.group())
     }
 
     /// A vehicle with a prefix unique to this call (process id, a per-process counter and the
@@ -186,7 +248,8 @@ impl Vehicle {
         &self.prefix
     }
 
-    /// The iceoryx2 configuration every node of this vehicle uses.
+    /// The iceoryx2 configuration the vehicle was built with, before its session gives it its
+    /// directory and prefix ([`effective_config`](Self::effective_config)).
     pub fn config(&self) -> &Config {
         &self.config
     }

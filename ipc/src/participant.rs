@@ -2,6 +2,7 @@
 //! it opens.
 
 use std::fmt;
+use std::sync::Arc;
 use std::thread;
 use std::time::Duration;
 
@@ -20,6 +21,7 @@ use iceoryx2::service::builder::publish_subscribe::{
 };
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 
+use crate::access::{AccessError, Session};
 use crate::naming::{NameError, Role, Vehicle};
 use crate::port::{
     CallReceiver, CallSender, EventReceiver, EventSender, HeartbeatPublisher, HeartbeatSubscriber,
@@ -76,7 +78,7 @@ impl ServiceFailure {
             | ServiceFailure::Notifier(NotifierCreateError::ExceedsMaxSupportedNotifiers) => {
                 "the service already has all the senders it accepts"
             }
-            _ => "check that /dev/shm and /tmp/iceoryx2 are writable and not full",
+            _ => "check that /dev/shm and the vehicle's directory are writable and not full",
         }
     }
 }
@@ -86,6 +88,8 @@ impl ServiceFailure {
 pub enum SetupError {
     /// A name was refused.
     Name(NameError),
+    /// The vehicle's files could not be set up or are not safe to use.
+    Access(AccessError),
     /// The iceoryx2 node could not be created.
     Node {
         /// The node's name.
@@ -111,9 +115,10 @@ impl fmt::Display for SetupError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             SetupError::Name(e) => e.fmt(f),
+            SetupError::Access(e) => e.fmt(f),
             SetupError::Node { node, error } => write!(
                 f,
-                "cannot create the iceoryx2 node `{node}` ({error:?}); check that /dev/shm and /tmp/iceoryx2 are writable"
+                "cannot create the iceoryx2 node `{node}` ({error:?}); check that /dev/shm and the vehicle's directory are writable"
             ),
             SetupError::Service { service, failure } => write!(
                 f,
@@ -136,6 +141,12 @@ impl From<NameError> for SetupError {
     }
 }
 
+impl From<AccessError> for SetupError {
+    fn from(e: AccessError) -> Self {
+        SetupError::Access(e)
+    }
+}
+
 /// One process of a vehicle: an iceoryx2 node named after its role, from which it opens ports.
 ///
 /// Create one per process (a node's ports are single-threaded: open them on the thread that
@@ -147,6 +158,9 @@ pub struct Participant {
     role: Role,
     origin: Origin,
     node: Node<ipc::Service>,
+    /// The process's membership of the vehicle: dropped after the node (fields drop in order),
+    /// so that the last one out finds nothing of its own in use.
+    session: Arc<Session>,
 }
 
 /// How many times a service is opened again when another process is creating or removing it at
@@ -196,19 +210,24 @@ impl Participant {
                 name: node_name.clone(),
             })
         })?;
+        let session = vehicle.session()?;
         let node = NodeBuilder::new()
             .name(&name)
-            .config(vehicle.config())
+            .config(session.config())
             .create::<ipc::Service>()
             .map_err(|error| SetupError::Node {
                 node: node_name.clone(),
                 error,
             })?;
+        // iceoryx2 leaves the vehicle's node counter open to every user: make it the
+        // vehicle's alone before going on.
+        session.secure()?;
         Ok(Participant {
             vehicle: vehicle.clone(),
             origin: Origin::new(&node_name),
             role,
             node,
+            session,
         })
     }
 
@@ -273,6 +292,22 @@ impl Participant {
     /// A publisher of heartbeats.
     pub fn heartbeat_publisher(&self) -> Result<HeartbeatPublisher, SetupError> {
         self.sender(self.vehicle.heartbeat_service(), HEARTBEAT)
+    }
+
+    /// Opens a heartbeat publisher that may send bodies of up to `max_body_len` bytes (at most
+    /// [`MAX_BODY_LEN`](crate::wire::MAX_BODY_LEN)) rather than the service's default of 1,024:
+    /// for the player, whose heartbeat carries its status and acknowledgements, sized from its
+    /// project. The limit is the publisher's own (its shared memory grows by powers of two as
+    /// needed); receivers read any body up to [`MAX_BODY_LEN`](crate::wire::MAX_BODY_LEN).
+    pub fn heartbeat_publisher_sized(
+        &self,
+        max_body_len: usize,
+    ) -> Result<HeartbeatPublisher, SetupError> {
+        let spec = ServiceSpec {
+            max_body_len: max_body_len.clamp(HEARTBEAT.max_body_len, crate::wire::MAX_BODY_LEN),
+            ..HEARTBEAT
+        };
+        self.sender(self.vehicle.heartbeat_service(), spec)
     }
 
     /// A subscriber to heartbeats (from the next heartbeat each sender sends).
@@ -381,10 +416,14 @@ impl Participant {
             .max_loaned_samples(2)
             .create()
             .map_err(|e| failed(ServiceFailure::Publisher(e)))?;
+        // With a group: the publisher's memory and connections are the group's before the
+        // notifier (created next) tells the receivers to connect.
+        self.session.share_now();
         let notifier = events
             .notifier_builder()
             .create()
             .map_err(|e| failed(ServiceFailure::Notifier(e)))?;
+        self.session.share_now();
         Ok(Sender::new(
             service.clone(),
             spec,
@@ -392,6 +431,7 @@ impl Participant {
             publisher,
             notifier,
             factory,
+            self.session.clone(),
         ))
     }
 
@@ -416,6 +456,14 @@ impl Participant {
             .buffer_size(spec.subscriber_buffer)
             .create()
             .map_err(|e| failed(ServiceFailure::Subscriber(e)))?;
-        Ok(Receiver::new(service.clone(), spec, subscriber, listener))
+        self.session.share_now();
+        Ok(Receiver::new(
+            service.clone(),
+            spec,
+            subscriber,
+            listener,
+            factory,
+            self.session.clone(),
+        ))
     }
 }

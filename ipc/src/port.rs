@@ -20,6 +20,7 @@ use std::cell::{Cell, RefCell};
 use std::collections::HashMap;
 use std::fmt;
 use std::marker::PhantomData;
+use std::sync::Arc;
 
 use iceoryx2::port::listener::{Listener, ListenerWaitError};
 use iceoryx2::port::notifier::Notifier;
@@ -29,6 +30,7 @@ use iceoryx2::port::{LoanError, ReceiveError};
 use iceoryx2::prelude::{ipc, EventId, PortFactory};
 use iceoryx2::service::port_factory::publish_subscribe;
 
+use crate::access::Session;
 use crate::wire::{self, Message, MsgHeader, MsgKind, Origin, WireError, WIRE_VERSION};
 
 /// Event id a sender notifies after delivering a sample.
@@ -304,6 +306,8 @@ pub struct Sender<M: Message> {
     next_seq: Cell<u64>,
     stats: Cell<SenderStats>,
     _kind: PhantomData<fn(&M)>,
+    /// The process's membership of the vehicle, kept while the port lives.
+    _session: Arc<Session>,
 }
 
 /// Sends events to the player (programs, CAN bridge, tools).
@@ -340,6 +344,7 @@ impl<M: Message> Sender<M> {
         publisher: Publisher<ipc::Service, [u8], MsgHeader>,
         notifier: Notifier<ipc::Service>,
         factory: publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>,
+        session: Arc<Session>,
     ) -> Self {
         let sender_id = fold_id(publisher.id().value());
         Sender {
@@ -353,6 +358,7 @@ impl<M: Message> Sender<M> {
             next_seq: Cell::new(1),
             stats: Cell::new(SenderStats::default()),
             _kind: PhantomData,
+            _session: session,
         }
     }
 
@@ -721,10 +727,13 @@ pub struct Receiver<M: Message> {
     spec: ServiceSpec,
     subscriber: Subscriber<ipc::Service, [u8], MsgHeader>,
     listener: Listener<ipc::Service>,
+    factory: publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>,
     stats: Cell<ReceiverStats>,
     senders: RefCell<HashMap<u64, SenderAccount>>,
     pending_wakeups: Cell<Wakeups>,
     _kind: PhantomData<fn() -> M>,
+    /// The process's membership of the vehicle, kept while the port lives.
+    _session: Arc<Session>,
 }
 
 /// Receives the events of the vehicle (the player).
@@ -753,16 +762,20 @@ impl<M: Message> Receiver<M> {
         spec: ServiceSpec,
         subscriber: Subscriber<ipc::Service, [u8], MsgHeader>,
         listener: Listener<ipc::Service>,
+        factory: publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>,
+        session: Arc<Session>,
     ) -> Self {
         Receiver {
             service,
             spec,
             subscriber,
             listener,
+            factory,
             stats: Cell::new(ReceiverStats::default()),
             senders: RefCell::new(HashMap::new()),
             pending_wakeups: Cell::new(Wakeups::default()),
             _kind: PhantomData,
+            _session: session,
         }
     }
 
@@ -793,6 +806,24 @@ impl<M: Message> Receiver<M> {
         let mut v: Vec<_> = self.senders.borrow().values().copied().collect();
         v.sort_by_key(|a| (a.origin.bytes(), a.sender));
         v
+    }
+
+    /// The ids of the senders connected to the service now ([`Sender::sender_id`]), in no
+    /// particular order. A sender whose process died stays listed until its node is cleaned up.
+    pub fn live_senders(&self) -> Vec<u64> {
+        let mut ids = Vec::new();
+        self.factory.dynamic_config().list_publishers(|p| {
+            ids.push(fold_id(p.publisher_id.value()));
+            iceoryx2::prelude::CallbackProgression::Continue
+        });
+        ids
+    }
+
+    /// Forgets what this receiver knows of sender `sender` (a sender that left): its account
+    /// no longer shows in [`senders`](Self::senders). Should it send again, its sequence
+    /// numbers are accounted from scratch.
+    pub fn forget_sender(&self, sender: u64) {
+        self.senders.borrow_mut().remove(&sender);
     }
 
     /// True when a sample waits in the buffer (a shared-memory read, no system call).

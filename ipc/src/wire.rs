@@ -14,10 +14,19 @@
 //! | events    | [`EventMsg`]  | programs, CAN bridge, tools to player  |
 //! | calls     | [`CallMsg`]   | player to one program                  |
 //! | marking   | [`MarkingMsg`]| player to monitors                     |
-//! | heartbeat | [`Heartbeat`] | anyone to anyone who listens           |
+//! | heartbeat | [`Heartbeat`] | anyone to anyone who listens; the player's carries its acknowledgements ([`Ack`]) |
 //! | signals   | [`SignalsMsg`]| CAN bridge to programs (latest values) |
 //!
 //! Events travel by **name**: programs do not know the player's event indices.
+//!
+//! **Acknowledgements.** A sender's shared memory goes with its process, so a sender waits for
+//! the player to say it has taken its events before it leaves. The player says so in its
+//! heartbeat, typed ([`Heartbeat::acks`], one [`Ack`] per sender: the last sequence number
+//! taken, the last one settled on the flight record, the counts of what was taken, refused and
+//! not recorded, the latest refusals with the player's reasons) and bounded ([`MAX_ACKS`]
+//! senders, the most recently active first; [`MAX_REFUSALS`] refusals of at most
+//! [`MAX_REASON_LEN`] bytes each), beside the flight recorder's state ([`Recorder`]). The JSON
+//! `status` is for people and tools only; nothing parses an acknowledgement out of it.
 //!
 //! Encoding never builds an intermediate buffer: [`encoded_len`] measures the body (bincode's
 //! size writer), the sender loans a slice of exactly that length and [`encode_into`] writes it
@@ -35,8 +44,19 @@ use iceoryx2::prelude::ZeroCopySend;
 
 /// Version of the wire format. It is written in every header, and it is part of the header's
 /// iceoryx2 type name, so a process built with another wire version cannot even open the
-/// services.
-pub const WIRE_VERSION: u16 = 1;
+/// services. Version 2: the heartbeat carries typed acknowledgements and the recorder's state.
+pub const WIRE_VERSION: u16 = 2;
+
+/// Most senders one heartbeat acknowledges (the most recently active first). The events
+/// service takes 32 senders at once; the rest is room for senders that just left.
+pub const MAX_ACKS: usize = 64;
+
+/// Most refusals one [`Ack`] lists (the latest).
+pub const MAX_REFUSALS: usize = 2;
+
+/// Longest reason (of a refusal, of the recorder's state) a heartbeat carries, in bytes; a
+/// longer one is cut on a character boundary.
+pub const MAX_REASON_LEN: usize = 160;
 
 /// Length of the origin field of a header, in bytes.
 pub const ORIGIN_LEN: usize = 32;
@@ -129,8 +149,178 @@ pub struct Heartbeat {
     /// A counter of work done (events processed, frames read...), to tell a stuck process from
     /// an idle one.
     pub progress: u64,
-    /// A short status word ("running", "catastrophic"...).
+    /// The sender's live status as JSON, for people and tools (`petrel status`).
     pub status: String,
+    /// The player's acknowledgement of each sender of events (empty in other heartbeats): at
+    /// most [`MAX_ACKS`], the most recently active first.
+    pub acks: Vec<Ack>,
+    /// The state of the player's flight recorder ([`RecorderState::None`] in other heartbeats).
+    pub recorder: Recorder,
+}
+
+impl Heartbeat {
+    /// The acknowledgement of sender `sender` ([`Sender::sender_id`](crate::Sender::sender_id)).
+    pub fn ack_for(&self, sender: u64) -> Option<&Ack> {
+        self.acks.iter().find(|a| a.sender == sender)
+    }
+
+    /// Cuts what the heartbeat carries to its bounds ([`MAX_ACKS`], [`MAX_REFUSALS`],
+    /// [`MAX_REASON_LEN`], [`ORIGIN_LEN`]), so that its encoded length never exceeds
+    /// [`Heartbeat::max_encoded_len`] of its status's length.
+    pub fn bound(&mut self) {
+        self.acks.truncate(MAX_ACKS);
+        for a in &mut self.acks {
+            cut_text(&mut a.origin, ORIGIN_LEN);
+            let extra = a.refusals.len().saturating_sub(MAX_REFUSALS);
+            a.refusals.drain(..extra);
+            for r in &mut a.refusals {
+                cut_text(&mut r.reason, MAX_REASON_LEN);
+            }
+        }
+        cut_text(&mut self.recorder.reason, MAX_REASON_LEN);
+    }
+
+    /// The largest encoded length of a bounded heartbeat (see [`Heartbeat::bound`]) whose status
+    /// is `status_len` bytes long: what a publisher must be able to send.
+    pub fn max_encoded_len(status_len: usize) -> usize {
+        // bincode writes a string as its length and its bytes: only the length matters.
+        let text = |n: usize| "x".repeat(n);
+        let worst = Heartbeat {
+            uptime_ms: u64::MAX,
+            period_ms: u32::MAX,
+            progress: u64::MAX,
+            status: String::new(),
+            acks: vec![
+                Ack {
+                    sender: u64::MAX,
+                    origin: text(ORIGIN_LEN),
+                    last_seq: u64::MAX,
+                    settled_seq: u64::MAX,
+                    received: u64::MAX,
+                    taken: u64::MAX,
+                    refused: u64::MAX,
+                    pending: u64::MAX,
+                    unrecorded: u64::MAX,
+                    missing: u64::MAX,
+                    refusals: vec![
+                        AckRefusal {
+                            seq: u64::MAX,
+                            reason: text(MAX_REASON_LEN),
+                        };
+                        MAX_REFUSALS
+                    ],
+                };
+                MAX_ACKS
+            ],
+            recorder: Recorder {
+                state: RecorderState::Failing,
+                reason: text(MAX_REASON_LEN),
+            },
+        };
+        // The status's length prefix is a varint of at most 9 bytes.
+        encoded_len(&worst).unwrap_or(MAX_BODY_LEN) + status_len + 9
+    }
+}
+
+/// Cuts `text` to at most `max` bytes, on a character boundary.
+pub fn cut_text(text: &mut String, max: usize) {
+    if text.len() > max {
+        let mut end = max;
+        while !text.is_char_boundary(end) {
+            end -= 1;
+        }
+        text.truncate(end);
+    }
+}
+
+/// The player's account of the events of one sender: what it took, refused and recorded.
+///
+/// For a sender, every message it delivered is, once the player has read it, either taken
+/// (queued in the engine) or refused (with a reason); a taken event is then settled on the
+/// flight record, or pending (not yet written: the recorder is failing), or unrecorded (the
+/// recorder had to drop it). An event is safe, surviving a crash of the player, once it is
+/// settled and was not unrecorded.
+#[derive(Debug, Clone, PartialEq, Eq, Default, Encode, Decode)]
+pub struct Ack {
+    /// The sending port's id ([`MsgHeader::sender`]).
+    pub sender: u64,
+    /// Its origin (at most [`ORIGIN_LEN`] bytes).
+    pub origin: String,
+    /// The newest sequence number the player took (taken or refused).
+    pub last_seq: u64,
+    /// Every message up to this sequence number is settled: refused, or taken and on the flight
+    /// record (flushed to the operating system), or counted in `unrecorded`. Without a journal
+    /// taking is settling.
+    pub settled_seq: u64,
+    /// Messages taken from the events buffer (taken + refused).
+    pub received: u64,
+    /// Events accepted into the engine's queue.
+    pub taken: u64,
+    /// Messages refused before the engine (unknown event, parameters, undecodable, after a
+    /// catastrophic event).
+    pub refused: u64,
+    /// Taken events not yet on the flight record (the recorder is failing and retries).
+    pub pending: u64,
+    /// Taken events the flight recorder could not keep: processed, but lost from the record.
+    pub unrecorded: u64,
+    /// Sequence numbers the player never received (refused by the transport: its buffer was
+    /// full).
+    pub missing: u64,
+    /// The latest refusals (at most [`MAX_REFUSALS`]), oldest first.
+    pub refusals: Vec<AckRefusal>,
+}
+
+impl Ack {
+    /// True when every message up to `seq` is settled (see [`Ack::settled_seq`]).
+    pub fn settles(&self, seq: u64) -> bool {
+        self.settled_seq >= seq
+    }
+}
+
+/// One message the player refused, and why (its refusal text).
+#[derive(Debug, Clone, PartialEq, Eq, Default, Encode, Decode)]
+pub struct AckRefusal {
+    /// The message's sequence number.
+    pub seq: u64,
+    /// The player's reason, at most [`MAX_REASON_LEN`] bytes.
+    pub reason: String,
+}
+
+/// The state of the player's flight recorder.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Encode, Decode)]
+pub enum RecorderState {
+    /// Not a player's heartbeat, or a player without a journal (`--no-journal`).
+    #[default]
+    None,
+    /// Every record written.
+    Ok,
+    /// Records cannot be written (a full disk...): they are kept in memory, not acknowledged,
+    /// and written once the recorder can again.
+    Failing,
+    /// The recorder could not keep what it could not write: records are dropped (unrecorded)
+    /// until it can write again, when it starts over from a checkpoint of the state.
+    Dropping,
+}
+
+impl RecorderState {
+    /// The state as a word (`none`, `ok`, `failing`, `dropping`), as `petrel status` shows it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            RecorderState::None => "none",
+            RecorderState::Ok => "ok",
+            RecorderState::Failing => "failing",
+            RecorderState::Dropping => "dropping",
+        }
+    }
+}
+
+/// The flight recorder's state, and why it fails (empty when it does not).
+#[derive(Debug, Clone, PartialEq, Eq, Default, Encode, Decode)]
+pub struct Recorder {
+    /// The state.
+    pub state: RecorderState,
+    /// The last error, at most [`MAX_REASON_LEN`] bytes.
+    pub reason: String,
 }
 
 /// The latest decoded values of the vehicle's CAN signals (`MESSAGE.signal`), published by the
@@ -233,7 +423,7 @@ impl Message for SignalsMsg {
 /// depend on the module path and changes with [`WIRE_VERSION`].
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("petrel::MsgHeader/v1")]
+#[type_name("petrel::MsgHeader/v2")]
 pub struct MsgHeader {
     /// The sending port's id, unique among the vehicle's live ports.
     pub sender: u64,
@@ -435,6 +625,26 @@ mod tests {
             period_ms: 100,
             progress: 3,
             status: "running".into(),
+            acks: vec![Ack {
+                sender: 9,
+                origin: "tool/send1".into(),
+                last_seq: 4,
+                settled_seq: 3,
+                received: 4,
+                taken: 3,
+                refused: 1,
+                pending: 1,
+                unrecorded: 0,
+                missing: 0,
+                refusals: vec![AckRefusal {
+                    seq: 2,
+                    reason: "unknown event `x`".into(),
+                }],
+            }],
+            recorder: Recorder {
+                state: RecorderState::Failing,
+                reason: "No space left on device".into(),
+            },
         });
         let signals = SignalsMsg {
             time_us: 7,
@@ -534,6 +744,45 @@ mod tests {
         raw[0] = b'a';
         raw[1] = 0xFF;
         assert_eq!(Origin::from_bytes(raw).as_str(), "a");
+    }
+
+    #[test]
+    fn a_bounded_heartbeat_never_exceeds_its_maximum() {
+        let long = "é".repeat(500);
+        let mut hb = Heartbeat {
+            status: "s".repeat(300),
+            acks: (0..200)
+                .map(|i| Ack {
+                    sender: u64::MAX - i,
+                    origin: long.clone(),
+                    last_seq: u64::MAX,
+                    settled_seq: u64::MAX,
+                    refusals: (0..10)
+                        .map(|_| AckRefusal {
+                            seq: u64::MAX,
+                            reason: long.clone(),
+                        })
+                        .collect(),
+                    ..Ack::default()
+                })
+                .collect(),
+            recorder: Recorder {
+                state: RecorderState::Dropping,
+                reason: long.clone(),
+            },
+            ..Heartbeat::default()
+        };
+        hb.bound();
+        assert_eq!(hb.acks.len(), MAX_ACKS);
+        assert!(hb.acks.iter().all(|a| a.refusals.len() == MAX_REFUSALS));
+        let len = encoded_len(&hb).unwrap();
+        assert!(len <= Heartbeat::max_encoded_len(300), "{len}");
+        let back: Heartbeat = {
+            let mut buf = vec![0u8; len];
+            encode_into(&hb, &mut buf).unwrap();
+            decode(&buf).unwrap()
+        };
+        assert_eq!(back.ack_for(u64::MAX).map(|a| a.origin.len()), Some(32));
     }
 
     #[test]

@@ -332,7 +332,7 @@ fn a_sigkilled_program_is_reported_dead_and_cleaned() {
     let rx = player.event_receiver().unwrap();
     let mut watch = ProgramWatch::new(&vehicle, ["GDD", "PLN"]);
     assert!(watch.check().unwrap().is_empty());
-    let before = shm_files(vehicle.prefix());
+    let before = shm_files(&vehicle.shm_prefix().unwrap());
     let mut child = ChildProcess::spawn(&vehicle, "sleeper");
     child.expect("READY");
     let changes = watch.check().unwrap();
@@ -349,7 +349,7 @@ fn a_sigkilled_program_is_reported_dead_and_cleaned() {
     let nodes = list_nodes(&vehicle).unwrap();
     let gdd = nodes.iter().find(|n| n.name == "program/GDD").unwrap();
     assert_eq!((gdd.status, gdd.pid), (NodeStatus::Alive, Some(pid)));
-    let with_child = shm_files(vehicle.prefix());
+    let with_child = shm_files(&vehicle.shm_prefix().unwrap());
     let child_files: Vec<_> = with_child.difference(&before).cloned().collect();
     assert!(!child_files.is_empty());
     assert_eq!(
@@ -374,7 +374,7 @@ fn a_sigkilled_program_is_reported_dead_and_cleaned() {
         (dead[0].name.as_str(), dead[0].pid),
         ("program/GDD", Some(pid))
     );
-    let left = shm_files(vehicle.prefix());
+    let left = shm_files(&vehicle.shm_prefix().unwrap());
     assert!(
         child_files.iter().any(|f| left.contains(f)),
         "the killed child left nothing behind?"
@@ -390,7 +390,7 @@ fn a_sigkilled_program_is_reported_dead_and_cleaned() {
     // The connection between the dead sender and the player goes when the player's side next
     // updates its connections (any receive does).
     assert!(rx.try_recv().unwrap().is_none());
-    let after = shm_files(vehicle.prefix());
+    let after = shm_files(&vehicle.shm_prefix().unwrap());
     let remaining: Vec<_> = child_files.iter().filter(|f| after.contains(*f)).collect();
     assert!(remaining.is_empty(), "not cleaned: {remaining:?}");
     // The player hears of the death through its event service.

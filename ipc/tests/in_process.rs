@@ -217,6 +217,7 @@ fn heartbeats_keep_the_latest() {
         period_ms: 100,
         progress,
         status: "running".into(),
+        ..Heartbeat::default()
     };
     assert!(matches!(
         beats.send(&beat(0)),
@@ -342,4 +343,59 @@ fn a_reactor_without_sources_is_a_timer() {
             Err(petrel_ipc::ReactorError::NothingToWaitFor)
         ));
     }
+}
+
+#[test]
+fn a_sized_heartbeat_publisher_carries_what_the_default_refuses() {
+    let vehicle = TestVehicle::new("auv");
+    let player = Participant::join(&vehicle, Role::Player).unwrap();
+    let small = player.heartbeat_publisher().unwrap();
+    let monitor = Participant::join(&vehicle, Role::tool("monitor").unwrap()).unwrap();
+    let listener = monitor.heartbeat_subscriber().unwrap();
+    let acks: Vec<petrel_ipc::Ack> = (0..petrel_ipc::wire::MAX_ACKS as u64)
+        .map(|i| petrel_ipc::Ack {
+            sender: i,
+            origin: format!("tool/send{i}"),
+            last_seq: i,
+            settled_seq: i,
+            ..petrel_ipc::Ack::default()
+        })
+        .collect();
+    let beat = Heartbeat {
+        status: "x".repeat(3000),
+        acks,
+        ..Heartbeat::default()
+    };
+    assert!(matches!(small.send(&beat), Err(SendError::Wire { .. })));
+    drop(small);
+    let max = Heartbeat::max_encoded_len(3000);
+    let sized = player.heartbeat_publisher_sized(max).unwrap();
+    sized.send(&beat).unwrap();
+    let got = listener.try_recv().unwrap().unwrap().msg;
+    assert_eq!(got.ack_for(63).map(|a| a.last_seq), Some(63));
+    assert_eq!(got, beat);
+}
+
+#[test]
+fn a_receiver_lists_its_live_senders_and_forgets_departed_ones() {
+    let vehicle = TestVehicle::new("auv");
+    let player = Participant::join(&vehicle, Role::Player).unwrap();
+    let events = player.event_receiver().unwrap();
+    let tool = Participant::join(&vehicle, Role::tool("a").unwrap()).unwrap();
+    let a = tool.event_sender().unwrap();
+    let b = tool.event_sender().unwrap();
+    let mut live = events.live_senders();
+    live.sort();
+    let mut expected = vec![a.sender_id(), b.sender_id()];
+    expected.sort();
+    assert_eq!(live, expected);
+    a.send(&EventMsg::new("x", vec![])).unwrap();
+    b.send(&EventMsg::new("x", vec![])).unwrap();
+    events.drain(|_| {}).unwrap();
+    assert_eq!(events.senders().len(), 2);
+    let gone = a.sender_id();
+    drop(a);
+    assert_eq!(events.live_senders(), vec![b.sender_id()]);
+    events.forget_sender(gone);
+    assert_eq!(events.senders().len(), 1);
 }

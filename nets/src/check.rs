@@ -41,36 +41,22 @@ pub fn check(project: &Project) -> (Option<c::CompiledProject>, Diagnostics) {
     };
     let compiled = ck.run();
     let mut d = ck.d;
-    apply_allows(project, &mut d, false);
+    apply_allows(project, &mut d, AllowPass::Check);
     d.sort();
     let compiled = if d.has_errors() { None } else { compiled };
     (compiled, d)
 }
 
-/// How an instance's parameters are bound.
-#[derive(Clone, Debug, PartialEq)]
-enum ParamBinding {
-    /// The net has no parameter.
-    None,
-    /// Fixed when the instance was made (manifest `[instances]`, or `children X(args)`).
-    Fixed(Vec<c::Value>),
-    /// Bound at each activation (`activate X(args)`).
-    AtActivation,
-}
-
-/// How the nets of a `children` line or a root are bound, known before their values are.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Mode {
-    NoParams,
-    Fixed,
-    AtActivation,
-}
+/// The values of an instance's leading parameters, fixed when it was made (manifest
+/// `[instances]`, or `children X(args)`); its other parameters are bound at each activation.
+type Fixed = Vec<c::Value>;
 
 /// A net that nobody declares as a child: a net of the project, or a manifest instance.
 struct Root {
     name: String,
     decl: usize,
-    mode: Mode,
+    /// How many leading parameters the instance fixes.
+    fixed: usize,
     /// The manifest instance, for its arguments.
     instance: Option<usize>,
 }
@@ -87,8 +73,22 @@ enum NetRef {
 struct ChildInfo<'p> {
     decl: usize,
     args: Option<&'p [Expr]>,
-    mode: Mode,
+    /// How many leading parameters the `children` line fixes.
+    fixed: usize,
 }
+
+/// A call whose program a net parameter names (`call self.moves.forward()`), resolved per
+/// instance: in the template's compiled call, `program` is [`PROGRAM_PARAM`] plus the
+/// parameter's index and `function` the index of this record.
+struct PendingCall {
+    function: Name,
+    /// The arguments' types as written (an int literal may still become a float).
+    types: Vec<Type>,
+    span: Span,
+}
+
+/// Marks, in a template, a call whose program is a parameter (see [`PendingCall`]).
+const PROGRAM_PARAM: u32 = u32::MAX / 2;
 
 /// A net's body, checked once: places, transitions whose net references are indices into
 /// `refs` (to be resolved per instance), parameters as [`c::Arg::NetParam`].
@@ -101,13 +101,15 @@ struct Template<'p> {
     globals_used: Vec<(u32, Span)>,
     /// `finish` appears in the body, at this place.
     finishes: Option<Span>,
+    /// Calls whose program a parameter names.
+    pending_calls: Vec<PendingCall>,
 }
 
 /// One instance, in project order.
 struct Inst {
     name: String,
     decl: usize,
-    binding: ParamBinding,
+    fixed: Fixed,
     parent: Option<(usize, u32)>,
     children: Vec<usize>,
 }
@@ -245,6 +247,7 @@ impl<'p> Checker<'p> {
         }
         let timers = self.timers_compiled();
         self.hierarchy();
+        self.cycles();
         self.find_roots();
 
         // Each body once.
@@ -279,6 +282,7 @@ impl<'p> Checker<'p> {
                     .iter()
                     .map(|p| (p.name.text.clone(), p.ty))
                     .collect(),
+                internal: e.internal,
             })
             .collect();
         let programs = m
@@ -296,6 +300,11 @@ impl<'p> Checker<'p> {
                             .iter()
                             .map(|p| (p.name.text.clone(), p.ty))
                             .collect(),
+                        answers: f
+                            .answers
+                            .iter()
+                            .filter_map(|a| self.answer(p, f, a))
+                            .collect(),
                     })
                     .collect(),
             })
@@ -310,8 +319,15 @@ impl<'p> Checker<'p> {
             start: Vec::new(),
             finals: Vec::new(),
             invariants: Vec::new(),
+            goals: Vec::new(),
+            progress_excludes: self.progress_excludes(),
         };
         project.start = self.start(&project, &root_inst);
+        project.goals = m
+            .goals
+            .iter()
+            .map(|f| self.final_marking(&project, f))
+            .collect();
         project.finals = m
             .finals
             .iter()
@@ -319,6 +335,50 @@ impl<'p> Checker<'p> {
             .collect();
         project.invariants = self.invariants(&project);
         Some(project)
+    }
+
+    /// An event a function declares it answers with: declared, and not `internal` (nets emit
+    /// those, programs do not).
+    fn answer(&mut self, p: &ProgramDecl, f: &FunctionDecl, a: &Name) -> Option<u32> {
+        let Some(&e) = self.events.get(a.as_str()) else {
+            self.unknown("E0203", "event", a, self.events.keys().copied().collect());
+            return None;
+        };
+        if self.event_decl(e).internal {
+            self.d.push(
+                Diagnostic::error(
+                    "E0419",
+                    a.span,
+                    format!(
+                        "`{}.{}` answers with `{a}`, which is internal: only nets emit it",
+                        p.name, f.name
+                    ),
+                )
+                .label("an internal event")
+                .help("remove `internal = true` from the event, or the event from the answers"),
+            );
+            return None;
+        }
+        Some(e)
+    }
+
+    /// The categories the progress check leaves out (default: catastrophic).
+    fn progress_excludes(&mut self) -> Vec<Category> {
+        let Some(list) = &self.p.manifest.progress_excludes else {
+            return vec![Category::Catastrophic];
+        };
+        let mut out = Vec::new();
+        for n in list {
+            match Category::from_keyword(&n.text) {
+                Some(c) => out.push(c),
+                None => self.d.push(
+                    Diagnostic::error("E0102", n.span, format!("unknown event category `{n}`"))
+                        .label("not a category")
+                        .help("the categories are catastrophic, safety, mission, communication and nominal"),
+                ),
+            }
+        }
+        out
     }
 
     fn timers_compiled(&mut self) -> Vec<c::Timer> {
@@ -384,6 +444,62 @@ impl<'p> Checker<'p> {
         }
     }
 
+    /// Reports the `children` lines that lead from a net back to itself (such nets would have
+    /// no root to be instantiated from).
+    fn cycles(&mut self) {
+        let n = self.decls.len();
+        let children: Vec<Vec<usize>> = self
+            .decls
+            .iter()
+            .map(|d| {
+                d.children()
+                    .filter_map(|c| self.decl_ids.get(c.net.as_str()).copied())
+                    .collect()
+            })
+            .collect();
+        // 0 unseen, 1 on the path, 2 done.
+        let mut state = vec![0u8; n];
+        for root in 0..n {
+            if state[root] != 0 {
+                continue;
+            }
+            let mut stack: Vec<(usize, usize)> = vec![(root, 0)];
+            state[root] = 1;
+            while let Some(&mut (v, ref mut k)) = stack.last_mut() {
+                if let Some(&w) = children[v].get(*k) {
+                    *k += 1;
+                    match state[w] {
+                        0 => {
+                            state[w] = 1;
+                            stack.push((w, 0));
+                        }
+                        1 => {
+                            let path: Vec<String> = stack
+                                .iter()
+                                .skip_while(|(x, _)| *x != w)
+                                .map(|(x, _)| self.decls[*x].name.text.clone())
+                                .collect();
+                            let name = &self.decls[w].name;
+                            self.d.push(
+                                Diagnostic::error(
+                                    "E0304",
+                                    name.span,
+                                    format!("the children of net `{name}` lead back to it: {} -> {name}", path.join(" -> ")),
+                                )
+                                .label("a net is its own descendant")
+                                .help("the `children` lines must form a tree: remove one of the lines that closes the cycle"),
+                            );
+                        }
+                        _ => {}
+                    }
+                } else {
+                    state[v] = 2;
+                    stack.pop();
+                }
+            }
+        }
+    }
+
     /// The nets nobody declares as a child, and the manifest's instances.
     fn find_roots(&mut self) {
         let m = &self.p.manifest;
@@ -444,11 +560,7 @@ impl<'p> Checker<'p> {
                         self.roots.push(Root {
                             name: inst.name.text.clone(),
                             decl: i,
-                            mode: if n.params.is_empty() {
-                                Mode::NoParams
-                            } else {
-                                Mode::Fixed
-                            },
+                            fixed: inst.args.len().min(n.params.len()),
                             instance: Some(k),
                         });
                     }
@@ -458,11 +570,7 @@ impl<'p> Checker<'p> {
                     self.roots.push(Root {
                         name: n.name.text.clone(),
                         decl: i,
-                        mode: if n.params.is_empty() {
-                            Mode::NoParams
-                        } else {
-                            Mode::AtActivation
-                        },
+                        fixed: 0,
                         instance: None,
                     });
                 }
@@ -470,33 +578,24 @@ impl<'p> Checker<'p> {
         }
     }
 
-    /// The binding of a root: an instance's arguments checked against its template.
-    fn root_binding(&mut self, r: usize) -> ParamBinding {
-        let (decl, mode, instance) = (
-            self.roots[r].decl,
-            self.roots[r].mode,
-            self.roots[r].instance,
-        );
+    /// The fixed parameters of a root: an instance's arguments checked against its template.
+    fn root_binding(&mut self, r: usize) -> Fixed {
+        let (decl, instance) = (self.roots[r].decl, self.roots[r].instance);
         let net = self.decls[decl];
-        match (mode, instance) {
-            (Mode::AtActivation, _) => ParamBinding::AtActivation,
-            (_, Some(k)) => {
+        match instance {
+            Some(k) => {
                 let inst = &self.p.manifest.instances[k];
                 let what = format!("net `{}`", net.name);
                 let values = self.constant_args(&what, &net.params, &inst.args, inst.name.span);
-                if net.params.is_empty() {
-                    ParamBinding::None
-                } else {
-                    values
-                        .map(ParamBinding::Fixed)
-                        .unwrap_or(ParamBinding::AtActivation)
-                }
+                // After an error the values are unknown: the instance fixes nothing.
+                values.unwrap_or_default()
             }
-            _ => ParamBinding::None,
+            None => Vec::new(),
         }
     }
 
-    /// Literal arguments (an instance's) checked against parameters.
+    /// Literal arguments (an instance's) checked against the leading parameters: an instance
+    /// fixes as many as it gives, the others are bound at activation.
     fn constant_args(
         &mut self,
         what: &str,
@@ -504,7 +603,7 @@ impl<'p> Checker<'p> {
         args: &[Expr],
         span: Span,
     ) -> Option<Vec<c::Value>> {
-        if params.len() != args.len() {
+        if args.len() > params.len() {
             self.arity(what, params, args.len(), span);
             return None;
         }
@@ -538,7 +637,8 @@ impl<'p> Checker<'p> {
         );
     }
 
-    /// Expands an instance and, recursively, its children (pre-order).
+    /// Expands an instance and, recursively, its children (pre-order). `fixed` holds the values
+    /// of its leading parameters; the rest are bound at activation.
     #[allow(clippy::too_many_arguments)]
     fn expand(
         &mut self,
@@ -546,7 +646,7 @@ impl<'p> Checker<'p> {
         insts: &mut Vec<Inst>,
         decl: usize,
         name: String,
-        binding: ParamBinding,
+        fixed: Fixed,
         parent: Option<(usize, u32)>,
         path: &mut Vec<usize>,
     ) -> usize {
@@ -554,36 +654,22 @@ impl<'p> Checker<'p> {
         insts.push(Inst {
             name: name.clone(),
             decl,
-            binding: binding.clone(),
+            fixed: fixed.clone(),
             parent,
             children: Vec::new(),
         });
+        // `cycles` reported any cycle; this only keeps the expansion finite.
         if path.contains(&decl) {
-            let n = &self.decls[decl].name;
-            if self.reported.insert((n.span.file.0, n.span.start, "E0304")) {
-                self.d.push(
-                    Diagnostic::error(
-                        "E0304",
-                        n.span,
-                        format!("the children of net `{n}` lead back to it"),
-                    )
-                    .label("a net is its own descendant")
-                    .help("the `children` lines must form a tree: remove one of the lines that closes the cycle"),
-                );
-            }
             return me;
         }
         path.push(decl);
         let own_places = self.decls[decl].places().count() as u32;
         for (k, ch) in templates[decl].children.iter().enumerate() {
-            let child_binding = match (ch.mode, ch.args) {
-                (Mode::NoParams, _) => ParamBinding::None,
-                (Mode::AtActivation, _) => ParamBinding::AtActivation,
-                (Mode::Fixed, Some(args)) => match self.child_args(decl, &binding, ch, args) {
-                    Some(v) => ParamBinding::Fixed(v),
-                    None => ParamBinding::AtActivation,
-                },
-                (Mode::Fixed, None) => ParamBinding::AtActivation,
+            let child_fixed = match ch.args {
+                Some(args) if ch.fixed > 0 => {
+                    self.child_args(decl, &fixed, ch, args).unwrap_or_default()
+                }
+                _ => Vec::new(),
             };
             let child_name = format!("{name}/{}", self.decls[ch.decl].name);
             let id = self.expand(
@@ -591,7 +677,7 @@ impl<'p> Checker<'p> {
                 insts,
                 ch.decl,
                 child_name,
-                child_binding,
+                child_fixed,
                 Some((me, own_places + k as u32)),
                 path,
             );
@@ -606,7 +692,7 @@ impl<'p> Checker<'p> {
     fn child_args(
         &mut self,
         parent_decl: usize,
-        parent: &ParamBinding,
+        parent: &Fixed,
         ch: &ChildInfo<'p>,
         args: &[Expr],
     ) -> Option<Vec<c::Value>> {
@@ -619,9 +705,9 @@ impl<'p> Checker<'p> {
                         .params
                         .iter()
                         .position(|q| q.name.text == n.text)?;
-                    match parent {
-                        ParamBinding::Fixed(values) => out.push(convert(&values[i], p.ty)?),
-                        _ => {
+                    match parent.get(i) {
+                        Some(value) => out.push(convert(value, p.ty)?),
+                        None => {
                             if self.reported.insert((n.span.file.0, n.span.start, "E0415")) {
                                 self.d.push(
                                     Diagnostic::error(
@@ -660,66 +746,205 @@ impl<'p> Checker<'p> {
                 NetRef::Root(k) => root_inst.get(k).copied().unwrap_or(me) as c::NetId,
             }
         };
-        let fixed = match &inst.binding {
-            ParamBinding::Fixed(v) => Some(v.as_slice()),
-            _ => None,
-        };
-        let transitions = t
-            .transitions
-            .iter()
-            .map(|tr| {
-                let mut tr = tr.clone();
-                for a in &mut tr.actions {
-                    match a {
-                        c::Action::Activate { net, args } => {
-                            *net = resolve(*net);
-                            fold_args(args, fixed);
-                        }
-                        c::Action::Deactivate(net) => *net = resolve(*net),
-                        c::Action::Emit { target, args, .. } => {
-                            if let Some(n) = target {
-                                *n = resolve(*n);
+        let fixed = inst.fixed.as_slice();
+        let mut transitions = Vec::new();
+        for tr in &t.transitions {
+            let mut tr = tr.clone();
+            for a in &mut tr.actions {
+                if let c::Action::Call {
+                    program,
+                    function,
+                    args,
+                } = a
+                {
+                    if *program >= PROGRAM_PARAM {
+                        let param = (*program - PROGRAM_PARAM) as usize;
+                        let pending = &t.pending_calls[*function as usize];
+                        fold_args(args, fixed);
+                        match self.program_of(
+                            decl,
+                            &inst.name,
+                            fixed.get(param),
+                            param,
+                            pending,
+                            args,
+                        ) {
+                            Some((p, f)) => {
+                                *program = p;
+                                *function = f;
                             }
-                            fold_args(args, fixed);
-                        }
-                        c::Action::Call { args, .. } => fold_args(args, fixed),
-                        c::Action::StartTimer { after, .. } => {
-                            if let (c::TimerDuration::NetParamSeconds(i), Some(values)) =
-                                (&*after, fixed)
-                            {
-                                *after = c::TimerDuration::Millis(seconds_to_millis(
-                                    &values[*i as usize],
-                                ));
+                            // Reported; the instance keeps a call that is never compiled.
+                            None => {
+                                *program = 0;
+                                *function = 0;
                             }
                         }
-                        c::Action::CancelTimer(_) | c::Action::Finish => {}
+                        continue;
                     }
                 }
-                if let Some(g) = tr.guard.take() {
-                    tr.guard = match fold_guard(g, fixed) {
-                        c::Guard::Const(true) => None,
-                        g => Some(g),
-                    };
+                match a {
+                    c::Action::Activate { net, args } => {
+                        *net = resolve(*net);
+                        fold_args(args, fixed);
+                    }
+                    c::Action::Deactivate(net) => *net = resolve(*net),
+                    c::Action::Emit { target, args, .. } => {
+                        if let Some(n) = target {
+                            *n = resolve(*n);
+                        }
+                        fold_args(args, fixed);
+                    }
+                    c::Action::Call { args, .. } => fold_args(args, fixed),
+                    c::Action::StartTimer { after, .. } => {
+                        if let c::TimerDuration::NetParamSeconds(i) = &*after {
+                            let i = *i as usize;
+                            *after = match fixed.get(i) {
+                                Some(v) => c::TimerDuration::Millis(seconds_to_millis(v)),
+                                None => c::TimerDuration::NetParamSeconds((i - fixed.len()) as u32),
+                            };
+                        }
+                    }
+                    c::Action::CancelTimer(_) | c::Action::Finish => {}
                 }
-                tr
-            })
-            .collect();
+            }
+            if let Some(g) = tr.guard.take() {
+                tr.guard = match fold_guard(g, fixed) {
+                    c::Guard::Const(true) => None,
+                    g => Some(g),
+                };
+            }
+            transitions.push(tr);
+        }
         c::Net {
             name: inst.name.clone(),
             template: decl.name.text.clone(),
-            params: match inst.binding {
-                ParamBinding::AtActivation => decl
-                    .params
-                    .iter()
-                    .map(|p| (p.name.text.clone(), p.ty))
-                    .collect(),
-                _ => Vec::new(),
-            },
+            params: decl
+                .params
+                .iter()
+                .skip(inst.fixed.len())
+                .map(|p| (p.name.text.clone(), p.ty))
+                .collect(),
             places: t.places.clone(),
             transitions,
             children: inst.children.iter().map(|&c| c as c::NetId).collect(),
             parent: inst.parent.map(|(p, i)| (p as c::NetId, i)),
         }
+    }
+
+    /// The program and function of `call self.PARAM.f(args)` in one instance, its arguments
+    /// (parameters already folded) converted to the function's types; errors reported once.
+    fn program_of(
+        &mut self,
+        decl: &NetDecl,
+        instance: &str,
+        value: Option<&c::Value>,
+        param: usize,
+        pending: &PendingCall,
+        args: &mut [c::Arg],
+    ) -> Option<(u32, u32)> {
+        let pname = &decl.params[param].name;
+        let program = match value {
+            Some(c::Value::Text(t)) => t.clone(),
+            _ => {
+                if self
+                    .reported
+                    .insert((pending.span.file.0, pending.span.start, "E0418"))
+                {
+                    self.d.push(
+                        Diagnostic::error(
+                            "E0418",
+                            pending.span,
+                            format!("in net `{instance}`, `self.{pname}` is not fixed: the program it names must be known before the mission"),
+                        )
+                        .label("a program named by a parameter bound at activation")
+                        .help(format!("fix `{pname}` in the instance (manifest [instances], or the parent's `children` line)")),
+                    );
+                }
+                return None;
+            }
+        };
+        let report = |ck: &mut Self, code: &'static str, msg: String, help: String| {
+            if ck
+                .reported
+                .insert((pending.span.file.0, pending.span.start, code))
+            {
+                ck.d.push(
+                    Diagnostic::error(code, pending.span, msg)
+                        .label(format!(
+                            "in net `{instance}`, `self.{pname}` is \"{program}\""
+                        ))
+                        .help(help),
+                );
+            }
+        };
+        let Some(&pid) = self.programs.get(program.as_str()) else {
+            let hint = suggest(
+                &program,
+                self.programs.keys().copied(),
+                Candidates::Declared,
+            );
+            report(self, "E0204", format!("unknown program `{program}`"), hint);
+            return None;
+        };
+        let pdecl = &self.p.manifest.programs[pid as usize];
+        let Some(fid) = pdecl
+            .functions
+            .iter()
+            .position(|f| f.name.text == pending.function.text)
+        else {
+            report(
+                self,
+                "E0205",
+                format!("program `{program}` has no function `{}`", pending.function),
+                format!(
+                    "declare it in [programs.{program}.functions], or fix the instance's `{pname}`"
+                ),
+            );
+            return None;
+        };
+        let params = &pdecl.functions[fid].params;
+        if params.len() != args.len() {
+            report(
+                self,
+                "E0401",
+                format!(
+                    "function `{program}.{}` takes {} argument(s), {} given",
+                    pending.function,
+                    params.len(),
+                    args.len()
+                ),
+                "every program a parameter may name must take the same arguments".into(),
+            );
+            return None;
+        }
+        for ((p, a), written) in params.iter().zip(args.iter_mut()).zip(&pending.types) {
+            let ty = match a {
+                c::Arg::Literal(v) => v.ty(),
+                _ => *written,
+            };
+            if ty == p.ty {
+                continue;
+            }
+            match a {
+                c::Arg::Literal(c::Value::Int(i)) if p.ty == Type::Float => {
+                    *a = c::Arg::Literal(c::Value::Float(*i as f64));
+                }
+                _ => {
+                    report(
+                        self,
+                        "E0402",
+                        format!(
+                            "parameter `{}` of function `{program}.{}` is {}, {ty} given",
+                            p.name, pending.function, p.ty
+                        ),
+                        "every program a parameter may name must take the same argument types"
+                            .into(),
+                    );
+                    return None;
+                }
+            }
+        }
+        Some((pid, fid as u32))
     }
 
     fn globals_compiled(
@@ -809,6 +1034,7 @@ impl<'p> Checker<'p> {
                         continue;
                     }
                     if !project.nets[id as usize].params.is_empty() {
+                        // Its parameters (or those its instance leaves) come at activation.
                         self.d.push(
                             Diagnostic::error(
                                 "E0412",
@@ -1050,22 +1276,11 @@ impl<'p> Checker<'p> {
                 continue;
             };
             let child = self.decls[k];
-            let mode = match &ch.args {
-                _ if child.params.is_empty() => {
-                    if ch.args.as_ref().is_some_and(|a| !a.is_empty()) {
-                        self.arity(
-                            &format!("net `{}`", child.name),
-                            &[],
-                            ch.args.as_ref().map_or(0, Vec::len),
-                            ch.net.span,
-                        );
-                    }
-                    Mode::NoParams
-                }
-                None => Mode::AtActivation,
+            let fixed = match &ch.args {
+                None => 0,
                 Some(args) => {
                     self.child_args_typed(net, child, args, ch.net.span);
-                    Mode::Fixed
+                    args.len().min(child.params.len())
                 }
             };
             places.insert(format!("{}.done", ch.net), cplaces.len() as u32);
@@ -1076,7 +1291,7 @@ impl<'p> Checker<'p> {
             children.push(ChildInfo {
                 decl: k,
                 args: ch.args.as_deref(),
-                mode,
+                fixed,
             });
         }
         let mut t = Template {
@@ -1086,6 +1301,7 @@ impl<'p> Checker<'p> {
             children,
             globals_used: Vec::new(),
             finishes: None,
+            pending_calls: Vec::new(),
         };
         for tr in net.transitions() {
             let compiled = self.transition(net, &places, tr, &mut t);
@@ -1114,7 +1330,8 @@ impl<'p> Checker<'p> {
     /// The types of a `children X(args)` line: literals, or the parent's parameters.
     fn child_args_typed(&mut self, parent: &NetDecl, child: &NetDecl, args: &[Expr], span: Span) {
         let what = format!("net `{}`", child.name);
-        if child.params.len() != args.len() {
+        // The arguments fix the leading parameters; the others are bound at activation.
+        if args.len() > child.params.len() {
             self.arity(&what, &child.params, args.len(), span);
             return;
         }
@@ -1211,21 +1428,23 @@ impl<'p> Checker<'p> {
         Some(idx as u32)
     }
 
-    /// The parameters of a referenced net as an activation must give them, and how it is bound.
-    fn target_params(&self, t: &Template<'p>, r: u32) -> (Mode, &'p [Param], String) {
-        match t.refs[r as usize] {
-            NetRef::SelfNet => (Mode::NoParams, &[], "self".into()),
+    /// The parameters a referenced net takes at activation (those its instance does not fix),
+    /// whether it has others, and its name.
+    fn target_params(&self, t: &Template<'p>, r: u32) -> (&'p [Param], bool, String) {
+        let (decl, fixed, name) = match t.refs[r as usize] {
+            NetRef::SelfNet => return (&[], false, "self".into()),
             NetRef::Child(k) => {
                 let ch = &t.children[k];
                 let decl = self.decls[ch.decl];
-                (ch.mode, &decl.params, decl.name.text.clone())
+                (decl, ch.fixed, decl.name.text.clone())
             }
             NetRef::Root(k) => {
                 let root = &self.roots[k];
-                let decl = self.decls[root.decl];
-                (root.mode, &decl.params, root.name.clone())
+                (self.decls[root.decl], root.fixed, root.name.clone())
             }
-        }
+        };
+        let fixed = fixed.min(decl.params.len());
+        (&decl.params[fixed..], fixed > 0, name)
     }
 
     fn places(
@@ -1538,38 +1757,26 @@ impl<'p> Checker<'p> {
         Some(match a {
             Action::Activate { net, args, span } => {
                 let r = self.net_ref(s.net, tpl, net, false)?;
-                let (mode, params, target) = self.target_params(tpl, r);
-                let what = format!("the activation of net `{target}`");
-                match mode {
-                    Mode::AtActivation => {
-                        let args = self.args(s, &what, params, args, *span)?;
-                        c::Action::Activate { net: r, args }
-                    }
-                    _ => {
-                        if !args.is_empty() {
-                            self.d.push(
-                                Diagnostic::error(
-                                    "E0401",
-                                    *span,
-                                    format!(
-                                        "net `{target}` takes no argument when it is activated"
-                                    ),
-                                )
-                                .label(if mode == Mode::Fixed {
-                                    "its parameters are fixed by its instance".to_string()
-                                } else {
-                                    "it has no parameter".to_string()
-                                })
-                                .help(format!("write `activate {target}`")),
-                            );
-                            return None;
-                        }
-                        c::Action::Activate {
-                            net: r,
-                            args: Vec::new(),
-                        }
-                    }
+                let (params, some_fixed, target) = self.target_params(tpl, r);
+                if params.is_empty() && !args.is_empty() {
+                    self.d.push(
+                        Diagnostic::error(
+                            "E0401",
+                            *span,
+                            format!("net `{target}` takes no argument when it is activated"),
+                        )
+                        .label(if some_fixed {
+                            "its parameters are fixed by its instance".to_string()
+                        } else {
+                            "it has no parameter".to_string()
+                        })
+                        .help(format!("write `activate {target}`")),
+                    );
+                    return None;
                 }
+                let what = format!("the activation of net `{target}`");
+                let args = self.args(s, &what, params, args, *span)?;
+                c::Action::Activate { net: r, args }
             }
             Action::Deactivate(n) => c::Action::Deactivate(self.net_ref(s.net, tpl, n, true)?),
             Action::Finish(span) => {
@@ -1621,6 +1828,55 @@ impl<'p> Checker<'p> {
                 c::Action::StartTimer {
                     timer: timer?,
                     after,
+                }
+            }
+            Action::Call {
+                program,
+                function,
+                args,
+                span,
+            } if program.text.starts_with("self.") => {
+                // The program a parameter names: resolved per instance, which must fix it.
+                let name = &program.text["self.".len()..];
+                let param = Name {
+                    text: name.to_string(),
+                    span: program.span,
+                };
+                let Some(i) = s.net.params.iter().position(|p| p.name.text == name) else {
+                    self.unknown_param(s.net, &param);
+                    return None;
+                };
+                if s.net.params[i].ty != Type::Text {
+                    self.d.push(
+                        Diagnostic::error(
+                            "E0402",
+                            program.span,
+                            format!(
+                                "parameter `{name}` of net `{}` is {}: it cannot name a program",
+                                s.net.name, s.net.params[i].ty
+                            ),
+                        )
+                        .label("not a text")
+                        .help("a program is named by a text parameter: `net ROBOT(moves: text)`"),
+                    );
+                    return None;
+                }
+                let mut compiled = Vec::new();
+                let mut types = Vec::new();
+                for a in args {
+                    let (arg, ty) = self.operand(s, a)?;
+                    compiled.push(arg);
+                    types.push(ty);
+                }
+                tpl.pending_calls.push(PendingCall {
+                    function: function.clone(),
+                    types,
+                    span: *span,
+                });
+                c::Action::Call {
+                    program: PROGRAM_PARAM + i as u32,
+                    function: (tpl.pending_calls.len() - 1) as u32,
+                    args: compiled,
                 }
             }
             Action::Call {
@@ -1816,11 +2072,14 @@ impl<'p> Checker<'p> {
             Some(v) => Some(c::Arg::Literal(v)),
             None => {
                 let found = match a {
+                    Expr::Int(..) if p.ty == Type::Float => {
+                        "an int that no float holds exactly (above 2^53)"
+                    }
                     Expr::Int(..) => "an int",
                     Expr::Float(..) => "a float",
                     Expr::Bool(..) => "a bool",
                     Expr::Text(..) => "a text",
-                    Expr::List(..) => "a list that is not a list of numbers",
+                    Expr::List(..) => "a list that is not a list of numbers (each exactly a float)",
                     Expr::Var(_) | Expr::SelfParam(_) => "a name",
                 };
                 self.mismatch(what, p, a.span(), &format!("this is {found}"));
@@ -1875,13 +2134,19 @@ fn seconds_to_millis(v: &c::Value) -> u64 {
     }
 }
 
-fn fold_arg(a: &mut c::Arg, fixed: Option<&[c::Value]>) {
-    if let (c::Arg::NetParam(i), Some(values)) = (&*a, fixed) {
-        *a = c::Arg::Literal(values[*i as usize].clone());
+/// A net parameter fixed by the instance becomes its value; the others are renumbered among the
+/// activation arguments (which hold only the parameters the instance leaves).
+fn fold_arg(a: &mut c::Arg, fixed: &[c::Value]) {
+    if let c::Arg::NetParam(i) = &*a {
+        let i = *i as usize;
+        *a = match fixed.get(i) {
+            Some(v) => c::Arg::Literal(v.clone()),
+            None => c::Arg::NetParam((i - fixed.len()) as u32),
+        };
     }
 }
 
-fn fold_args(args: &mut [c::Arg], fixed: Option<&[c::Value]>) {
+fn fold_args(args: &mut [c::Arg], fixed: &[c::Value]) {
     for a in args {
         fold_arg(a, fixed);
     }
@@ -1889,7 +2154,7 @@ fn fold_args(args: &mut [c::Arg], fixed: Option<&[c::Value]>) {
 
 /// A guard with an instance's fixed parameters replaced by their values, and what is then
 /// constant computed.
-fn fold_guard(g: c::Guard, fixed: Option<&[c::Value]>) -> c::Guard {
+fn fold_guard(g: c::Guard, fixed: &[c::Value]) -> c::Guard {
     use c::Guard as G;
     match g {
         G::Const(b) => G::Const(b),
@@ -1999,7 +2264,11 @@ pub fn resolve_formula(
 pub fn literal(e: &Expr, ty: Type) -> Option<c::Value> {
     Some(match (e, ty) {
         (Expr::Int(v, _), Type::Int) => c::Value::Int(*v),
-        (Expr::Int(v, _), Type::Float) => c::Value::Float(*v as f64),
+        // An integer where a float is expected converts only when the float holds it exactly
+        // (every integer up to 2^53 does; 2^53 + 1 would silently become 2^53).
+        (Expr::Int(v, _), Type::Float) if (*v as f64) as i128 == i128::from(*v) => {
+            c::Value::Float(*v as f64)
+        }
         (Expr::Float(v, _), Type::Float) => c::Value::Float(*v),
         (Expr::Bool(b, _), Type::Bool) => c::Value::Bool(*b),
         (Expr::Text(s, _), Type::Text) => c::Value::Text(s.clone()),
@@ -2017,15 +2286,26 @@ pub fn literal(e: &Expr, ty: Type) -> Option<c::Value> {
     })
 }
 
+/// Which pass of [`apply_allows`] this is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AllowPass {
+    /// The checker's: silences, and reports an `@allow` of a code that is not a warning's
+    /// (W0106).
+    Check,
+    /// Silences the warnings added since (a verification that did not finish), nothing more.
+    FilterOnly,
+    /// The last, once the verification's warnings are in: silences, and reports an `@allow`
+    /// that silenced nothing (W0105).
+    Final,
+}
+
 /// The warnings an `@allow` stands for, and the `@allow`s that stand for nothing.
 ///
 /// An `@allow(CODE)` before a transition or a place silences the warnings of that code whose
 /// location is the item's name; before a net, those located at the net's name or any of its
-/// items. The checker's pass (`final_pass` false) also reports an `@allow` of a code that is not
-/// a warning's (W0106); the last pass, once the verification's warnings are in too, reports an
-/// `@allow` that silenced nothing (W0105).
-pub fn apply_allows(project: &Project, d: &mut Diagnostics, final_pass: bool) {
-    let judged_all = final_pass;
+/// items.
+pub fn apply_allows(project: &Project, d: &mut Diagnostics, pass: AllowPass) {
+    let (final_pass, judged_all) = (pass != AllowPass::Check, pass == AllowPass::Final);
     struct Allowed<'a> {
         allow: &'a Allow,
         covers: Vec<Span>,

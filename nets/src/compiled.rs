@@ -276,6 +276,8 @@ pub struct Event {
     pub category: Category,
     /// Parameter names and types, in order.
     pub params: Vec<(String, Type)>,
+    /// Only the nets emit it.
+    pub internal: bool,
 }
 
 /// A program function.
@@ -285,6 +287,8 @@ pub struct Function {
     pub name: String,
     /// Parameter names and types, in order.
     pub params: Vec<(String, Type)>,
+    /// The events the program answers a call with (empty: not declared).
+    pub answers: Vec<EventId>,
 }
 
 /// A software program.
@@ -327,6 +331,10 @@ pub struct CompiledProject {
     pub finals: Vec<Vec<(NetId, PlaceRef)>>,
     /// Invariants: what must hold in every stable state.
     pub invariants: Vec<Invariant>,
+    /// Markings that count as ends for the progress check (besides `finals`).
+    pub goals: Vec<Vec<(NetId, PlaceRef)>>,
+    /// Categories whose events the progress check does not count on the way to an end.
+    pub progress_excludes: Vec<Category>,
 }
 
 impl CompiledProject {

@@ -147,25 +147,56 @@ impl Diagnostics {
             .sort_by_key(|d| d.span.map(|s| (0, s.file.0, s.start)).unwrap_or((1, 0, 0)));
     }
 
-    /// Renders every finding for people, followed by a summary line.
+    /// Renders the findings for people, followed by a summary line: the first
+    /// [`MAX_HUMAN`] in full, then one line counting the rest ("... and N more errors").
+    ///
+    /// Linear in the size of the sources and the number of findings: each file's line table is
+    /// built once for the whole report (not once per finding), and a finding on a line longer
+    /// than [`LONG_LINE`] shows a window of that line around its caret rather than the whole
+    /// line, so ten thousand bad characters on one line do not print that line ten thousand
+    /// times.
     pub fn render_human(&self, sources: &SourceMap) -> String {
         let mut out = String::new();
-        for d in &self.list {
-            out.push_str(&render_one(d, sources));
+        let mut cache = ariadne_cache(sources);
+        for d in self.list.iter().take(MAX_HUMAN) {
+            out.push_str(&render_one(d, sources, &mut cache));
         }
         let (e, w) = (self.error_count(), self.warning_count());
         let plural = |n: usize, s: &str| format!("{n} {s}{}", if n == 1 { "" } else { "s" });
+        if self.list.len() > MAX_HUMAN {
+            let shown = &self.list[..MAX_HUMAN];
+            let shown_e = shown
+                .iter()
+                .filter(|d| d.severity == Severity::Error)
+                .count();
+            let (more_e, more_w) = (e - shown_e, w - (MAX_HUMAN - shown_e));
+            let mut more = Vec::new();
+            if more_e > 0 {
+                more.push(plural(more_e, "more error"));
+            }
+            if more_w > 0 {
+                more.push(plural(more_w, "more warning"));
+            }
+            let _ = writeln!(
+                out,
+                "... and {} not shown (the first {MAX_HUMAN} findings are shown; `--format json` lists up to {MAX_JSON})",
+                more.join(" and ")
+            );
+        }
         if e + w > 0 {
             let _ = writeln!(out, "{}, {}", plural(e, "error"), plural(w, "warning"));
         }
         out
     }
 
-    /// Renders every finding as one JSON document for tools.
+    /// Renders the findings as one JSON document for tools: `errors` and `warnings` count them
+    /// all, `diagnostics` lists the first [`MAX_JSON`], and `omitted` says how many more there
+    /// are.
     pub fn to_json(&self, sources: &SourceMap) -> serde_json::Value {
         let list: Vec<_> = self
             .list
             .iter()
+            .take(MAX_JSON)
             .map(|d| {
                 let (file, start, end) = match d.span {
                     Some(s) if (s.file.0 as usize) < sources.len() => {
@@ -195,10 +226,21 @@ impl Diagnostics {
         serde_json::json!({
             "errors": self.error_count(),
             "warnings": self.warning_count(),
+            "omitted": self.list.len().saturating_sub(MAX_JSON),
             "diagnostics": list,
         })
     }
 }
+
+/// How many findings [`Diagnostics::render_human`] prints in full: past a hundred, a person
+/// fixes the first ones and runs the check again, and the rest would only bury them.
+pub const MAX_HUMAN: usize = 100;
+
+/// How many findings [`Diagnostics::to_json`] lists; the counts cover them all.
+pub const MAX_JSON: usize = 1000;
+
+/// A source line longer than this many bytes is shown as a window around the caret.
+pub const LONG_LINE: usize = 240;
 
 impl IntoIterator for Diagnostics {
     type Item = Diagnostic;
@@ -208,7 +250,39 @@ impl IntoIterator for Diagnostics {
     }
 }
 
-fn render_one(d: &Diagnostic, sources: &SourceMap) -> String {
+/// A file as ariadne knows it: shown by its name, told apart by its index (two files may
+/// share a name).
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+struct SourceId(u32, std::sync::Arc<str>);
+
+impl std::fmt::Display for SourceId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.1)
+    }
+}
+
+/// Every file's line table, built once per report.
+fn ariadne_cache(sources: &SourceMap) -> impl ariadne::Cache<SourceId> + '_ {
+    ariadne::sources(
+        sources
+            .files()
+            .map(|(id, f)| (SourceId(id.0, f.name.as_str().into()), f.text.as_str()))
+            .collect::<Vec<_>>(),
+    )
+}
+
+fn severity_word(s: Severity) -> &'static str {
+    match s {
+        Severity::Error => "Error",
+        Severity::Warning => "Warning",
+    }
+}
+
+fn render_one(
+    d: &Diagnostic,
+    sources: &SourceMap,
+    cache: &mut impl ariadne::Cache<SourceId>,
+) -> String {
     use ariadne::{CharSet, Config, IndexType, Label, Report, ReportKind};
     let kind = match d.severity {
         Severity::Error => ReportKind::Error,
@@ -220,10 +294,7 @@ fn render_one(d: &Diagnostic, sources: &SourceMap) -> String {
             let mut out = format!(
                 "[{}] {}: {}\n",
                 d.code,
-                match d.severity {
-                    Severity::Error => "Error",
-                    Severity::Warning => "Warning",
-                },
+                severity_word(d.severity),
                 d.message
             );
             if let Some(h) = &d.help {
@@ -232,15 +303,26 @@ fn render_one(d: &Diagnostic, sources: &SourceMap) -> String {
             return out;
         }
     };
-    let file = sources.get(span.file);
-    let name = file.name.clone();
-    let range = byte_range(&file.text, span);
+    let related: Vec<(Span, &str)> = d
+        .related
+        .iter()
+        .filter(|(s, _)| !s.is_synthetic() && (s.file.0 as usize) < sources.len())
+        .map(|(s, t)| (*s, t.as_str()))
+        .collect();
     let label = if d.label.is_empty() {
-        d.message.clone()
+        d.message.as_str()
     } else {
-        d.label.clone()
+        d.label.as_str()
     };
-    let mut report = Report::build(kind, (name.clone(), range.clone()))
+    if std::iter::once(span)
+        .chain(related.iter().map(|(s, _)| *s))
+        .any(|s| on_long_line(sources, s))
+    {
+        return render_long(d, span, label, &related, sources);
+    }
+    let id = |s: Span| SourceId(s.file.0, sources.get(s.file).name.as_str().into());
+    let range = byte_range(&sources.get(span.file).text, span);
+    let mut report = Report::build(kind, (id(span), range.clone()))
         .with_config(
             Config::default()
                 .with_color(false)
@@ -249,18 +331,10 @@ fn render_one(d: &Diagnostic, sources: &SourceMap) -> String {
         )
         .with_code(d.code)
         .with_message(&d.message)
-        .with_label(Label::new((name.clone(), range)).with_message(label));
-    let mut cache: Vec<(String, &str)> = vec![(name.clone(), file.text.as_str())];
-    for (i, (s, text)) in d.related.iter().enumerate() {
-        if s.is_synthetic() || (s.file.0 as usize) >= sources.len() {
-            continue;
-        }
-        let f = sources.get(s.file);
-        if !cache.iter().any(|(n, _)| n == &f.name) {
-            cache.push((f.name.clone(), f.text.as_str()));
-        }
+        .with_label(Label::new((id(span), range)).with_message(label));
+    for (i, (s, text)) in related.iter().enumerate() {
         report = report.with_label(
-            Label::new((f.name.clone(), byte_range(&f.text, *s)))
+            Label::new((id(*s), byte_range(&sources.get(s.file).text, *s)))
                 .with_message(text)
                 .with_order(i as i32 + 1),
         );
@@ -270,8 +344,80 @@ fn render_one(d: &Diagnostic, sources: &SourceMap) -> String {
     }
     let mut buf = Vec::new();
     // Writing into a Vec cannot fail; ariadne only errors on I/O.
-    let _ = report.finish().write(ariadne::sources(cache), &mut buf);
+    let _ = report.finish().write(cache, &mut buf);
     String::from_utf8_lossy(&buf).into_owned()
+}
+
+/// True when `span` starts on a line longer than [`LONG_LINE`] bytes.
+fn on_long_line(sources: &SourceMap, span: Span) -> bool {
+    sources
+        .get(span.file)
+        .line_bounds(span.start as usize)
+        .len()
+        > LONG_LINE
+}
+
+/// The same report as ariadne's, for a finding on a long line: the line is cut to a window
+/// around each caret (what a person reads anyway), so the report's size does not grow with
+/// the line's.
+fn render_long(
+    d: &Diagnostic,
+    span: Span,
+    label: &str,
+    related: &[(Span, &str)],
+    sources: &SourceMap,
+) -> String {
+    let mut out = format!(
+        "[{}] {}: {}\n",
+        d.code,
+        severity_word(d.severity),
+        d.message
+    );
+    let mut excerpt = |s: Span, text: &str, first: bool| {
+        let f = sources.get(s.file);
+        let at = f.line_col(s.start as usize);
+        let line = f.line_text(at.line);
+        // Columns count characters: cut on characters, never inside one.
+        let before = 40usize;
+        let from = at.column.saturating_sub(1).saturating_sub(before);
+        let chars: String = line.chars().skip(from).take(before + 80).collect();
+        let total = line.chars().count();
+        let lead = if from > 0 { "..." } else { "" };
+        let tail = if from + chars.chars().count() < total {
+            "..."
+        } else {
+            ""
+        };
+        let width = at.line.to_string().len();
+        let pad = " ".repeat(width + 2);
+        let corner = if first { "," } else { ":" };
+        let _ = writeln!(out, "{pad}{corner}-[ {}:{at} ]", f.name);
+        let _ = writeln!(out, "{pad}|");
+        let _ = writeln!(out, " {} | {lead}{chars}{tail}", at.line);
+        let caret_col = lead.len() + (at.column - 1 - from);
+        let _ = writeln!(
+            out,
+            "{pad}| {}^ {text} (line {} is {total} characters long: a part is shown)",
+            " ".repeat(caret_col),
+            at.line
+        );
+    };
+    excerpt(span, label, true);
+    for (s, text) in related {
+        excerpt(*s, text, false);
+    }
+    let width = sources
+        .get(span.file)
+        .line_col(span.start as usize)
+        .line
+        .to_string()
+        .len();
+    if let Some(h) = &d.help {
+        let pad = " ".repeat(width + 2);
+        let _ = writeln!(out, "{pad}| \n{pad}| Help: {h}");
+    }
+    let _ = writeln!(out, "{}'", "-".repeat(width + 2));
+    out
 }
 
 /// A non-empty range inside `text` on character boundaries, whatever the span says: a span at

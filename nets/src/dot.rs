@@ -1,17 +1,28 @@
 //! Graphviz DOT drawing of a project's nets: what `petrel dot` prints.
 //!
 //! The drawing is for people reading a mission, so it follows Petri-net conventions: places are
-//! circles (filled when they hold a token), transitions are boxes that say what fires them and
-//! what they do, and each net is a cluster. Global places are drawn once, outside every cluster,
-//! so a reader sees at a glance which nets share them.
+//! circles (filled when they hold a token), transitions are boxes that say what fires them (the
+//! event, the guard) and what they do, and each net is a cluster. Global places are drawn once,
+//! outside every cluster, so a reader sees at a glance which nets share them.
+//!
+//! The nets drawn are the nets the project **runs** ([`crate::instances`]): a template with two
+//! instances is drawn twice, as `R1` and `R2`, each with its own places, both reaching the same
+//! global places; a child is drawn once per parent (`MISSION/TRANSIT`), its completion place
+//! `TRANSIT.done` in the parent's cluster with the `finish` arc that marks it. An emptiness test
+//! (`not p`) is an arc ending in a small circle (`arrowhead=odot`, the inhibitor arc of the
+//! literature). [`project_tree_dot`] draws the structure alone: one box per net, the tree of
+//! `children` lines, and `activate` edges.
 //!
 //! The model is drawn as written, before checking: an unresolved place name becomes a dashed red
 //! node rather than an error, so the drawing helps to find the mistake instead of refusing.
 //! Output follows declaration order and nothing else, so the same project always gives the same
 //! text and golden tests stay stable.
 
-use crate::fmt::{format_action, format_transition_header, format_trigger};
-use crate::model::{NetDecl, Project, TransitionDecl};
+use crate::fmt::{
+    format_action, format_expr, format_guard, format_transition_header, format_trigger,
+};
+use crate::instances::{instances, Instance, Instances};
+use crate::model::{Action, NetDecl, Project, TransitionDecl};
 use std::collections::BTreeSet;
 use std::fmt::Write as _;
 
@@ -24,76 +35,84 @@ const MARKED_FILL: &str = "#303030";
 const DORMANT_FILL: &str = "#b8b8b8";
 /// Outline, fill and arc colour of global places, so shared places stand out from local ones.
 const GLOBAL_COLOR: &str = "#1f6fb2";
+/// Colour of completion places and of the `finish` arcs that mark them: the link between a
+/// child and its parent.
+const COMPLETION_COLOR: &str = "#2a7f3f";
 /// Colour of unresolved place names: they are mistakes to fix.
 const UNKNOWN_COLOR: &str = "#d62728";
 /// Prefix of global place ids; a net with this name gets a suffixed prefix so ids stay unique.
 const GLOBAL_PREFIX: &str = "global";
 
-/// The Graphviz DOT text of `project`'s nets, or of the one net named `only_net`.
+/// The Graphviz DOT text of the nets `project` runs, or of those named `only_net`.
 ///
-/// Every net is a cluster labelled with its name and whether the mission starts with it active.
-/// Node ids are `NET.place` for places, `NET.t.transition` for transitions, `global.NAME` for
-/// global places and `NET.unknown.NAME` for names that resolve to no place (identifiers have no
-/// dots, so these never collide). With `only_net`, the drawing keeps that net's cluster and the
-/// global places it uses.
+/// Every net (a plain net, an instance of a template, a child instance) is a cluster labelled
+/// with its name, its template and arguments when it has any, and whether the mission starts
+/// with it active. Node ids are `NET.place` for places, `NET.done.CHILD` for completion places,
+/// `NET.t.transition` for transitions, `global.NAME` for global places and `NET.unknown.NAME`
+/// for names that resolve to no place (identifiers have no dots, so these never collide). With
+/// `only_net` (a net's name, or a template's: all its instances), the drawing keeps those
+/// clusters and the global places they use.
 ///
 /// Fails only when `only_net` names no net of the project; the message lists the nets there are.
 pub fn project_to_dot(project: &Project, only_net: Option<&str>) -> Result<String, String> {
-    let prefixes = net_prefixes(project);
-    // Keep each net with its unique id prefix; the filter then drops the other nets.
-    let nets: Vec<(&NetDecl, &str)> = project
-        .nets()
-        .zip(prefixes.iter().map(String::as_str))
-        .filter(|(net, _)| only_net.is_none_or(|name| net.name.text == name))
+    let decls: Vec<&NetDecl> = project.nets().collect();
+    let expanded = instances(project);
+    let prefixes = net_prefixes(&expanded);
+    let chosen: Vec<usize> = (0..expanded.list.len())
+        .filter(|&i| {
+            only_net.is_none_or(|name| {
+                let inst = &expanded.list[i];
+                inst.name == name || decls[inst.net].name.text == name
+            })
+        })
         .collect();
     if let Some(name) = only_net {
-        if nets.is_empty() {
-            return Err(no_such_net(project, name));
+        if chosen.is_empty() {
+            return Err(no_such_net(&expanded, &decls, name));
         }
     }
 
     let globals = global_names(project);
-    let drawn: Vec<NetDrawing> = nets
-        .iter()
-        .map(|(net, prefix)| draw_net(project, net, prefix, &globals))
-        .collect();
+    let ctx = Context {
+        project,
+        decls: &decls,
+        expanded: &expanded,
+        prefixes: &prefixes,
+        drawn: chosen.iter().copied().collect(),
+        globals: &globals,
+    };
+    let drawn: Vec<NetDrawing> = chosen.iter().map(|&i| ctx.draw_net(i)).collect();
 
     // Every global place in the whole drawing; with one net, only those it touches.
     let used: BTreeSet<&str> = drawn
         .iter()
         .flat_map(|d| d.globals_used.iter().map(String::as_str))
         .collect();
-    let shown_globals: Vec<(&str, u32)> = globals
+    let shown_globals: Vec<&Global> = globals
         .iter()
-        .filter(|(name, _)| only_net.is_none() || used.contains(name))
-        .copied()
+        .filter(|g| only_net.is_none() || used.contains(g.name))
         .collect();
 
     let mut out = String::new();
-    let title = match only_net {
+    let mut title = match only_net {
         None => project.manifest.name.clone(),
         Some(name) => format!("{}, net {name}", project.manifest.name),
     };
-    let _ = writeln!(out, "digraph {} {{", q(&project.manifest.name));
-    let _ = writeln!(
-        out,
-        "  graph [rankdir=LR, fontname={}, fontsize=12, label={}, labelloc=t];",
-        q(FONT),
-        q(&title)
-    );
-    let _ = writeln!(out, "  node [fontname={}, fontsize=10];", q(FONT));
-    let _ = writeln!(
-        out,
-        "  edge [fontname={}, fontsize=10, arrowsize=0.7];",
-        q(FONT)
-    );
+    if expanded.truncated {
+        let _ = write!(
+            title,
+            " (the first {} nets only)",
+            crate::instances::MAX_INSTANCES
+        );
+    }
+    header(&mut out, &project.manifest.name, &title, "LR", "");
 
     if !shown_globals.is_empty() {
         // Declared at top level, before any cluster, so Graphviz keeps them outside all of them.
         out.push('\n');
         out.push_str("  // Global places, shared by every net.\n");
-        for (name, tokens) in &shown_globals {
-            out.push_str(&global_node(name, *tokens));
+        for g in &shown_globals {
+            out.push_str(&global_node(g));
         }
     }
 
@@ -118,28 +137,204 @@ pub fn project_to_dot(project: &Project, only_net: Option<&str>) -> Result<Strin
     Ok(out)
 }
 
-/// The error for a net name that matches no net, listing the nets there are.
-fn no_such_net(project: &Project, name: &str) -> String {
-    let names: Vec<&str> = project.nets().map(|n| n.name.text.as_str()).collect();
-    if names.is_empty() {
-        format!("no net named `{name}`; the project has no nets")
+/// The Graphviz DOT text of the tree of nets (Figure 8 of the ProCoSA paper): one box per net
+/// the project runs, a solid arrow from each parent to each child its `children` lines declare,
+/// and a dashed arrow labelled `activate` from each net to each net one of its transitions
+/// activates. Nets active at start are filled. The places and transitions are left out, so a
+/// mission of forty nets reads at a glance; [`project_to_dot`] draws them.
+pub fn project_tree_dot(project: &Project) -> String {
+    let decls: Vec<&NetDecl> = project.nets().collect();
+    let expanded = instances(project);
+    let prefixes = net_prefixes(&expanded);
+    let start: BTreeSet<&str> = project.manifest.start.iter().map(|s| s.as_str()).collect();
+    let mut out = String::new();
+    let mut title = format!("{}: tree of nets", project.manifest.name);
+    if expanded.truncated {
+        let _ = write!(
+            title,
+            " (the first {} nets only)",
+            crate::instances::MAX_INSTANCES
+        );
+    }
+    header(
+        &mut out,
+        &project.manifest.name,
+        &title,
+        "TB",
+        "shape=box, style=rounded, ",
+    );
+    if !expanded.list.is_empty() {
+        out.push_str("\n  // Nets: filled when active at start.\n");
+    }
+    for (inst, prefix) in expanded.list.iter().zip(&prefixes) {
+        let decl = decls[inst.net];
+        let origin = origin(inst, decl);
+        // An instance says its template on a second line; a net bound at activation its
+        // parameters after its name.
+        let label = match origin.strip_prefix(" = ") {
+            Some(template) => format!("{}\\n{}", escape(&inst.name), escape(template)),
+            None => escape(&format!("{}{origin}", inst.name)),
+        };
+        let style = if start.contains(inst.name.as_str()) {
+            ", style=\"rounded,filled\", fillcolor=\"#d8d8d8\""
+        } else {
+            ""
+        };
+        let _ = writeln!(out, "  {} [label=\"{label}\"{style}];", q(prefix));
+    }
+
+    let mut tree = Vec::new();
+    for (i, inst) in expanded.list.iter().enumerate() {
+        for &c in &inst.children {
+            tree.push((i, c));
+        }
+    }
+    if !tree.is_empty() {
+        out.push_str("\n  // Children: each parent runs its own instance of each child.\n");
+        for &(p, c) in &tree {
+            let _ = writeln!(out, "  {} -> {};", q(&prefixes[p]), q(&prefixes[c]));
+        }
+    }
+
+    let mut activations: Vec<(usize, usize)> = Vec::new();
+    for (i, inst) in expanded.list.iter().enumerate() {
+        for t in decls[inst.net].transitions() {
+            for a in &t.actions {
+                let Action::Activate { net, .. } = &a.action else {
+                    continue;
+                };
+                let target = resolve_net(&expanded, &decls, i, &net.text);
+                if let Some(target) = target.filter(|t| !activations.contains(&(i, *t))) {
+                    activations.push((i, target));
+                }
+            }
+        }
+    }
+    if !activations.is_empty() {
+        out.push_str(
+            "\n  // Activations: `activate NET` in a transition of the net at the tail.\n",
+        );
+        for &(from, to) in &activations {
+            // Along a parent-child edge the tree already places the nodes: this one must not
+            // pull on the layout a second time.
+            let constraint = if tree.contains(&(from, to)) {
+                ", constraint=false"
+            } else {
+                ""
+            };
+            let _ = writeln!(
+                out,
+                "  {} -> {} [style=dashed, label=\"activate\"{constraint}];",
+                q(&prefixes[from]),
+                q(&prefixes[to])
+            );
+        }
+    }
+    out.push_str("}\n");
+    out
+}
+
+/// The graph's opening: name, layout direction, fonts, and the nodes' default shape (empty, or
+/// attributes ending in `, `).
+fn header(out: &mut String, name: &str, title: &str, rankdir: &str, node: &str) {
+    let _ = writeln!(out, "digraph {} {{", q(name));
+    let _ = writeln!(
+        out,
+        "  graph [rankdir={rankdir}, fontname={}, fontsize=12, label={}, labelloc=t];",
+        q(FONT),
+        q(title)
+    );
+    let _ = writeln!(out, "  node [{node}fontname={}, fontsize=10];", q(FONT));
+    let _ = writeln!(
+        out,
+        "  edge [fontname={}, fontsize=10, arrowsize=0.7];",
+        q(FONT)
+    );
+}
+
+/// The net a net name in an action of instance `from` means: a child of its net (its own
+/// instance of it), else a net nobody declares as a child. `self` and unknown names mean none.
+fn resolve_net(expanded: &Instances, decls: &[&NetDecl], from: usize, name: &str) -> Option<usize> {
+    let inst = &expanded.list[from];
+    if let Some(pos) = decls[inst.net].children().position(|c| c.net.text == name) {
+        return inst
+            .children
+            .iter()
+            .copied()
+            .find(|&c| expanded.list[c].parent.map(|p| p.1) == Some(pos));
+    }
+    expanded
+        .list
+        .iter()
+        .position(|i| i.parent.is_none() && i.name == name)
+}
+
+/// What a net is made from, for its label: nothing for a plain net; `(p: type)` for a net
+/// bound at activation; ` = TEMPLATE(p: type = value)` for an instance.
+fn origin(inst: &Instance, decl: &NetDecl) -> String {
+    if decl.params.is_empty() {
+        return String::new();
+    }
+    let params: Vec<String> = match &inst.args {
+        Some(args) => decl
+            .params
+            .iter()
+            .enumerate()
+            .map(|(k, p)| match args.get(k) {
+                Some(a) => format!("{}: {} = {}", p.name, p.ty, format_expr(a)),
+                None => format!("{}: {}", p.name, p.ty),
+            })
+            .collect(),
+        None => decl
+            .params
+            .iter()
+            .map(|p| format!("{}: {}", p.name, p.ty))
+            .collect(),
+    };
+    if inst.args.is_none() && inst.name == decl.name.text {
+        format!("({})", params.join(", "))
     } else {
-        format!("no net named `{name}`; the nets are: {}", names.join(", "))
+        format!(" = {}({})", decl.name, params.join(", "))
     }
 }
 
-/// A unique id prefix per net, in dispatch order.
+/// The error for a net name that matches no net, listing the nets there are.
+fn no_such_net(expanded: &Instances, decls: &[&NetDecl], name: &str) -> String {
+    let names: Vec<&str> = expanded.list.iter().map(|i| i.name.as_str()).collect();
+    if names.is_empty() {
+        return format!("no net named `{name}`; the project has no nets");
+    }
+    let mut msg = format!("no net named `{name}`; the nets are: {}", names.join(", "));
+    let templates: BTreeSet<&str> = expanded
+        .list
+        .iter()
+        .filter(|i| i.name != decls[i.net].name.text && i.parent.is_none())
+        .map(|i| decls[i.net].name.as_str())
+        .collect();
+    if !templates.is_empty() {
+        let list: Vec<&str> = templates.into_iter().collect();
+        let _ = write!(
+            msg,
+            "; templates (all their instances): {}",
+            list.join(", ")
+        );
+    }
+    msg
+}
+
+/// A unique id prefix per net, in project order.
 ///
 /// Usually the net's name. Two nets with one name (a checker error) or a net named `global`
 /// would otherwise share node ids and Graphviz would merge their nodes, hiding the problem;
 /// a `#N` suffix (never part of an identifier) keeps them apart.
-fn net_prefixes(project: &Project) -> Vec<String> {
+fn net_prefixes(expanded: &Instances) -> Vec<String> {
     let mut taken: BTreeSet<String> = BTreeSet::new();
     taken.insert(GLOBAL_PREFIX.to_string());
-    project
-        .nets()
-        .map(|net| {
-            let base = net.name.text.as_str();
+    expanded
+        .list
+        .iter()
+        .map(|inst| {
+            let base = inst.name.as_str();
             let mut prefix = base.to_string();
             let mut n = 2;
             while taken.contains(&prefix) {
@@ -152,22 +347,37 @@ fn net_prefixes(project: &Project) -> Vec<String> {
         .collect()
 }
 
+/// A global place as drawn.
+struct Global<'a> {
+    name: &'a str,
+    tokens: u32,
+    /// The nets that may use it, as the manifest lists them; `None`: every net.
+    nets: Option<Vec<&'a str>>,
+}
+
 /// The global places with their initial tokens, in manifest order; a repeated name (a checker
 /// error) keeps its first declaration so the place is still drawn exactly once.
-fn global_names(project: &Project) -> Vec<(&str, u32)> {
+fn global_names(project: &Project) -> Vec<Global<'_>> {
     let mut seen = BTreeSet::new();
     project
         .manifest
         .globals
         .iter()
         .filter(|g| seen.insert(g.name.text.as_str()))
-        .map(|g| (g.name.text.as_str(), g.tokens))
+        .map(|g| Global {
+            name: g.name.as_str(),
+            tokens: g.tokens,
+            nets: g
+                .nets
+                .as_ref()
+                .map(|list| list.iter().map(|n| n.as_str()).collect()),
+        })
         .collect()
 }
 
 /// One net, drawn: its cluster text and its arcs, kept apart because arcs go at top level.
 struct NetDrawing {
-    /// The net's name as written, for the arcs' comment.
+    /// The net's name, for the arcs' comment.
     name: String,
     /// The `subgraph "cluster_..." { ... }` text, with its trailing newline.
     cluster: String,
@@ -181,154 +391,256 @@ struct NetDrawing {
 enum Target {
     /// A place of the transition's own net.
     Local,
+    /// The completion place of a child of the transition's net.
+    Completion,
     /// A global place of the manifest.
     Global,
     /// Neither: drawn as a dashed red node so the reader finds the mistake.
     Unknown,
 }
 
-/// Draws one net: its places, transitions and unresolved names, then its arcs.
-fn draw_net(project: &Project, net: &NetDecl, prefix: &str, globals: &[(&str, u32)]) -> NetDrawing {
-    let active = project
-        .manifest
-        .start
-        .iter()
-        .any(|s| s.text == net.name.text);
-    let locals: BTreeSet<&str> = net.places().map(|p| p.name.text.as_str()).collect();
-    // A net's own place shadows a global place of the same name.
-    let resolve = |name: &str| {
-        if locals.contains(name) {
-            Target::Local
-        } else if globals.iter().any(|(g, _)| *g == name) {
-            Target::Global
-        } else {
-            Target::Unknown
-        }
-    };
+/// What every net's drawing needs to know of the others.
+struct Context<'a> {
+    project: &'a Project,
+    decls: &'a [&'a NetDecl],
+    expanded: &'a Instances,
+    /// Node id prefix per instance.
+    prefixes: &'a [String],
+    /// The instances drawn: a `finish` arc reaches its parent only if the parent is drawn.
+    drawn: BTreeSet<usize>,
+    globals: &'a [Global<'a>],
+}
 
-    let mut arcs = Vec::new();
-    let mut globals_used = BTreeSet::new();
-    // Unknown names in first-use order, each drawn once per net.
-    let mut unknown: Vec<&str> = Vec::new();
-    for t in net.transitions() {
-        let tid = transition_id(prefix, t);
-        let ends = t
-            .inputs
+impl Context<'_> {
+    /// Draws one net: its places, completion places, transitions and unresolved names, then
+    /// its arcs.
+    fn draw_net(&self, me: usize) -> NetDrawing {
+        let inst = &self.expanded.list[me];
+        let net = self.decls[inst.net];
+        let prefix = self.prefixes[me].as_str();
+        let active = self
+            .project
+            .manifest
+            .start
             .iter()
-            .map(|n| (n, true))
-            .chain(t.outputs.iter().map(|n| (n, false)));
-        for (name, is_input) in ends {
-            let name = name.text.as_str();
-            let (pid, style) = match resolve(name) {
-                Target::Local => (format!("{prefix}.{name}"), String::new()),
-                Target::Global => {
-                    globals_used.insert(name.to_string());
-                    (
-                        format!("{GLOBAL_PREFIX}.{name}"),
-                        format!(" [color={}]", q(GLOBAL_COLOR)),
-                    )
-                }
-                Target::Unknown => {
-                    if !unknown.contains(&name) {
-                        unknown.push(name);
-                    }
-                    (
-                        format!("{prefix}.unknown.{name}"),
-                        format!(" [color={}, style=dashed]", q(UNKNOWN_COLOR)),
-                    )
-                }
-            };
-            let (from, to) = if is_input {
-                (q(&pid), q(&tid))
+            .any(|s| s.text == inst.name);
+        let locals: BTreeSet<&str> = net.places().map(|p| p.name.text.as_str()).collect();
+        let children: BTreeSet<String> =
+            net.children().map(|c| format!("{}.done", c.net)).collect();
+        // A net's own place shadows a global place of the same name.
+        let resolve = |name: &str| {
+            if locals.contains(name) {
+                Target::Local
+            } else if children.contains(name) {
+                Target::Completion
+            } else if self.globals.iter().any(|g| g.name == name) {
+                Target::Global
             } else {
-                (q(&tid), q(&pid))
+                Target::Unknown
+            }
+        };
+        // The completion place a `finish` of this net marks, if its parent is drawn.
+        let finish_to = inst.parent.and_then(|(p, pos)| {
+            let parent = &self.expanded.list[p];
+            let child = self.decls[parent.net].children().nth(pos)?;
+            self.drawn
+                .contains(&p)
+                .then(|| completion_id(&self.prefixes[p], &child.net.text))
+        });
+
+        let mut arcs = Vec::new();
+        let mut globals_used = BTreeSet::new();
+        // Unknown names in first-use order, each drawn once per net.
+        let mut unknown: Vec<&str> = Vec::new();
+        for t in net.transitions() {
+            let tid = transition_id(prefix, t);
+            // Inputs, emptiness tests (drawn as inhibitor arcs), outputs.
+            let ends = t
+                .inputs
+                .iter()
+                .map(|n| (n, End::Input))
+                .chain(t.empty.iter().map(|n| (n, End::Empty)))
+                .chain(t.outputs.iter().map(|n| (n, End::Output)));
+            for (name, end) in ends {
+                let name = name.text.as_str();
+                let mut style: Vec<String> = Vec::new();
+                let pid = match resolve(name) {
+                    Target::Local => format!("{prefix}.{name}"),
+                    Target::Completion => {
+                        style.push(format!("color={}", q(COMPLETION_COLOR)));
+                        completion_id(prefix, name.strip_suffix(".done").unwrap_or(name))
+                    }
+                    Target::Global => {
+                        globals_used.insert(name.to_string());
+                        style.push(format!("color={}", q(GLOBAL_COLOR)));
+                        format!("{GLOBAL_PREFIX}.{name}")
+                    }
+                    Target::Unknown => {
+                        if !unknown.contains(&name) {
+                            unknown.push(name);
+                        }
+                        style.push(format!("color={}", q(UNKNOWN_COLOR)));
+                        style.push("style=dashed".to_string());
+                        format!("{prefix}.unknown.{name}")
+                    }
+                };
+                if let End::Empty = end {
+                    style.push("arrowhead=odot".to_string());
+                    style.push(format!("tooltip={}", q(&format!("{name} must be empty"))));
+                }
+                let (from, to) = match end {
+                    End::Output => (q(&tid), q(&pid)),
+                    End::Input | End::Empty => (q(&pid), q(&tid)),
+                };
+                arcs.push(arc_line(&from, &to, &style));
+            }
+            if let Some(done) = &finish_to {
+                if t.actions
+                    .iter()
+                    .any(|a| matches!(a.action, Action::Finish(_)))
+                {
+                    let style = [
+                        format!("color={}", q(COMPLETION_COLOR)),
+                        "style=dashed".to_string(),
+                        "label=\"finish\"".to_string(),
+                    ];
+                    arcs.push(arc_line(&q(&tid), &q(done), &style));
+                }
+            }
+        }
+
+        let mut c = String::new();
+        let _ = writeln!(c, "  subgraph {} {{", q(&format!("cluster_{prefix}")));
+        let name = format!("{}{}", inst.name, origin(inst, net));
+        if active {
+            let _ = writeln!(c, "    label={};", q(&format!("{name}: active at start")));
+            c.push_str("    style=solid;\n    color=\"#606060\";\n");
+        } else {
+            let label = format!("{name}: inactive at start (light fill: marking when activated)");
+            let _ = writeln!(c, "    label={};", q(&label));
+            c.push_str("    style=dashed;\n    color=\"#909090\";\n");
+        }
+        for p in net.places() {
+            let id = format!("{prefix}.{}", p.name);
+            let when = if active { "at start" } else { "when activated" };
+            let marking = match p.tokens {
+                0 => format!("empty {when}"),
+                1 => format!("1 token {when}"),
+                n => format!("{n} tokens {when}"),
             };
-            arcs.push(format!("  {from} -> {to}{style};\n"));
+            let fill = match (p.tokens, active) {
+                (0, _) => String::new(),
+                (_, true) => format!(", style=filled, fillcolor={}", q(MARKED_FILL)),
+                (_, false) => format!(", style=filled, fillcolor={}", q(DORMANT_FILL)),
+            };
+            let _ = writeln!(
+                c,
+                "    {} [shape=circle, label=\"\", xlabel={}, width=0.3, fixedsize=true{fill}, tooltip={}];",
+                q(&id),
+                q(&p.name.text),
+                q(&format!("{}.{}: {marking}", inst.name, p.name))
+            );
+        }
+        // One completion place per declared child (a repeated child is one node).
+        let mut done_drawn = BTreeSet::new();
+        for ch in net.children() {
+            let place = format!("{}.done", ch.net);
+            if !done_drawn.insert(place.clone()) {
+                continue;
+            }
+            let _ = writeln!(
+                c,
+                "    {} [shape=circle, label=\"\", xlabel={}, width=0.3, fixedsize=true, color={}, fontcolor={}, tooltip={}];",
+                q(&completion_id(prefix, &ch.net.text)),
+                q(&place),
+                q(COMPLETION_COLOR),
+                q(COMPLETION_COLOR),
+                q(&format!(
+                    "{}.{place}: completion place of child {}, marked by its finish",
+                    inst.name, ch.net
+                ))
+            );
+        }
+        for t in net.transitions() {
+            let _ = writeln!(
+                c,
+                "    {} [shape=box, label={}, tooltip={}];",
+                q(&transition_id(prefix, t)),
+                transition_label(t),
+                q(&format_transition_header(t))
+            );
+        }
+        for u in &unknown {
+            let _ = writeln!(
+                c,
+                "    {} [shape=circle, label=\"\", xlabel={}, width=0.3, fixedsize=true, style=dashed, color={}, fontcolor={}, tooltip={}];",
+                q(&format!("{prefix}.unknown.{u}")),
+                q(&format!("unknown place {u}")),
+                q(UNKNOWN_COLOR),
+                q(UNKNOWN_COLOR),
+                q(&format!("{} has no place {u} and there is no global place {u}", inst.name))
+            );
+        }
+        c.push_str("  }\n");
+
+        NetDrawing {
+            name: inst.name.clone(),
+            cluster: c,
+            arcs,
+            globals_used,
         }
     }
+}
 
-    let mut c = String::new();
-    let _ = writeln!(c, "  subgraph {} {{", q(&format!("cluster_{prefix}")));
-    let name = &net.name.text;
-    if active {
-        let _ = writeln!(c, "    label={};", q(&format!("{name}: active at start")));
-        c.push_str("    style=solid;\n    color=\"#606060\";\n");
+/// Which end of a transition an arc is.
+enum End {
+    Input,
+    /// An emptiness test: an inhibitor arc.
+    Empty,
+    Output,
+}
+
+/// `  "from" -> "to" [a, b];` (no brackets without attributes).
+fn arc_line(from: &str, to: &str, style: &[String]) -> String {
+    if style.is_empty() {
+        format!("  {from} -> {to};\n")
     } else {
-        let label = format!("{name}: inactive at start (light fill: marking when activated)");
-        let _ = writeln!(c, "    label={};", q(&label));
-        c.push_str("    style=dashed;\n    color=\"#909090\";\n");
-    }
-    for p in net.places() {
-        let id = format!("{prefix}.{}", p.name);
-        let when = if active { "at start" } else { "when activated" };
-        let marking = match p.tokens {
-            0 => format!("empty {when}"),
-            1 => format!("1 token {when}"),
-            n => format!("{n} tokens {when}"),
-        };
-        let fill = match (p.tokens, active) {
-            (0, _) => String::new(),
-            (_, true) => format!(", style=filled, fillcolor={}", q(MARKED_FILL)),
-            (_, false) => format!(", style=filled, fillcolor={}", q(DORMANT_FILL)),
-        };
-        let _ = writeln!(
-            c,
-            "    {} [shape=circle, label=\"\", xlabel={}, width=0.3, fixedsize=true{fill}, tooltip={}];",
-            q(&id),
-            q(&p.name.text),
-            q(&format!("{name}.{}: {marking}", p.name))
-        );
-    }
-    for t in net.transitions() {
-        let _ = writeln!(
-            c,
-            "    {} [shape=box, label={}, tooltip={}];",
-            q(&transition_id(prefix, t)),
-            transition_label(t),
-            q(&format_transition_header(t))
-        );
-    }
-    for u in &unknown {
-        let _ = writeln!(
-            c,
-            "    {} [shape=circle, label=\"\", xlabel={}, width=0.3, fixedsize=true, style=dashed, color={}, fontcolor={}, tooltip={}];",
-            q(&format!("{prefix}.unknown.{u}")),
-            q(&format!("unknown place {u}")),
-            q(UNKNOWN_COLOR),
-            q(UNKNOWN_COLOR),
-            q(&format!("{name} has no place {u} and there is no global place {u}"))
-        );
-    }
-    c.push_str("  }\n");
-
-    NetDrawing {
-        name: name.clone(),
-        cluster: c,
-        arcs,
-        globals_used,
+        format!("  {from} -> {to} [{}];\n", style.join(", "))
     }
 }
 
 /// The node of a global place: a double circle in its own colour, filled when marked.
-fn global_node(name: &str, tokens: u32) -> String {
-    let fill = if tokens > 0 {
+fn global_node(g: &Global) -> String {
+    let fill = if g.tokens > 0 {
         format!(", style=filled, fillcolor={}", q(GLOBAL_COLOR))
     } else {
         String::new()
     };
-    let marking = match tokens {
+    let marking = match g.tokens {
         0 => "empty at start".to_string(),
         1 => "1 token at start".to_string(),
         n => format!("{n} tokens at start"),
     };
+    let shared = match &g.nets {
+        None => "every net".to_string(),
+        Some(nets) if nets.is_empty() => "no net".to_string(),
+        Some(nets) => nets.join(", "),
+    };
     format!(
         "  {} [shape=doublecircle, label=\"\", xlabel={}, width=0.3, fixedsize=true, color={}, fontcolor={}{fill}, tooltip={}];\n",
-        q(&format!("{GLOBAL_PREFIX}.{name}")),
-        q(name),
+        q(&format!("{GLOBAL_PREFIX}.{}", g.name)),
+        q(g.name),
         q(GLOBAL_COLOR),
         q(GLOBAL_COLOR),
-        q(&format!("global place {name}, shared by every net: {marking}"))
+        q(&format!("global place {}, shared by {shared}: {marking}", g.name))
     )
+}
+
+/// The id of the completion place of `child` in a net: `.done.` keeps it apart from the
+/// places (`NET.place`), transitions (`NET.t.name`) and unknown names (`NET.unknown.name`),
+/// whatever the child is called.
+fn completion_id(prefix: &str, child: &str) -> String {
+    format!("{prefix}.done.{child}")
 }
 
 /// The id of a transition; the `.t.` keeps it apart from a place with the same name.
@@ -336,15 +648,20 @@ fn transition_id(prefix: &str, t: &TransitionDecl) -> String {
     format!("{prefix}.t.{}", t.name)
 }
 
-/// A transition's label, quoted: its name, what fires it, then one line per action.
+/// A transition's label, quoted: its name, what fires it (event and guard), then one line per
+/// action.
 ///
 /// Every line ends in `\l` (left-justified), so actions line up under the name.
 fn transition_label(t: &TransitionDecl) -> String {
     let mut lines = vec![t.name.text.clone()];
-    lines.push(match &t.trigger {
+    let mut fired_by = match &t.trigger {
         Some(trigger) => format!("on {}", format_trigger(trigger)),
         None => "immediate".to_string(),
-    });
+    };
+    if let Some(g) = &t.guard {
+        let _ = write!(fired_by, " if {}", format_guard(g));
+    }
+    lines.push(fired_by);
     lines.extend(t.actions.iter().map(|a| format_action(&a.action)));
     let mut s = String::from("\"");
     for line in &lines {

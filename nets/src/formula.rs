@@ -244,7 +244,7 @@ mod tests {
 
     fn read(text: &str) -> Result<Formula, String> {
         let mut d = Diagnostics::new();
-        parse_formula(FileId(0), 0, text, "E0612", &mut d).ok_or_else(|| {
+        parse_formula(FileId(0), 0, text, "E0108", &mut d).ok_or_else(|| {
             d.iter()
                 .map(|x| x.message.clone())
                 .collect::<Vec<_>>()

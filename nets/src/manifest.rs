@@ -86,6 +86,10 @@ struct RawManifest {
 struct RawVerify {
     #[serde(default, rename = "final")]
     finals: Vec<Vec<Spanned<String>>>,
+    #[serde(default, rename = "goal")]
+    goals: Vec<Vec<Spanned<String>>>,
+    #[serde(default)]
+    progress_excludes: Option<Vec<Spanned<String>>>,
 }
 
 #[derive(serde::Deserialize)]
@@ -105,6 +109,8 @@ struct RawEvent {
     #[serde(default)]
     params: Vec<Spanned<String>>,
     description: Option<String>,
+    #[serde(default)]
+    internal: bool,
 }
 
 #[derive(serde::Deserialize)]
@@ -112,7 +118,7 @@ struct RawEvent {
 struct RawProgram {
     description: Option<String>,
     #[serde(default)]
-    functions: Ordered<Vec<Spanned<String>>>,
+    functions: Ordered<Spanned<toml::Value>>,
 }
 
 #[derive(serde::Deserialize)]
@@ -313,10 +319,14 @@ pub fn parse_manifest(file: FileId, text: &str, diags: &mut Diagnostics) -> Opti
         ..Manifest::default()
     };
     for f in &raw.project.files {
-        m.files.push(FileRef {
+        let file = FileRef {
             path: f.get_ref().clone(),
             span: r.span(f.span()),
-        });
+        };
+        if let Err(why) = crate::paths::check_relative(&file.path) {
+            r.diags.push(outside_project(&file, &why));
+        }
+        m.files.push(file);
     }
     for s in &raw.project.start {
         m.start.push(r.name(s, "net", text));
@@ -424,11 +434,11 @@ pub fn parse_manifest(file: FileId, text: &str, diags: &mut Diagnostics) -> Opti
             range = range.start + 1..range.end.saturating_sub(1);
         }
         let formula = if exact {
-            crate::formula::parse_formula(file, range.start, v.get_ref(), "E0612", r.diags)
+            crate::formula::parse_formula(file, range.start, v.get_ref(), "E0108", r.diags)
         } else {
             // Escapes move positions: report at the whole string.
             let mut inner = Diagnostics::new();
-            let f = crate::formula::parse_formula(file, 0, v.get_ref(), "E0612", &mut inner);
+            let f = crate::formula::parse_formula(file, 0, v.get_ref(), "E0108", &mut inner);
             for mut d in inner.into_iter() {
                 d.span = Some(r.span(v.span()));
                 r.diags.push(d);
@@ -464,6 +474,7 @@ pub fn parse_manifest(file: FileId, text: &str, diags: &mut Diagnostics) -> Opti
             category,
             params,
             description: v.description.clone(),
+            internal: v.internal,
         });
     }
     for (k, v) in &raw.programs.0 {
@@ -471,10 +482,57 @@ pub fn parse_manifest(file: FileId, text: &str, diags: &mut Diagnostics) -> Opti
         let mut functions = Vec::new();
         for (fk, fv) in &v.functions.0 {
             let fname = r.name(fk, "function", text);
-            let params = r.params(fv, text);
+            // `f = ["x: int"]`, or `f = { params = ["x: int"], answers = ["done"] }`.
+            let strings = |r: &mut Reader, list: &toml::Value| -> Option<Vec<Spanned<String>>> {
+                let items = list.as_array()?;
+                let mut out = Vec::new();
+                for i in items {
+                    let t = i.as_str()?;
+                    let range = quoted_in(text, fv.span(), t).unwrap_or(fv.span());
+                    // Spans inside the string, as for a plain list (the quotes around it).
+                    let range = range.start.saturating_sub(1)..range.end + 1;
+                    out.push(Spanned::new(range, t.to_string()));
+                }
+                let _ = r;
+                Some(out)
+            };
+            let (params, answers) = match fv.get_ref() {
+                toml::Value::Array(_) => (strings(&mut r, fv.get_ref()), Some(Vec::new())),
+                toml::Value::Table(t) => {
+                    let unknown: Vec<&String> = t
+                        .keys()
+                        .filter(|k| *k != "params" && *k != "answers")
+                        .collect();
+                    if let Some(k) = unknown.first() {
+                        r.diags.push(
+                            Diagnostic::error("E0101", r.span(fv.span()), format!("unknown key `{k}` in function `{fname}`"))
+                                .label("not `params` or `answers`")
+                                .help("write `f = [\"x: int\"]`, or `f = { params = [\"x: int\"], answers = [\"EVENT\"] }`"),
+                        );
+                    }
+                    (
+                        t.get("params")
+                            .map_or(Some(Vec::new()), |v| strings(&mut r, v)),
+                        t.get("answers")
+                            .map_or(Some(Vec::new()), |v| strings(&mut r, v)),
+                    )
+                }
+                _ => (None, None),
+            };
+            let (Some(params), Some(answers)) = (params, answers) else {
+                r.diags.push(
+                    Diagnostic::error("E0101", r.span(fv.span()), format!("function `{fname}` is not written as expected"))
+                        .label("expected a list of parameters, or a table")
+                        .help("write `f = [\"x: int\"]`, or `f = { params = [\"x: int\"], answers = [\"EVENT\"] }`"),
+                );
+                continue;
+            };
+            let params = r.params(&params, text);
+            let answers = answers.iter().map(|a| r.name(a, "event", text)).collect();
             functions.push(FunctionDecl {
                 name: fname,
                 params,
+                answers,
             });
         }
         m.programs.push(ProgramDecl {
@@ -488,10 +546,9 @@ pub fn parse_manifest(file: FileId, text: &str, diags: &mut Diagnostics) -> Opti
         let event = r.name(&v.event, "event", text);
         m.timers.push(TimerDecl { name, event });
     }
-    for places in &raw.verify.finals {
-        // `NET.place` is not an identifier: keep the text, the checker resolves it.
-        let names = places
-            .iter()
+    // `NET.place` is not an identifier: keep the text, the checker resolves it.
+    let places = |r: &Reader, list: &[Spanned<String>]| -> Vec<Name> {
+        list.iter()
             .map(|s| {
                 let mut r2 = s.span();
                 if text[r2.clone()].starts_with('"') {
@@ -502,10 +559,34 @@ pub fn parse_manifest(file: FileId, text: &str, diags: &mut Diagnostics) -> Opti
                     span: r.span(r2),
                 }
             })
-            .collect();
-        m.finals.push(names);
+            .collect()
+    };
+    for list in &raw.verify.finals {
+        m.finals.push(places(&r, list));
     }
+    for list in &raw.verify.goals {
+        m.goals.push(places(&r, list));
+    }
+    m.progress_excludes = raw
+        .verify
+        .progress_excludes
+        .as_ref()
+        .map(|list| places(&r, list));
     Some(m)
+}
+
+/// E0109: a net file path of the manifest that would leave the project directory.
+pub(crate) fn outside_project(f: &FileRef, why: &crate::paths::PathProblem) -> Diagnostic {
+    Diagnostic::error(
+        "E0109",
+        f.span,
+        format!(
+            "net file `{}` is outside the project directory: {why}",
+            f.path.escape_debug()
+        ),
+    )
+    .label("not a path inside the project")
+    .help("net files live in the project directory: name them relative to it, without `..`, and not through a link that leads out")
 }
 
 fn toml_str(s: &str) -> String {
@@ -607,6 +688,9 @@ pub fn format_manifest(m: &Manifest) -> String {
             if let Some(d) = &e.description {
                 fields.push(format!("description = {}", toml_str(d)));
             }
+            if e.internal {
+                fields.push("internal = true".to_string());
+            }
             let _ = writeln!(
                 out,
                 "{} = {{ {} }}",
@@ -622,21 +706,42 @@ pub fn format_manifest(m: &Manifest) -> String {
         }
         let _ = writeln!(out, "[programs.{}.functions]", toml_key(&p.name.text));
         for f in &p.functions {
-            let _ = writeln!(
-                out,
-                "{} = {}",
-                toml_key(&f.name.text),
-                param_list(&f.params)
-            );
+            if f.answers.is_empty() {
+                let _ = writeln!(
+                    out,
+                    "{} = {}",
+                    toml_key(&f.name.text),
+                    param_list(&f.params)
+                );
+            } else {
+                let answers: Vec<String> = f.answers.iter().map(|a| toml_str(&a.text)).collect();
+                let _ = writeln!(
+                    out,
+                    "{} = {{ params = {}, answers = [{}] }}",
+                    toml_key(&f.name.text),
+                    param_list(&f.params),
+                    answers.join(", ")
+                );
+            }
         }
     }
-    if !m.finals.is_empty() {
-        out.push_str("\n[verify]\nfinal = [\n");
-        for f in &m.finals {
-            let places: Vec<String> = f.iter().map(|n| toml_str(&n.text)).collect();
-            let _ = writeln!(out, "    [{}],", places.join(", "));
+    if !m.finals.is_empty() || !m.goals.is_empty() || m.progress_excludes.is_some() {
+        out.push_str("\n[verify]\n");
+        for (key, list) in [("final", &m.finals), ("goal", &m.goals)] {
+            if list.is_empty() {
+                continue;
+            }
+            let _ = writeln!(out, "{key} = [");
+            for f in list {
+                let places: Vec<String> = f.iter().map(|n| toml_str(&n.text)).collect();
+                let _ = writeln!(out, "    [{}],", places.join(", "));
+            }
+            out.push_str("]\n");
         }
-        out.push_str("]\n");
+        if let Some(ex) = &m.progress_excludes {
+            let cats: Vec<String> = ex.iter().map(|n| toml_str(&n.text)).collect();
+            let _ = writeln!(out, "progress_excludes = [{}]", cats.join(", "));
+        }
     }
     if !m.timers.is_empty() {
         out.push_str("\n[timers]\n");

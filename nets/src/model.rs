@@ -125,6 +125,7 @@ pub fn builtin_events() -> &'static [EventDecl] {
                 })
                 .collect(),
             description: Some(description.to_string()),
+            internal: false,
         };
         vec![
             ev(
@@ -167,6 +168,18 @@ pub fn builtin_events() -> &'static [EventDecl] {
                 &[("name", Type::Text)],
                 "an invariant of the manifest stopped holding after a step",
             ),
+            ev(
+                "recorder_failed",
+                Category::Safety,
+                &[("reason", Type::Text)],
+                "the flight recorder cannot write its journal (a full disk...): events are processed but not acknowledged",
+            ),
+            ev(
+                "recorder_restored",
+                Category::Safety,
+                &[],
+                "the flight recorder writes its journal again",
+            ),
         ]
     })
 }
@@ -182,6 +195,9 @@ pub struct EventDecl {
     pub params: Vec<Param>,
     /// Free text for people.
     pub description: Option<String>,
+    /// Only the nets emit it (`internal = true`): no program or operator sends it, so the
+    /// verifier delivers it only after a net emitted it.
+    pub internal: bool,
 }
 
 /// A function a software program offers to the nets.
@@ -191,6 +207,9 @@ pub struct FunctionDecl {
     pub name: Name,
     /// Parameters, in order.
     pub params: Vec<Param>,
+    /// The events the program answers a call with (`answers = [...]`): they come only after a
+    /// call to a function that lists them (the verifier's model of the program).
+    pub answers: Vec<Name>,
 }
 
 /// A software program (PLN, GUI, DEC...) and the functions nets may call.
@@ -297,6 +316,12 @@ pub struct Manifest {
     /// Intended final markings: a dead state holding every place of one of these is the
     /// mission's planned end, not an error. Places are written `NET.place` or `global.place`.
     pub finals: Vec<Vec<Name>>,
+    /// Markings that count as the mission's ends for the progress check, besides `finals`
+    /// (`[verify] goal`); not necessarily dead.
+    pub goals: Vec<Vec<Name>>,
+    /// Categories whose events are not counted on the way to an end by the progress check
+    /// (`[verify] progress_excludes`; `None`: the default, catastrophic).
+    pub progress_excludes: Option<Vec<Name>>,
     /// Named instances of net templates.
     pub instances: Vec<InstanceDecl>,
     /// Invariants, in the order written.

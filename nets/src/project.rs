@@ -79,7 +79,16 @@ pub fn load(dir: &Path) -> Result<LoadedProject, LoadError> {
     let mut file_ids = Vec::new();
     if let Some(manifest) = parse_manifest(manifest_file, &text, &mut diagnostics) {
         for f in &manifest.files {
-            let path = dir.join(&f.path);
+            // Never read (and so never let `fmt` rewrite) a file outside the project.
+            let path = match crate::paths::confine(dir, &f.path) {
+                Ok(p) => p,
+                Err(why @ crate::paths::PathProblem::Escapes(_)) => {
+                    diagnostics.push(crate::manifest::outside_project(f, &why));
+                    continue;
+                }
+                // What the text tells, parse_manifest reported.
+                Err(_) => continue,
+            };
             match std::fs::read_to_string(&path) {
                 Ok(text) => {
                     let id = sources.add(display(dir, &f.path), text.clone());
@@ -165,17 +174,44 @@ pub fn load_and_check(
 }
 
 /// Writes a project (manifest and net files, in canonical layout) into `dir`, creating it.
+///
+/// Every net file path must stay inside `dir` ([`crate::paths::confine`]): otherwise nothing is
+/// written and the error (`InvalidInput`) names the path. Readers report such paths as
+/// diagnostics first (E0109, E0508); this is the last guard.
 pub fn write(dir: &Path, project: &Project) -> std::io::Result<()> {
-    std::fs::create_dir_all(dir)?;
-    std::fs::write(dir.join(MANIFEST), format_manifest(&project.manifest))?;
+    let mut paths = Vec::new();
     for f in &project.files {
-        let path = dir.join(&f.path);
+        paths.push(confined(dir, &f.path)?);
+    }
+    let manifest = confined(dir, MANIFEST)?;
+    std::fs::create_dir_all(dir)?;
+    std::fs::write(manifest, format_manifest(&project.manifest))?;
+    for (f, path) in project.files.iter().zip(paths) {
         if let Some(parent) = path.parent() {
             std::fs::create_dir_all(parent)?;
         }
         std::fs::write(path, format_file(f))?;
     }
     Ok(())
+}
+
+/// Rewrites one net file of the project in `dir` (what `petrel fmt` does), only if its path
+/// stays inside `dir`.
+pub fn write_net_file(dir: &Path, rel: &str, text: &str) -> std::io::Result<()> {
+    std::fs::write(confined(dir, rel)?, text)
+}
+
+fn confined(dir: &Path, rel: &str) -> std::io::Result<PathBuf> {
+    crate::paths::confine(dir, rel).map_err(|why| {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            format!(
+                "`{}` is outside {}: {why}",
+                rel.escape_debug(),
+                dir.display()
+            ),
+        )
+    })
 }
 
 /// Reads and checks a project held in memory: a manifest and `(path, text)` net files (the

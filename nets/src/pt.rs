@@ -22,6 +22,10 @@ pub struct PtNet {
     /// Whether the net carries a `<toolspecific tool="nupn">` block (a split into sequential
     /// units, which some analysers use).
     pub has_nupn: bool,
+    /// Whether the net carries a net-level `<toolspecific tool="petrel">` block: it is a
+    /// Petrel project's export, and its P/T structure is only the project's skeleton (no
+    /// events, activation, emptiness tests or guards), which analysers should say.
+    pub petrel_export: bool,
 }
 
 /// A place of a [`PtNet`].

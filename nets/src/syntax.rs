@@ -177,7 +177,23 @@ fn lex(file: FileId, text: &str, diags: &mut Diagnostics) -> Vec<Token> {
                     }
                 }
             } else if is_float {
+                // A non-zero literal that rounds to zero (`1e-400`) is refused like one that
+                // rounds to infinity: a number is read exactly enough or not at all.
+                let mantissa = number.split(['e', 'E']).next().unwrap_or("");
+                let nonzero = mantissa.bytes().any(|b| (b'1'..=b'9').contains(&b));
                 match number.parse::<f64>() {
+                    Ok(v) if v == 0.0 && nonzero => {
+                        diags.push(
+                            Diagnostic::error(
+                                "E0001",
+                                sp(i),
+                                format!("the number `{number}` is too small for a float"),
+                            )
+                            .label("rounds to 0")
+                            .help("floats reach down to about 4.9e-324; write 0.0 for zero"),
+                        );
+                        Tok::Float(0.0)
+                    }
                     Ok(v) if v.is_finite() => Tok::Float(v),
                     _ => {
                         diags.push(
@@ -323,6 +339,12 @@ fn lex(file: FileId, text: &str, diags: &mut Diagnostics) -> Vec<Token> {
     toks
 }
 
+/// How deeply lists may nest in an argument. The language's only list type is `[float]`, so
+/// one level is all a valid file holds; the bound keeps the recursive descent (and every
+/// recursive walk of the expressions it builds) from overflowing the stack on crafted input
+/// such as 30,000 `[`.
+pub const MAX_NESTING: usize = 32;
+
 /// Marks a syntax error already reported; the parser then skips ahead.
 struct Recover;
 
@@ -337,6 +359,8 @@ struct Parser<'d> {
     pending: Vec<String>,
     /// Nesting of guards being parsed: bounded, so no text can exhaust the stack.
     depth: usize,
+    /// Lists open around the expression being read (bounded by [`MAX_NESTING`]).
+    list_depth: usize,
 }
 
 /// Deepest nesting of parentheses in a guard.
@@ -1041,8 +1065,19 @@ impl Parser<'_> {
                 Action::StartTimer { timer, after }
             }
             "call" => {
-                const HELP: &str = "write `call PROGRAM.FUNCTION(arg, ...)`";
-                let program = self.name("a program name", HELP)?;
+                const HELP: &str = "write `call PROGRAM.FUNCTION(arg, ...)`, or `call self.PARAM.FUNCTION(...)` for the program a net parameter names";
+                // `self.PARAM`: the program a parameter of the net names.
+                let program = if self.at_ident("self") {
+                    let s = self.bump().span;
+                    self.expect(Tok::Dot, HELP)?;
+                    let param = self.name("a parameter name", HELP)?;
+                    Name {
+                        text: format!("self.{}", param.text),
+                        span: s.to(param.span),
+                    }
+                } else {
+                    self.name("a program name", HELP)?
+                };
                 self.expect(Tok::Dot, HELP)?;
                 let function = self.name("a function name", HELP)?;
                 self.expect(Tok::LParen, HELP)?;
@@ -1122,9 +1157,24 @@ impl Parser<'_> {
                 }));
             }
             Tok::Ident(_) => return Ok(Expr::Var(self.name("a value", "")?)),
+            Tok::LBracket if self.list_depth >= MAX_NESTING => {
+                self.diags.push(
+                    Diagnostic::error(
+                        "E0001",
+                        t.span,
+                        format!("lists nested more than {MAX_NESTING} deep"),
+                    )
+                    .label("too deep")
+                    .help("an argument is at most a list of floats `[1.0, 2.0]`"),
+                );
+                return Err(Recover);
+            }
             Tok::LBracket => {
                 self.bump();
-                let (items, end) = self.args(Tok::RBracket)?;
+                self.list_depth += 1;
+                let list = self.args(Tok::RBracket);
+                self.list_depth -= 1;
+                let (items, end) = list?;
                 return Ok(Expr::List(items, t.span.to(end)));
             }
             _ => {
@@ -1159,6 +1209,7 @@ pub fn parse_file(file: FileId, path: &str, text: &str, diags: &mut Diagnostics)
         diags,
         pending: Vec::new(),
         depth: 0,
+        list_depth: 0,
     };
     p.file(path)
 }
@@ -1172,6 +1223,7 @@ pub fn parse_action(file: FileId, text: &str, diags: &mut Diagnostics) -> Option
         diags,
         pending: Vec::new(),
         depth: 0,
+        list_depth: 0,
     };
     let action = p.action().ok()?;
     if !p.at(&Tok::Eof) {
@@ -1179,4 +1231,40 @@ pub fn parse_action(file: FileId, text: &str, diags: &mut Diagnostics) -> Option
         return None;
     }
     Some(action)
+}
+
+/// Parses a guard written alone (the text after `if`), as PNML's Petrel blocks carry them.
+pub fn parse_guard(file: FileId, text: &str, diags: &mut Diagnostics) -> Option<Guard> {
+    let mut p = Parser {
+        toks: lex(file, text, diags),
+        pos: 0,
+        diags,
+        pending: Vec::new(),
+        depth: 0,
+        list_depth: 0,
+    };
+    let guard = p.guard().ok()?;
+    if !p.at(&Tok::Eof) {
+        p.error(
+            "the end of the guard",
+            "write one guard only: join conditions with `and`, `or`",
+        );
+        return None;
+    }
+    Some(guard)
+}
+
+/// Parses arguments written alone (`"r1", 0.5, self.speed`, without parentheses; empty text for
+/// none), as PNML's Petrel blocks carry the arguments of instances and `children` lines.
+pub fn parse_args(file: FileId, text: &str, diags: &mut Diagnostics) -> Option<Vec<Expr>> {
+    let mut p = Parser {
+        toks: lex(file, text, diags),
+        pos: 0,
+        diags,
+        pending: Vec::new(),
+        depth: 0,
+        list_depth: 0,
+    };
+    // The end of the text closes the list as `)` would.
+    p.args(Tok::Eof).ok().map(|(args, _)| args)
 }

@@ -1,14 +1,16 @@
 //! Tests of the Graphviz DOT drawing (`petrel_nets::dot`).
 //!
-//! Graphviz is not available to tests, so a small structural validator below parses the subset
-//! of DOT the drawing uses and checks what Graphviz would trip on or silently get wrong: balanced
-//! braces and brackets, terminated strings, unique node declarations, and edges whose ends are
-//! all declared nodes (Graphviz would invent an unstyled node for a typo instead of failing).
+//! A small structural validator below parses the subset of DOT the drawing uses and checks what
+//! Graphviz would trip on or silently get wrong: balanced braces and brackets, terminated
+//! strings, unique node declarations, and edges whose ends are all declared nodes (Graphviz
+//! would invent an unstyled node for a typo instead of failing). The drawings of the language's
+//! newer constructs also go through the real `dot` (`scripts/test.sh` installs Graphviz), which
+//! must accept them without a warning.
 //!
 //! The whole-project golden is `tests/data/dot/survey.dot`; run with `PETREL_BLESS=1` to rewrite
 //! it after an intended change, then review the difference.
 
-use petrel_nets::dot::project_to_dot;
+use petrel_nets::dot::{project_to_dot, project_tree_dot};
 use petrel_nets::model::*;
 use petrel_nets::source::Span;
 
@@ -814,4 +816,259 @@ fn empty_project_is_valid_dot() {
     let (text, dot) = draw(&Project::default(), None);
     assert!(dot.nodes.is_empty() && dot.edges.is_empty());
     assert!(text.starts_with("digraph \"\" {"));
+}
+
+// ---------------------------------------------------------------------------------------------
+// The constructs of structured missions (nets/tests/data/language).
+
+/// The language project, which must check clean.
+fn language() -> Project {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/language");
+    let (loaded, compiled, diags) = petrel_nets::project::load_and_check(&dir).expect("readable");
+    assert!(compiled.is_some() && diags.is_empty(), "{diags:?}");
+    loaded.project
+}
+
+/// Runs the real Graphviz on `text`: it must lay it out without an error or a warning.
+fn graphviz(text: &str) {
+    use std::io::Write as _;
+    use std::process::{Command, Stdio};
+    let child = Command::new("dot")
+        .arg("-Tsvg")
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn();
+    let mut child = child
+        .expect("graphviz `dot` is missing: run the suite with scripts/test.sh, which installs it");
+    child
+        .stdin
+        .take()
+        .expect("stdin")
+        .write_all(text.as_bytes())
+        .expect("write to dot");
+    let out = child.wait_with_output().expect("dot runs");
+    assert!(
+        out.status.success() && out.stderr.is_empty(),
+        "graphviz rejects the drawing: {}\n{text}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(String::from_utf8_lossy(&out.stdout).contains("<svg"));
+}
+
+fn edge<'a>(dot: &'a Dot, from: &str, to: &str) -> Vec<&'a Attrs> {
+    dot.edges
+        .iter()
+        .filter(|e| e.0 == from && e.1 == to)
+        .map(|e| &e.2)
+        .collect()
+}
+
+fn cluster_of<'a>(dot: &'a Dot, node: &str) -> Option<&'a str> {
+    dot.nodes
+        .iter()
+        .find(|n| n.0 == node)
+        .and_then(|n| n.2.as_deref())
+}
+
+#[test]
+fn instances_are_drawn_apart_and_share_their_globals() {
+    let p = language();
+    let (text, dot) = draw(&p, None);
+    graphviz(&text);
+    let clusters: Vec<&str> = dot.clusters.iter().map(|c| c.0.as_str()).collect();
+    assert_eq!(
+        clusters,
+        [
+            "cluster_R1",
+            "cluster_R2",
+            "cluster_SYNC",
+            "cluster_PLAN",
+            "cluster_PHASES",
+            "cluster_PHASES/TRANSIT",
+            "cluster_PHASES/SURVEY"
+        ],
+        "the template ROBOT is drawn once per instance, never alone"
+    );
+    let label = |c: &str| {
+        let attrs = &dot.clusters.iter().find(|x| x.0 == c).unwrap().1;
+        attr(attrs, "label").unwrap().to_string()
+    };
+    // Parameters with their values, or their types when bound at activation.
+    assert_eq!(
+        label("cluster_R1"),
+        r#"R1 = ROBOT(robot: text = \"r1\", speed: float = 0.5): active at start"#
+    );
+    assert!(label("cluster_PLAN").starts_with("PLAN(heading: float): inactive at start"));
+    assert!(label("cluster_PHASES/TRANSIT")
+        .starts_with("PHASES/TRANSIT = TRANSIT(speed: float = 0.5): inactive"));
+    // Each instance has its own places; both take and give back the one global token.
+    assert_eq!(cluster_of(&dot, "R1.moving"), Some("cluster_R1"));
+    assert_eq!(cluster_of(&dot, "R2.moving"), Some("cluster_R2"));
+    assert_eq!(cluster_of(&dot, "global.bottleneck_free"), None);
+    for r in ["R1", "R2"] {
+        assert_eq!(
+            edge(&dot, "global.bottleneck_free", &format!("{r}.t.pass")).len(),
+            1
+        );
+        assert_eq!(
+            edge(&dot, &format!("{r}.t.leave_it"), "global.bottleneck_free").len(),
+            1
+        );
+    }
+    // A scoped global says which nets see it.
+    assert!(attr(dot.node("global.bottleneck_free"), "tooltip")
+        .unwrap()
+        .contains("shared by ROBOT, SYNC"));
+}
+
+#[test]
+fn guards_emptiness_tests_emit_targets_and_finish_are_drawn() {
+    let (text, dot) = draw(&language(), None);
+    // The guard follows the trigger; an emission says where it goes.
+    assert_eq!(
+        attr(dot.node("R1.t.enter"), "label"),
+        Some(r"enter\lon at_bottleneck(r) if r == self.robot\l")
+    );
+    assert_eq!(
+        attr(dot.node("PHASES.t.nudge"), "label"),
+        Some(r"nudge\lon heading(d) if d > 10.0\lemit arrived to TRANSIT\l")
+    );
+    // `not alarm`: an inhibitor arc, ending in a small circle at the transition.
+    let tested = edge(&dot, "global.alarm", "SYNC.t.raise");
+    assert_eq!(tested.len(), 1, "{text}");
+    assert_eq!(attr(tested[0], "arrowhead"), Some("odot"));
+    // The output arc to alarm is an ordinary one.
+    let marked = edge(&dot, "SYNC.t.raise", "global.alarm");
+    assert_eq!(marked.len(), 1);
+    assert_eq!(attr(marked[0], "arrowhead"), None);
+    // Completion places are the parent's; `finish` marks them from the child's instance.
+    assert_eq!(
+        cluster_of(&dot, "PHASES.done.TRANSIT"),
+        Some("cluster_PHASES")
+    );
+    assert_eq!(
+        attr(dot.node("PHASES.done.TRANSIT"), "xlabel"),
+        Some("TRANSIT.done")
+    );
+    assert_eq!(edge(&dot, "PHASES.done.TRANSIT", "PHASES.t.next").len(), 1);
+    let finish = edge(&dot, "PHASES/TRANSIT.t.arrive", "PHASES.done.TRANSIT");
+    assert_eq!(finish.len(), 1, "{text}");
+    assert_eq!(attr(finish[0], "label"), Some("finish"));
+    assert_eq!(
+        attr(dot.node("PHASES/TRANSIT.t.arrive"), "label"),
+        Some(r"arrive\lon arrived\lfinish\l")
+    );
+}
+
+#[test]
+fn a_template_name_draws_all_its_instances() {
+    let p = language();
+    let (text, dot) = draw(&p, Some("ROBOT"));
+    graphviz(&text);
+    let clusters: Vec<&str> = dot.clusters.iter().map(|c| c.0.as_str()).collect();
+    assert_eq!(clusters, ["cluster_R1", "cluster_R2"]);
+    let globals: Vec<&str> = dot
+        .node_ids()
+        .into_iter()
+        .filter(|id| id.starts_with("global."))
+        .collect();
+    assert_eq!(globals, ["global.bottleneck_free"]);
+    // A child alone: its `finish` arc has no parent to reach, and is left out.
+    let (text, dot) = draw(&p, Some("PHASES/TRANSIT"));
+    graphviz(&text);
+    assert_eq!(dot.clusters.len(), 1);
+    assert!(
+        dot.edges.iter().all(|e| !e.1.starts_with("PHASES.")),
+        "{text}"
+    );
+    // The error lists the nets and the templates.
+    let err = project_to_dot(&p, Some("NOPE")).unwrap_err();
+    assert!(
+        err.contains("R1, R2, SYNC, PLAN, PHASES, PHASES/TRANSIT, PHASES/SURVEY")
+            && err.contains("templates (all their instances): ROBOT"),
+        "{err}"
+    );
+}
+
+#[test]
+fn the_tree_shows_children_and_activations() {
+    let p = language();
+    let text = project_tree_dot(&p);
+    let dot = validate(&text).unwrap_or_else(|e| panic!("invalid DOT: {e}\n{text}"));
+    graphviz(&text);
+    assert!(text.contains("rankdir=TB"));
+    assert!(
+        dot.clusters.is_empty(),
+        "the tree draws no place or transition"
+    );
+    assert_eq!(
+        dot.node_ids(),
+        [
+            "R1",
+            "R2",
+            "SYNC",
+            "PLAN",
+            "PHASES",
+            "PHASES/TRANSIT",
+            "PHASES/SURVEY"
+        ]
+    );
+    assert_eq!(
+        attr(dot.node("R2"), "label"),
+        Some(r#"R2\nROBOT(robot: text = \"r2\", speed: float = 0.4)"#)
+    );
+    assert_eq!(
+        attr(dot.node("PLAN"), "label"),
+        Some("PLAN(heading: float)")
+    );
+    // Active at start: filled.
+    assert!(attr(dot.node("SYNC"), "style").unwrap().contains("filled"));
+    assert_eq!(attr(dot.node("PLAN"), "style"), None);
+    // Children: solid; activations: dashed, labelled, along the tree or across it.
+    let solid: Vec<(&str, &str)> = dot
+        .edges
+        .iter()
+        .filter(|e| attr(&e.2, "style").is_none())
+        .map(|e| (e.0.as_str(), e.1.as_str()))
+        .collect();
+    assert_eq!(
+        solid,
+        [("PHASES", "PHASES/TRANSIT"), ("PHASES", "PHASES/SURVEY")]
+    );
+    let dashed: Vec<(&str, &str)> = dot
+        .edges
+        .iter()
+        .filter(|e| attr(&e.2, "style") == Some("dashed"))
+        .map(|e| {
+            assert_eq!(attr(&e.2, "label"), Some("activate"));
+            (e.0.as_str(), e.1.as_str())
+        })
+        .collect();
+    assert_eq!(
+        dashed,
+        [
+            ("SYNC", "PLAN"),
+            ("PHASES", "PHASES/TRANSIT"),
+            ("PHASES", "PHASES/SURVEY")
+        ]
+    );
+    // The survey project has no children: its tree is its activation.
+    let text = project_tree_dot(&survey());
+    let dot = validate(&text).unwrap();
+    graphviz(&text);
+    let edges: Vec<(&str, &str)> = dot
+        .edges
+        .iter()
+        .map(|e| (e.0.as_str(), e.1.as_str()))
+        .collect();
+    assert_eq!(edges, [("Flight", "Payload")]);
+}
+
+#[test]
+fn the_older_drawings_are_still_accepted_by_graphviz() {
+    let p = survey();
+    for only in [None, Some("Flight"), Some("Payload")] {
+        graphviz(&project_to_dot(&p, only).unwrap());
+    }
 }

@@ -748,17 +748,21 @@ fn sample_project() -> Project {
             category,
             params: vec![param(&format!("x{i}"), *ty), param("flag", Type::Bool)],
             description: (i % 2 == 0).then(|| format!("event {i}: \"<&>\"\nsecond line")),
+            internal: false,
         })
         .chain([EventDecl {
             name: n("tick"),
             category: Category::Nominal,
             params: vec![],
             description: Some(String::new()),
+            internal: false,
         }])
         .collect();
     let manifest = Manifest {
         instances: Vec::new(),
         invariants: Vec::new(),
+        goals: Vec::new(),
+        progress_excludes: None,
         name: "uav mission <&> \"quoted\"".into(),
         description: Some("  leading spaces\r\nand CRLF\ttab ]]> end  ".into()),
         files: vec![
@@ -796,6 +800,7 @@ fn sample_project() -> Project {
                 functions: vec![
                     FunctionDecl {
                         name: n("goto"),
+                        answers: Vec::new(),
                         params: vec![
                             param("x", Type::Float),
                             param("path", Type::FloatList),
@@ -804,6 +809,7 @@ fn sample_project() -> Project {
                     },
                     FunctionDecl {
                         name: n("stop"),
+                        answers: Vec::new(),
                         params: vec![],
                     },
                 ],
@@ -813,6 +819,7 @@ fn sample_project() -> Project {
                 description: None,
                 functions: vec![FunctionDecl {
                     name: n("show"),
+                    answers: Vec::new(),
                     params: vec![param("n", Type::Int)],
                 }],
             },
@@ -1308,13 +1315,16 @@ mod properties {
         #![proptest_config(ProptestConfig::with_cases(64))]
 
         /// Comments, descriptions, paths, names in Petrel data and text literals may hold any
-        /// character, and all come back exactly.
+        /// character, and all come back exactly (paths: any that stays inside the project;
+        /// the others are E0508, tests/paths.rs).
         #[test]
         fn any_text_survives_the_round_trip(
             comment in any::<String>(),
             description in any::<String>(),
             literal in "[^\n]*",
-            path in any::<String>(),
+            path in any::<String>().prop_filter("a path inside the project", |p| {
+                petrel_nets::paths::check_relative(p).is_ok()
+            }),
         ) {
             let mut project = sample_project();
             project.manifest.description = Some(description);
@@ -1353,4 +1363,592 @@ mod properties {
             let _ = import_pnml(FileId(0), &mangled, &mut diags);
         }
     }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The constructs of structured missions: parameters, instances, children, guards, emptiness
+// tests, events addressed to a net, invariants, scoped globals, intended warnings
+// ---------------------------------------------------------------------------------------------
+
+fn data_dir(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+}
+
+/// `nets/tests/data/language`, checked: it must check clean, without a warning.
+fn language() -> Project {
+    let (loaded, compiled, diags) =
+        petrel_nets::project::load_and_check(&data_dir("language")).expect("readable");
+    assert!(diags.is_empty(), "{}", diags.render_human(&loaded.sources));
+    assert!(compiled.is_some());
+    loaded.project
+}
+
+/// What the language project must use, so that editing it cannot silently drop a construct
+/// from the round trip.
+#[test]
+fn the_language_project_uses_every_construct() {
+    let p = language();
+    let m = &p.manifest;
+    assert_eq!(m.instances.len(), 2, "two instances of one template");
+    assert_eq!(m.instances[0].net, m.instances[1].net);
+    assert!(!m.invariants.is_empty() && m.invariants.iter().all(|i| i.formula.is_some()));
+    assert!(
+        m.globals.iter().any(|g| g.nets.is_some()),
+        "a scoped global"
+    );
+    let nets: Vec<&NetDecl> = p.nets().collect();
+    assert!(nets.iter().any(|n| !n.params.is_empty()), "net parameters");
+    assert!(
+        nets.iter().any(|n| !n.allows.is_empty()),
+        "@allow before a net"
+    );
+    let items: Vec<&Item> = nets.iter().flat_map(|n| &n.items).collect();
+    assert!(items
+        .iter()
+        .any(|i| matches!(i.kind, ItemKind::Children(_))));
+    assert!(items
+        .iter()
+        .any(|i| matches!(i.kind, ItemKind::Place(_)) && !i.allows.is_empty()));
+    assert!(items
+        .iter()
+        .any(|i| matches!(i.kind, ItemKind::Transition(_)) && !i.allows.is_empty()));
+    let children: Vec<&ChildDecl> = nets.iter().flat_map(|n| n.children()).collect();
+    assert!(children.iter().any(|c| c.args.is_some()) && children.iter().any(|c| c.args.is_none()));
+    let transitions: Vec<&TransitionDecl> = nets.iter().flat_map(|n| n.transitions()).collect();
+    assert!(transitions.iter().any(|t| t.guard.is_some()), "a guard");
+    assert!(
+        transitions.iter().any(|t| !t.empty.is_empty()),
+        "an emptiness test"
+    );
+    assert!(
+        transitions
+            .iter()
+            .any(|t| t.inputs.iter().any(|n| n.text.ends_with(".done"))),
+        "a completion place"
+    );
+    let actions: Vec<&Action> = transitions
+        .iter()
+        .flat_map(|t| t.actions.iter().map(|a| &a.action))
+        .collect();
+    assert!(actions.iter().any(|a| matches!(a, Action::Finish(_))));
+    assert!(actions
+        .iter()
+        .any(|a| matches!(a, Action::Activate { args, .. } if !args.is_empty())));
+    assert!(actions
+        .iter()
+        .any(|a| matches!(a, Action::Deactivate(n) if n.text == "self")));
+    assert!(actions
+        .iter()
+        .any(|a| matches!(a, Action::Emit { to: Some(_), .. })));
+    assert!(actions.iter().any(|a| matches!(
+        a,
+        Action::StartTimer {
+            after: DurationExpr::SelfSeconds(_),
+            ..
+        }
+    )));
+    assert!(actions.iter().any(|a| matches!(a, Action::Call { args, .. }
+        if args.iter().any(|e| matches!(e, Expr::SelfParam(_))))));
+}
+
+#[test]
+fn the_language_project_survives_export_and_import() {
+    let project = language();
+    let xml = export_pnml(&project);
+    assert!(xml.contains("<toolspecific tool=\"petrel\" version=\"2\">"));
+    let mut map = SourceMap::new();
+    let file = map.add("language.pnml", xml.clone());
+    let mut diags = Diagnostics::new();
+    let back = import_pnml(file, &xml, &mut diags);
+    assert!(diags.is_empty(), "{}\n{xml}", diags.render_human(&map));
+    let back = back.expect("imports");
+    assert_eq!(back, project);
+    assert_eq!(
+        export_pnml(&back),
+        xml,
+        "a second export is the same document"
+    );
+    // The imported project checks as the original does, and prints as the files are written.
+    let (compiled, found) = petrel_nets::check::check(&back);
+    assert!(found.is_empty(), "{:?}", codes(&found));
+    assert!(compiled.is_some());
+    for f in &back.files {
+        let written = std::fs::read_to_string(data_dir("language").join(&f.path)).unwrap();
+        assert_eq!(petrel_nets::fmt::format_file(f), written, "{}", f.path);
+    }
+    // Spans of what was parsed from text (guards, arguments, invariants) point into the file.
+    for t in back.nets().flat_map(|n| n.transitions()) {
+        if let Some(g) = &t.guard {
+            assert!(xml[g.span().start as usize..].starts_with("<guard>"));
+        }
+    }
+}
+
+#[test]
+fn instances_expand_as_the_checker_does() {
+    for dir in [
+        data_dir("language"),
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../missions/uav"),
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../missions/auv"),
+    ] {
+        let (loaded, compiled, diags) = petrel_nets::project::load_and_check(&dir).unwrap();
+        let compiled = compiled.unwrap_or_else(|| panic!("{}: {:?}", dir.display(), codes(&diags)));
+        let expanded = petrel_nets::instances::instances(&loaded.project);
+        assert!(!expanded.truncated);
+        let decls: Vec<&NetDecl> = loaded.project.nets().collect();
+        let ours: Vec<(String, String, Option<usize>, Vec<usize>)> = expanded
+            .list
+            .iter()
+            .map(|i| {
+                (
+                    i.name.clone(),
+                    decls[i.net].name.text.clone(),
+                    i.parent.map(|p| p.0),
+                    i.children.clone(),
+                )
+            })
+            .collect();
+        let theirs: Vec<(String, String, Option<usize>, Vec<usize>)> = compiled
+            .nets
+            .iter()
+            .map(|n| {
+                (
+                    n.name.clone(),
+                    n.template.clone(),
+                    n.parent.map(|p| p.0 as usize),
+                    n.children.iter().map(|&c| c as usize).collect(),
+                )
+            })
+            .collect();
+        assert_eq!(ours, theirs, "{}", dir.display());
+    }
+}
+
+/// `(source, target)` of every arc of a P/T net, by id.
+fn arc_ids(pt: &petrel_nets::pnml::PtNet) -> BTreeSet<(String, String)> {
+    let id = |n: PtNode| match n {
+        PtNode::Place(i) => pt.places[i].id.clone(),
+        PtNode::Transition(i) => pt.transitions[i].id.clone(),
+    };
+    pt.arcs
+        .iter()
+        .map(|a| (id(a.source), id(a.target)))
+        .collect()
+}
+
+#[test]
+fn the_skeleton_has_one_copy_per_instance_and_the_finish_arcs() {
+    let xml = export_pnml(&language());
+    let mut diags = Diagnostics::new();
+    let pt = parse_pnml(FileId(0), &xml, &mut diags).remove(0);
+    assert!(diags.is_empty());
+    assert!(pt.petrel_export);
+    let places: Vec<(&str, &str, u64)> = pt
+        .places
+        .iter()
+        .map(|p| (p.id.as_str(), p.name.as_str(), p.initial))
+        .collect();
+    assert_eq!(
+        places,
+        [
+            ("global.bottleneck_free", "global.bottleneck_free", 1),
+            ("global.alarm", "global.alarm", 0),
+            ("R1.moving", "R1.moving", 1),
+            ("R1.waiting", "R1.waiting", 0),
+            ("R1.in_bottleneck", "R1.in_bottleneck", 0),
+            ("R2.moving", "R2.moving", 1),
+            ("R2.waiting", "R2.waiting", 0),
+            ("R2.in_bottleneck", "R2.in_bottleneck", 0),
+            ("SYNC.watching", "SYNC.watching", 1),
+            // PLAN is not started: its place is empty until an activation, which P/T lacks.
+            ("PLAN.computing", "PLAN.computing", 0),
+            ("PHASES.idle", "PHASES.idle", 1),
+            ("PHASES.transiting", "PHASES.transiting", 0),
+            ("PHASES.surveying", "PHASES.surveying", 0),
+            ("PHASES.finished", "PHASES.finished", 0),
+            ("PHASES.TRANSIT.done", "PHASES.TRANSIT.done", 0),
+            ("PHASES.SURVEY.done", "PHASES.SURVEY.done", 0),
+            ("PHASES-TRANSIT.cruising", "PHASES/TRANSIT.cruising", 0),
+            ("PHASES-SURVEY.scanning", "PHASES/SURVEY.scanning", 0),
+        ]
+    );
+    let s = |a: &str, b: &str| (a.to_string(), b.to_string());
+    let expected: BTreeSet<(String, String)> = [
+        // Each robot has its own copy, and both take the one global token.
+        s("R1.moving", "R1.enter"),
+        s("R1.enter", "R1.waiting"),
+        s("R1.waiting", "R1.pass"),
+        s("global.bottleneck_free", "R1.pass"),
+        s("R1.pass", "R1.in_bottleneck"),
+        s("R1.in_bottleneck", "R1.leave_it"),
+        s("R1.leave_it", "R1.moving"),
+        s("R1.leave_it", "global.bottleneck_free"),
+        s("R2.moving", "R2.enter"),
+        s("R2.enter", "R2.waiting"),
+        s("R2.waiting", "R2.pass"),
+        s("global.bottleneck_free", "R2.pass"),
+        s("R2.pass", "R2.in_bottleneck"),
+        s("R2.in_bottleneck", "R2.leave_it"),
+        s("R2.leave_it", "R2.moving"),
+        s("R2.leave_it", "global.bottleneck_free"),
+        // `raise` tests `alarm` for emptiness: no arc from it, only the output.
+        s("SYNC.watching", "SYNC.raise"),
+        s("SYNC.raise", "SYNC.watching"),
+        s("SYNC.raise", "global.alarm"),
+        s("PLAN.computing", "PLAN.done"),
+        s("PHASES.idle", "PHASES.begin"),
+        s("PHASES.begin", "PHASES.transiting"),
+        s("PHASES.transiting", "PHASES.nudge"),
+        s("PHASES.nudge", "PHASES.transiting"),
+        s("PHASES.transiting", "PHASES.next"),
+        s("PHASES.TRANSIT.done", "PHASES.next"),
+        s("PHASES.next", "PHASES.surveying"),
+        s("PHASES.surveying", "PHASES.wrap"),
+        s("PHASES.SURVEY.done", "PHASES.wrap"),
+        s("PHASES.wrap", "PHASES.finished"),
+        // The children's `finish` marks their parent's completion places.
+        s("PHASES-TRANSIT.cruising", "PHASES-TRANSIT.arrive"),
+        s("PHASES-TRANSIT.arrive", "PHASES.TRANSIT.done"),
+        s("PHASES-SURVEY.scanning", "PHASES-SURVEY.done"),
+        s("PHASES-SURVEY.done", "PHASES.SURVEY.done"),
+    ]
+    .into_iter()
+    .collect();
+    assert_eq!(arc_ids(&pt), expected);
+    assert_eq!(pt.arcs.len(), expected.len());
+    assert_eq!(pt.max_arc_weight(), 1);
+    assert_eq!(pt.transitions.len(), 14);
+
+    // A project without the Petrel block is not an export.
+    let plain = parse_pnml(FileId(0), &read_mcc("Sudoku-PT-AN01.pnml"), &mut diags).remove(0);
+    assert!(!plain.petrel_export);
+}
+
+#[test]
+fn a_version_1_export_still_imports() {
+    // Written by Petrel before nets had parameters (`petrel export --pnml missions/uav`).
+    let path = data_dir("pnml/uav-v1.pnml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(text.contains("<toolspecific tool=\"petrel\" version=\"1\">"));
+    let mut map = SourceMap::new();
+    let file = map.add("uav-v1.pnml", text.clone());
+    let mut diags = Diagnostics::new();
+    let back = import_pnml(file, &text, &mut diags);
+    assert!(diags.is_empty(), "{}", diags.render_human(&map));
+    let uav = petrel_nets::project::load(
+        &PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../missions/uav"),
+    )
+    .unwrap();
+    // Version 1 carried no invariants (the project gained them since): all else is equal.
+    let mut today = uav.project;
+    assert!(!today.manifest.invariants.is_empty());
+    today.manifest.invariants.clear();
+    assert_eq!(back.expect("imports"), today);
+
+    // Its checks still hold: a version-1 element without its data is refused.
+    let broken = text.replacen(
+        "<toolspecific tool=\"petrel\" version=\"1\">\n          <place name=\"ready\"",
+        "<toolspecific tool=\"other\" version=\"1\">\n          <place name=\"ready\"",
+        1,
+    );
+    assert_ne!(broken, text);
+    let mut diags = Diagnostics::new();
+    assert!(import_pnml(FileId(0), &broken, &mut diags).is_none());
+    assert!(diags
+        .iter()
+        .any(|d| d.code == "E0506" && d.message.contains("has no petrel data")));
+}
+
+/// Imports `xml`, expecting failure; the diagnostics with their lines.
+fn refused(xml: &str) -> Vec<(&'static str, String, String)> {
+    let mut map = SourceMap::new();
+    let file = map.add("t.pnml", xml.to_string());
+    let mut diags = Diagnostics::new();
+    assert!(import_pnml(file, xml, &mut diags).is_none(), "imported");
+    diags
+        .iter()
+        .map(|d| {
+            let line = d
+                .span
+                .map(|s| {
+                    map.get(file)
+                        .line_text(pos(&map, s).line)
+                        .trim()
+                        .to_string()
+                })
+                .unwrap_or_default();
+            (d.code, d.message.clone(), line)
+        })
+        .collect()
+}
+
+#[test]
+fn tampered_new_constructs_are_e0506_where_they_are_written() {
+    let xml = export_pnml(&language());
+    let cases: [(&str, &str, &str, &str); 9] = [
+        // A guard, arguments, an invariant that no longer parse.
+        (
+            "<guard>r == self.robot</guard>",
+            "<guard>r == == self.robot</guard>",
+            "petrel guard `r == == self.robot` does not parse",
+            "<guard>",
+        ),
+        (
+            "args=\"0.5\"",
+            "args=\"0.5 0.6\"",
+            "petrel argument list `0.5 0.6` does not parse",
+            "<child net=\"TRANSIT\"",
+        ),
+        (
+            "<invariant name=\"bottleneck\">not (",
+            "<invariant name=\"bottleneck\">not ((",
+            "petrel invariant",
+            "<invariant name=\"bottleneck\">",
+        ),
+        // A name that is not a name.
+        (
+            "<param name=\"robot\" type=\"text\"/>",
+            "<param name=\"ro bot\" type=\"text\"/>",
+            "`ro bot`, which is not a Petrel name",
+            "<param name=\"ro bot\"",
+        ),
+        // An instance's argument that is not a value.
+        (
+            "args=\"&quot;r1&quot;, 0.5\"",
+            "args=\"robot, 0.5\"",
+            "the arguments of instance `R1` are not all values",
+            "<instance name=\"R1\"",
+        ),
+        // A copy lost, or given to the wrong instance.
+        (
+            "            <copy net=\"R2\" ref=\"R2.waiting\"/>\n",
+            "",
+            "`waiting` of net `ROBOT` has 1 P/T copies, but the project runs 2 instance(s) of the net",
+            "<place name=\"waiting\"",
+        ),
+        (
+            "<copy net=\"R2\" ref=\"R2.moving\"/>",
+            "<copy net=\"R3\" ref=\"R2.moving\"/>",
+            "said to be instance `R3`'s, but the instance in its place is `R2`",
+            "<copy net=\"R3\"",
+        ),
+        // The `finish` arc removed from the skeleton.
+        (
+            "      <arc id=\"PHASES-TRANSIT.arrive.out\" source=\"PHASES-TRANSIT.arrive\" target=\"PHASES.TRANSIT.done\"/>\n",
+            "",
+            "lacks the arc from `PHASES-TRANSIT.arrive` to `PHASES.TRANSIT.done`",
+            "<transition id=\"PHASES-TRANSIT.arrive\">",
+        ),
+        // An arc for the emptiness test added: the skeleton has none.
+        (
+            "    </page>",
+            "      <arc id=\"extra\" source=\"global.alarm\" target=\"SYNC.raise\"/>\n    </page>",
+            "the arc from `global.alarm` to `SYNC.raise` is not in the Petrel data",
+            "<arc id=\"extra\"",
+        ),
+    ];
+    for (from, to, message, line) in cases {
+        assert!(xml.contains(from), "{from}");
+        let found = refused(&xml.replacen(from, to, 1));
+        assert!(
+            found
+                .iter()
+                .any(|(c, m, l)| *c == "E0506" && m.contains(message) && l.starts_with(line)),
+            "{from} -> {to}: {found:#?}"
+        );
+    }
+}
+
+#[test]
+fn an_unknown_version_is_e0507() {
+    let xml = export_pnml(&language()).replacen("version=\"2\"", "version=\"3\"", 1);
+    let found = refused(&xml);
+    assert_eq!(found.len(), 1, "{found:#?}");
+    assert_eq!(found[0].0, "E0507");
+    assert!(found[0].1.contains("version `3`"), "{}", found[0].1);
+    assert!(found[0].2.starts_with("<toolspecific tool=\"petrel\""));
+}
+
+#[test]
+fn deeply_nested_lists_in_petrel_text_are_refused_not_a_crash() {
+    // Parsing recurses into list literals: a hostile file must not exhaust the stack.
+    let xml = export_pnml(&language());
+    let deep = format!("{}1{}", "[".repeat(100_000), "]".repeat(100_000));
+    for (from, to) in [
+        (
+            "<code>call GUI.say(self.robot)</code>".to_string(),
+            format!("<code>call GUI.say({deep})</code>"),
+        ),
+        (
+            "<guard>d &gt; 10.0</guard>".to_string(),
+            format!("<guard>d &gt; {deep}</guard>"),
+        ),
+        ("args=\"0.5\"".to_string(), format!("args=\"{deep}\"")),
+    ] {
+        assert!(xml.contains(&from), "{from}");
+        let found = refused(&xml.replacen(&from, &to, 1));
+        let ends: Vec<String> = found
+            .iter()
+            .map(|(c, m, _)| format!("{c} ...{}", &m[m.len().saturating_sub(80)..]))
+            .collect();
+        assert!(
+            found
+                .iter()
+                .any(|(c, m, _)| *c == "E0506" && m.ends_with("lists nested more than 32 deep")),
+            "{ends:#?}"
+        );
+    }
+}
+
+#[test]
+fn truncated_and_mangled_language_exports_never_panic() {
+    let text = export_pnml(&language());
+    let end = text.rfind("</pnml>").unwrap();
+    for cut in (0..end).filter(|i| text.is_char_boundary(*i)).step_by(7) {
+        let mut diags = Diagnostics::new();
+        assert!(import_pnml(FileId(0), &text[..cut], &mut diags).is_none());
+        assert!(diags.has_errors(), "cut at {cut} gave no error");
+    }
+    // Each Petrel element dropped in turn: refused or read, never a panic.
+    let lines: Vec<&str> = text.lines().collect();
+    let block_end = lines
+        .iter()
+        .position(|l| l.trim() == "</toolspecific>")
+        .unwrap();
+    for skip in 5..block_end {
+        if !lines[skip].trim_end().ends_with("/>") {
+            continue;
+        }
+        let mangled: String = lines
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| *i != skip)
+            .map(|(_, l)| format!("{l}\n"))
+            .collect();
+        let _ = import_pnml(FileId(0), &mangled, &mut Diagnostics::new());
+    }
+}
+
+/// A project of nets `N0 ... N{depth-1}`, each declaring the next as its child; with
+/// `doubling`, `N{k}` and `M{k}` both declare `N{k+1}` and `M{k+1}`, so the instances double
+/// at each level.
+fn tower(depth: usize, doubling: bool) -> Project {
+    let n = |s: String| Name::synthetic(s);
+    let mut nets = Vec::new();
+    for k in 0..depth {
+        for prefix in ["N", "M"] {
+            if prefix == "M" && (!doubling || k == 0) {
+                continue;
+            }
+            let mut children = vec![ChildDecl {
+                net: n(format!("N{}", k + 1)),
+                args: None,
+            }];
+            if doubling {
+                children.push(ChildDecl {
+                    net: n(format!("M{}", k + 1)),
+                    args: None,
+                });
+            }
+            let items = if k + 1 < depth {
+                vec![Item {
+                    trivia: Trivia::default(),
+                    allows: Vec::new(),
+                    kind: ItemKind::Children(children),
+                    trailing: None,
+                }]
+            } else {
+                Vec::new()
+            };
+            nets.push(NetDecl {
+                trivia: Trivia::default(),
+                allows: Vec::new(),
+                name: n(format!("{prefix}{k}")),
+                params: Vec::new(),
+                items,
+                end_comments: Vec::new(),
+            });
+        }
+    }
+    Project {
+        manifest: Manifest {
+            name: "tower".into(),
+            files: vec![FileRef {
+                path: "t.pn".into(),
+                span: sp(),
+            }],
+            start: vec![n("N0".into())],
+            ..Manifest::default()
+        },
+        files: vec![NetFile {
+            path: "t.pn".into(),
+            nets,
+            end_comments: Vec::new(),
+        }],
+    }
+}
+
+#[test]
+fn instance_expansion_is_bounded_in_count_and_size() {
+    use petrel_nets::instances::{instances, MAX_INSTANCES};
+    let started = std::time::Instant::now();
+    // 2^30 instances if nothing stopped it.
+    let wide = instances(&tower(30, true));
+    assert!(wide.truncated);
+    assert_eq!(wide.list.len(), MAX_INSTANCES);
+    // A chain 20,000 deep: no stack overflow, names bounded in total.
+    let deep = instances(&tower(20_000, false));
+    assert!(deep.truncated);
+    assert!(deep.list.len() < 20_000);
+    assert_eq!(deep.list[2].name, "N0/N1/N2");
+    assert!(
+        started.elapsed().as_secs_f64() < 20.0,
+        "{:?}",
+        started.elapsed()
+    );
+    // Such a project does not import back.
+    let xml = export_pnml(&tower(30, true));
+    let found = refused(&xml);
+    assert!(
+        found
+            .iter()
+            .any(|(c, m, _)| *c == "E0506" && m.contains("expand into more than")),
+        "{:?}",
+        found.iter().take(3).collect::<Vec<_>>()
+    );
+}
+
+#[test]
+fn a_child_that_is_its_own_ancestor_is_made_once_without_children() {
+    let n = |s: &str| Name::synthetic(s);
+    let net = |name: &str, child: &str| NetDecl {
+        trivia: Trivia::default(),
+        allows: Vec::new(),
+        name: n(name),
+        params: Vec::new(),
+        items: vec![Item {
+            trivia: Trivia::default(),
+            allows: Vec::new(),
+            kind: ItemKind::Children(vec![ChildDecl {
+                net: n(child),
+                args: None,
+            }]),
+            trailing: None,
+        }],
+        end_comments: Vec::new(),
+    };
+    let mut p = tower(1, false);
+    p.files[0].nets = vec![net("ROOT", "A"), net("A", "B"), net("B", "A")];
+    let names: Vec<String> = petrel_nets::instances::instances(&p)
+        .list
+        .into_iter()
+        .map(|i| i.name)
+        .collect();
+    assert_eq!(names, ["ROOT", "ROOT/A", "ROOT/A/B", "ROOT/A/B/A"]);
+    // Export and import agree on it, whatever the checker says of the cycle.
+    let xml = export_pnml(&p);
+    let back = import_pnml(FileId(0), &xml, &mut Diagnostics::new());
+    assert_eq!(back, Some(p));
 }

@@ -402,6 +402,7 @@ fn net(places: &[(&str, u64)], transitions: &[(&str, Arcs, Arcs)]) -> PtNet {
             .collect(),
         arcs,
         has_nupn: false,
+        petrel_export: false,
     }
 }
 

@@ -14,6 +14,7 @@ start = ["A"]
 
 [globals]
 g = 0
+h = 0
 
 [events]
 go = { category = "nominal" }
@@ -51,7 +52,8 @@ fn an_unsafe_place_with_the_shortest_sequence_that_reaches_it() {
     assert_eq!(u.transition, "A.t1");
     assert_eq!(u.place, "global.g");
     assert_eq!(u.trace, ["go", "more", "done", "go"]);
-    assert_eq!(r.max_tokens_in_place, 2);
+    // The player refuses the second token: no place ever holds two.
+    assert_eq!(r.max_tokens_in_place, 1);
     assert!(!r.is_clean());
 }
 
@@ -183,15 +185,19 @@ fn max_states_stops_with_a_clear_error() {
 }
 
 #[test]
-fn one_net_alone_with_its_global_places_free() {
-    // Alone, B sees `g` marked by the environment at any time: its transition can fire.
+fn one_net_alone_with_the_global_places_other_nets_write_free() {
+    // A marks `g` after `go`; alone, B sees the environment mark it at any time: its
+    // transition can fire. `h` no other net writes: alone, B never sees it change.
     let p = project(
-        "net A { place a = 1  transition t on go: a -> a }
-         net B { place b = 1  place c  transition u on more: b, g -> c }",
+        "net A { place a = 1  transition t on go: a -> a, g }
+         net B { place b = 1  place c  place d
+                 transition u on more: b, g -> c
+                 transition v on more: c, h -> d }",
         "",
     );
+    // (`h` is declared in the manifest below, marked by nobody.)
     let whole = verify(&p, VerifyOptions::default()).unwrap();
-    assert!(whole.never_fired.contains(&"B.u".to_string()));
+    assert!(whole.never_fired.contains(&"B.v".to_string()));
     let alone = verify(
         &p,
         VerifyOptions {
@@ -200,7 +206,7 @@ fn one_net_alone_with_its_global_places_free() {
         },
     )
     .unwrap();
-    assert!(alone.never_fired.is_empty(), "{:?}", alone.never_fired);
+    assert_eq!(alone.never_fired, ["B.v"], "{:?}", alone.never_fired);
     assert!(matches!(
         verify(
             &p,

@@ -429,6 +429,36 @@ impl<'p> Engine<'p> {
         Ok(())
     }
 
+    /// Queues an event addressed to one net (`target`), as `emit EVENT to NET` does; `None`
+    /// queues it for every net, as [`Engine::submit`] does.
+    pub fn submit_to(
+        &mut self,
+        event: EventId,
+        params: Vec<Value>,
+        target: Option<NetId>,
+    ) -> Result<(), Refusal> {
+        self.submit(event, params)?;
+        if target.is_some() {
+            let cat = category_index(self.sem.project.events[event as usize].category);
+            if let Some(last) = self.queues[cat].back_mut() {
+                last.target = target;
+            }
+        }
+        Ok(())
+    }
+
+    /// Drops every queued event (counted as refused, so the accounting still balances), and
+    /// returns how many there were: for analyses that deliver events one at a time.
+    pub fn discard_queued(&mut self) -> usize {
+        let mut n = 0;
+        for q in &mut self.queues {
+            n += q.len();
+            q.clear();
+        }
+        self.stats.refused += n as u64;
+        n
+    }
+
     /// Queues an event by name.
     pub fn submit_named(&mut self, name: &str, params: Vec<Value>) -> Result<(), Refusal> {
         match self.sem.project.event_id(name) {
@@ -454,6 +484,26 @@ impl<'p> Engine<'p> {
         if state.len() == self.state.len() {
             self.state.copy_from_slice(state);
         }
+    }
+
+    /// Puts the engine in a recorded state between two steps (a journal's checkpoint): time
+    /// `now`, `state` of [`Layout::words`](petrel_nets::semantics::Layout) words, the timers'
+    /// `deadlines`; the queue is emptied and the engine counts as started. False (and nothing
+    /// changed) when the state or the deadlines are not of this project's size.
+    pub fn restore(&mut self, now: Micros, state: &[u64], deadlines: &[Option<Micros>]) -> bool {
+        if state.len() != self.state.len() || deadlines.len() != self.deadlines.len() {
+            return false;
+        }
+        for i in 0..self.queues.len() {
+            while let Some(Queued { params, .. }) = self.queues[i].pop_front() {
+                self.recycle(params);
+            }
+        }
+        self.now = now;
+        self.state.copy_from_slice(state);
+        self.deadlines.copy_from_slice(deadlines);
+        self.started = true;
+        true
     }
 
     /// Processes `event` at once, as a step the vehicle took: whatever is queued is dropped
@@ -572,14 +622,7 @@ impl<'p> Engine<'p> {
         let mut emitted = std::mem::take(&mut self.emitted);
         for q in emitted.drain(..) {
             // Types were checked statically; only a catastrophic end can refuse (counted).
-            let target = q.target;
-            if self.submit(q.event, q.params).is_ok() && target.is_some() {
-                // `submit` queued it for every net: address it now.
-                let cat = category_index(self.sem.project.events[q.event as usize].category);
-                if let Some(last) = self.queues[cat].back_mut() {
-                    last.target = target;
-                }
-            }
+            let _ = self.submit_to(q.event, q.params, q.target);
         }
         // The buffer goes back for the next step: no allocation in the steady state.
         self.emitted = emitted;

@@ -9,26 +9,96 @@
 //! replayed through the engine and every recorded state checked.
 //!
 //! A record cut short by a crash (its length runs past the end of the last segment, or its
-//! checksum fails and nothing follows it) is *torn*: dropped with a warning. A bad checksum
-//! anywhere else is *corruption*: an error that names the segment, the offset and the record.
+//! checksum fails and nothing but zero bytes follows it) is *torn*: dropped with a warning. So
+//! is a run of zero bytes at the end of the last segment, what a power loss leaves when a file's
+//! length reached the disk before its data. A bad checksum anywhere else is *corruption*: an
+//! error that names the segment, the offset and the record. `petrel play --resume` cuts a torn
+//! tail off ([`cut_torn_tail`]) before it writes on, so that it never becomes corruption in the
+//! middle of the journal.
+//!
+//! Decoding is bounded: a record's body is decoded with a bincode limit proportional to its own
+//! length ([`decode_entry`]), so a body with a valid checksum that claims a vector of 2^61
+//! elements or a string of 2^40 bytes is refused as an undecodable record, never a panic or an
+//! allocation the machine cannot make.
 
 use bincode::{Decode, Encode};
+use petrel_ipc::RecorderState;
 use petrel_nets::compiled::Value;
 use std::fs::{File, OpenOptions};
-use std::io::{BufWriter, Read, Write};
+use std::io::{Read, Write};
+use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 const MAGIC: &[u8; 8] = b"PETRELJ1";
-/// Largest record accepted when reading (a guard against a corrupt length field).
-const MAX_RECORD: u32 = 64 << 20;
+/// Largest record written or read (a guard against a corrupt length field). A step of the
+/// largest project holds a few kilobytes; events on the wire are at most 64 KiB.
+pub const MAX_RECORD: u32 = 16 << 20;
+
+/// How many bytes of memory decoding may claim per byte of a record. bincode claims
+/// `len × size_of::<T>()` before it decodes a container; the widest element an entry holds per
+/// byte of its encoding is a `String` (24 bytes in memory, 1 byte encoded when empty), so 32
+/// accepts every record the writer produces, and bounds what a crafted one can make us
+/// allocate to 32 times its own length.
+const CLAIM_PER_BYTE: usize = 32;
+
+fn decode_limited<const LIMIT: usize>(
+    body: &[u8],
+) -> Result<(Entry, usize), bincode::error::DecodeError> {
+    bincode::decode_from_slice(body, bincode::config::standard().with_limit::<LIMIT>())
+}
+
+/// Decodes one record's body into an [`Entry`], with a bincode limit of
+/// [`CLAIM_PER_BYTE`] times the body's length (rounded up to a power of two, at least 4 KiB):
+/// every byte of the body must belong to the entry. bincode's limit is a constant of its
+/// configuration type, so the limit is picked from a fixed ladder of powers of two.
+pub fn decode_entry(body: &[u8]) -> Result<Entry, String> {
+    if body.len() > MAX_RECORD as usize {
+        return Err(format!(
+            "a record of {} bytes, more than the {MAX_RECORD} a journal holds",
+            body.len()
+        ));
+    }
+    let limit = body
+        .len()
+        .saturating_mul(CLAIM_PER_BYTE)
+        .max(4096)
+        .next_power_of_two();
+    macro_rules! ladder {
+        ($($bits:literal)*) => {
+            match limit.trailing_zeros() {
+                $($bits => decode_limited::<{ 1usize << $bits }>(body),)*
+                _ => return Err(format!("a record of {} bytes is too large to decode", body.len())),
+            }
+        };
+    }
+    // 2^12 (4 KiB) up to 2^29 (32 × MAX_RECORD).
+    let decoded = ladder!(12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29);
+    match decoded {
+        Ok((entry, used)) if used == body.len() => Ok(entry),
+        Ok((_, used)) => Err(format!(
+            "{} bytes left over after the entry (of {})",
+            body.len() - used,
+            body.len()
+        )),
+        Err(bincode::error::DecodeError::LimitExceeded) => Err(format!(
+            "undecodable entry: it claims more memory than a record of {} bytes can hold (a corrupt or crafted length)",
+            body.len()
+        )),
+        Err(e) => Err(format!("undecodable entry: {e}")),
+    }
+}
+
+/// The journal format this Petrel writes (the header's `version`): 2 added [`Entry::Gap`] and
+/// [`Entry::Checkpoint`]. Version 1 journals read the same.
+pub const FORMAT_VERSION: u32 = 2;
 
 /// One journal entry.
 #[derive(Clone, Debug, PartialEq, Encode, Decode)]
 pub enum Entry {
     /// The first entry of every segment: what was recorded, and with which project.
     Header {
-        /// Format version (1).
+        /// Format version ([`FORMAT_VERSION`]).
         version: u32,
         /// Project name.
         project: String,
@@ -96,6 +166,27 @@ pub enum Entry {
         /// Running timers' deadlines after the step (microseconds), by timer.
         deadlines: Vec<Option<u64>>,
     },
+    /// The flight recorder could not keep `lost` entries (it could not write them, and no
+    /// longer had room in memory for them): the journal goes on from the [`Entry::Checkpoint`]
+    /// that follows.
+    Gap {
+        /// Mission time when the recorder could write again, microseconds.
+        time: u64,
+        /// Entries dropped.
+        lost: u64,
+        /// Why they could not be written.
+        reason: String,
+    },
+    /// The whole state of the engine between two steps (its queue empty): after a
+    /// [`Entry::Gap`], replay and `--resume` start over from it.
+    Checkpoint {
+        /// Mission time, microseconds.
+        time: u64,
+        /// The state.
+        state: Vec<u64>,
+        /// Running timers' deadlines (microseconds), by timer.
+        deadlines: Vec<Option<u64>>,
+    },
 }
 
 impl Entry {
@@ -107,7 +198,9 @@ impl Entry {
             | Entry::Resume { time }
             | Entry::Submit { time, .. }
             | Entry::Refused { time, .. }
-            | Entry::Step { time, .. } => Some(*time),
+            | Entry::Step { time, .. }
+            | Entry::Gap { time, .. }
+            | Entry::Checkpoint { time, .. } => Some(*time),
         }
     }
 }
@@ -144,16 +237,29 @@ impl std::str::FromStr for FlushPolicy {
 }
 
 /// Appends entries to a journal directory.
+///
+/// Entries are encoded into a queue of complete records, and written from it ([`flush`]
+/// (Self::flush), which each [`append`](Self::append) does according to the policy) at the
+/// segment's last good record boundary. A write that fails (a full disk) is cut back to that
+/// boundary, so a partial record never stays in the file, and the records stay queued: the next
+/// flush writes them again. Nothing queued is lost while the writer lives.
 pub struct JournalWriter {
     dir: PathBuf,
     policy: FlushPolicy,
     rotate_bytes: u64,
     header: Entry,
-    out: BufWriter<File>,
+    file: File,
     segment: u32,
-    segment_bytes: u64,
+    /// Bytes of the current segment on record: the end of its last good record.
+    written: u64,
+    /// The magic and the header: a segment holding only these takes any record.
+    floor: u64,
+    /// The file may hold bytes past `written` (a failed write whose cut failed too).
+    tail_dirty: bool,
+    /// Encoded records not yet written, and the length of each.
+    queued: Vec<u8>,
+    lengths: Vec<usize>,
     last_flush: Instant,
-    dirty: bool,
     buf: Vec<u8>,
     /// Records written.
     pub records: u64,
@@ -182,6 +288,26 @@ pub fn segments(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
     Ok(files)
 }
 
+/// Encodes `entry` as one record (length, CRC-32, body) at the end of `out`.
+fn encode_record(entry: &Entry, body: &mut Vec<u8>, out: &mut Vec<u8>) -> std::io::Result<()> {
+    body.clear();
+    bincode::encode_into_std_write(entry, body, bincode::config::standard())
+        .map_err(std::io::Error::other)?;
+    if body.len() > MAX_RECORD as usize {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!(
+                "a journal entry of {} bytes, more than the {MAX_RECORD} a record holds",
+                body.len()
+            ),
+        ));
+    }
+    out.extend_from_slice(&(body.len() as u32).to_le_bytes());
+    out.extend_from_slice(&crc32fast::hash(body).to_le_bytes());
+    out.extend_from_slice(body);
+    Ok(())
+}
+
 impl JournalWriter {
     /// Starts a journal in `dir` (created if needed), after any segments already there, and
     /// writes `header` first.
@@ -202,94 +328,186 @@ impl JournalWriter {
                     .ok()
             })
             .map_or(1, |n| n + 1);
-        let out = Self::new_segment(dir, next)?;
-        let mut w = JournalWriter {
+        let (file, floor) = Self::new_segment(dir, next, &header, policy)?;
+        Ok(JournalWriter {
             dir: dir.to_path_buf(),
             policy,
             rotate_bytes: rotate_bytes.max(4096),
-            header: header.clone(),
-            out,
+            header,
+            file,
             segment: next,
-            segment_bytes: MAGIC.len() as u64,
+            written: floor,
+            floor,
+            tail_dirty: false,
+            queued: Vec::with_capacity(4096),
+            lengths: Vec::new(),
             last_flush: Instant::now(),
-            dirty: false,
             buf: Vec::with_capacity(4096),
-            records: 0,
+            records: 1,
             busy: Duration::ZERO,
-        };
-        w.append(&header)?;
-        w.flush()?;
-        Ok(w)
+        })
     }
 
-    fn new_segment(dir: &Path, n: u32) -> std::io::Result<BufWriter<File>> {
-        let file = OpenOptions::new()
+    /// Creates segment `n` with the magic and the header, written (and synced under
+    /// [`FlushPolicy::Sync`]); a segment that could not be completed is removed.
+    fn new_segment(
+        dir: &Path,
+        n: u32,
+        header: &Entry,
+        policy: FlushPolicy,
+    ) -> std::io::Result<(File, u64)> {
+        let path = segment_path(dir, n);
+        let mut file = OpenOptions::new()
             .create_new(true)
+            .read(true)
             .write(true)
-            .open(segment_path(dir, n))?;
-        let mut out = BufWriter::with_capacity(64 << 10, file);
-        out.write_all(MAGIC)?;
-        Ok(out)
+            .open(&path)?;
+        let mut bytes = MAGIC.to_vec();
+        encode_record(header, &mut Vec::new(), &mut bytes)?;
+        let done = file.write_all(&bytes).and_then(|()| {
+            if policy == FlushPolicy::Sync {
+                file.sync_data()
+            } else {
+                Ok(())
+            }
+        });
+        if let Err(e) = done {
+            drop(file);
+            let _ = std::fs::remove_file(&path);
+            return Err(e);
+        }
+        Ok((file, bytes.len() as u64))
     }
 
-    /// Appends one entry and flushes according to the policy.
-    pub fn append(&mut self, entry: &Entry) -> std::io::Result<()> {
+    /// Queues one entry without writing it (see [`flush`](Self::flush)). Fails only when the
+    /// entry cannot be encoded as a record (larger than [`MAX_RECORD`]).
+    pub fn push(&mut self, entry: &Entry) -> std::io::Result<()> {
         let started = Instant::now();
-        self.buf.clear();
-        bincode::encode_into_std_write(entry, &mut self.buf, bincode::config::standard())
-            .map_err(std::io::Error::other)?;
-        if self.segment_bytes + 8 + self.buf.len() as u64 > self.rotate_bytes
-            && !matches!(entry, Entry::Header { .. })
-        {
-            self.rotate()?;
-            // Re-encode: rotate() used the buffer for the new segment's header.
-            self.buf.clear();
-            bincode::encode_into_std_write(entry, &mut self.buf, bincode::config::standard())
-                .map_err(std::io::Error::other)?;
-        }
-        let crc = crc32fast::hash(&self.buf);
-        self.out.write_all(&(self.buf.len() as u32).to_le_bytes())?;
-        self.out.write_all(&crc.to_le_bytes())?;
-        self.out.write_all(&self.buf)?;
-        self.segment_bytes += 8 + self.buf.len() as u64;
-        self.records += 1;
-        self.dirty = true;
-        match self.policy {
-            FlushPolicy::EveryRecord => self.flush()?,
-            FlushPolicy::Sync => {
-                self.flush()?;
-                self.out.get_ref().sync_data()?;
-            }
-            FlushPolicy::Interval(p) => {
-                if self.last_flush.elapsed() >= p {
-                    self.flush()?;
-                }
-            }
-        }
+        let before = self.queued.len();
+        encode_record(entry, &mut self.buf, &mut self.queued)?;
+        self.lengths.push(self.queued.len() - before);
         self.busy += started.elapsed();
         Ok(())
     }
 
-    /// Hands everything written so far to the operating system.
-    pub fn flush(&mut self) -> std::io::Result<()> {
-        if self.dirty {
-            self.out.flush()?;
-            self.dirty = false;
+    /// Queues one entry and writes according to the policy. On an error the entry stays
+    /// queued (unless it could not be encoded at all), and the next flush tries again.
+    pub fn append(&mut self, entry: &Entry) -> std::io::Result<()> {
+        self.push(entry)?;
+        match self.policy {
+            FlushPolicy::EveryRecord | FlushPolicy::Sync => self.flush(),
+            FlushPolicy::Interval(p) => {
+                if self.last_flush.elapsed() >= p {
+                    self.flush()
+                } else {
+                    Ok(())
+                }
+            }
         }
-        self.last_flush = Instant::now();
-        Ok(())
+    }
+
+    /// Writes every queued record to the operating system (and syncs it to the disk under
+    /// [`FlushPolicy::Sync`]), starting new segments past the rotation size. On an error, what
+    /// was written stays written, the rest stays queued, and the segment ends at its last good
+    /// record.
+    pub fn flush(&mut self) -> std::io::Result<()> {
+        let started = Instant::now();
+        let result = self.write_queued();
+        if result.is_ok() {
+            self.last_flush = Instant::now();
+        }
+        self.busy += started.elapsed();
+        result
+    }
+
+    fn write_queued(&mut self) -> std::io::Result<()> {
+        if self.tail_dirty {
+            self.file.set_len(self.written)?;
+            self.tail_dirty = false;
+        }
+        let (mut done, mut k) = (0usize, 0usize);
+        let result = loop {
+            if k == self.lengths.len() {
+                break Ok(());
+            }
+            // The records that fit in this segment (any one record fits in a fresh segment).
+            let (mut end, mut j) = (done, k);
+            while j < self.lengths.len() {
+                let len = self.lengths[j];
+                let fresh = self.written == self.floor && end == done;
+                if !fresh && self.written + (end - done + len) as u64 > self.rotate_bytes {
+                    break;
+                }
+                end += len;
+                j += 1;
+            }
+            if end > done {
+                let bytes = &self.queued[done..end];
+                if let Err((e, wrote)) = write_at_tracked(&self.file, bytes, self.written) {
+                    // Keep the complete records that reached the file (not under `Sync`: they
+                    // are not on the disk), and cut the rest: no partial record stays.
+                    if self.policy != FlushPolicy::Sync {
+                        let mut kept = 0;
+                        while k < j && kept + self.lengths[k] <= wrote {
+                            kept += self.lengths[k];
+                            k += 1;
+                            self.records += 1;
+                        }
+                        self.written += kept as u64;
+                        done += kept;
+                    }
+                    self.tail_dirty = self.file.set_len(self.written).is_err();
+                    break Err(e);
+                }
+                if self.policy == FlushPolicy::Sync {
+                    // Not synced, not on record: written again (the same bytes) next time.
+                    if let Err(e) = self.file.sync_data() {
+                        break Err(e);
+                    }
+                }
+                self.written += (end - done) as u64;
+                self.records += (j - k) as u64;
+                done = end;
+                k = j;
+            }
+            if k < self.lengths.len() {
+                if let Err(e) = self.rotate() {
+                    break Err(e);
+                }
+            }
+        };
+        self.queued.drain(..done);
+        self.lengths.drain(..k);
+        result
     }
 
     fn rotate(&mut self) -> std::io::Result<()> {
-        self.flush()?;
-        if self.policy == FlushPolicy::Sync {
-            self.out.get_ref().sync_data()?;
-        }
+        let (file, floor) =
+            Self::new_segment(&self.dir, self.segment + 1, &self.header, self.policy)?;
+        self.file = file;
         self.segment += 1;
-        self.out = Self::new_segment(&self.dir, self.segment)?;
-        self.segment_bytes = MAGIC.len() as u64;
-        let header = self.header.clone();
-        self.append(&header)
+        self.written = floor;
+        self.floor = floor;
+        self.records += 1;
+        Ok(())
+    }
+
+    /// Records queued and not yet written.
+    pub fn queued_records(&self) -> usize {
+        self.lengths.len()
+    }
+
+    /// Bytes queued and not yet written.
+    pub fn queued_bytes(&self) -> usize {
+        self.queued.len()
+    }
+
+    /// Drops every queued record (the recorder gives up on them); returns how many.
+    pub fn discard_queued(&mut self) -> usize {
+        let n = self.lengths.len();
+        self.queued.clear();
+        self.lengths.clear();
+        n
     }
 
     /// The directory.
@@ -298,39 +516,268 @@ impl JournalWriter {
     }
 }
 
-/// The journal of a running player: a writer, or none (`--no-journal`). A failure to write is
-/// logged loudly and counted but never stops the player: a vehicle must keep flying.
+/// Writes all of `bytes` at `offset`; on an error, also says how many bytes were written
+/// before it (a full disk takes what it has room for).
+fn write_at_tracked(file: &File, bytes: &[u8], offset: u64) -> Result<(), (std::io::Error, usize)> {
+    let mut done = 0;
+    while done < bytes.len() {
+        match file.write_at(&bytes[done..], offset + done as u64) {
+            Ok(0) => {
+                return Err((
+                    std::io::Error::new(std::io::ErrorKind::WriteZero, "the file took no byte"),
+                    done,
+                ))
+            }
+            Ok(n) => done += n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err((e, done)),
+        }
+    }
+    Ok(())
+}
+
+/// What the journal's [`flush`](Journal::flush) means for the events taken since the last one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Settlement {
+    /// Everything appended is on record (or there is no journal): settled.
+    Recorded,
+    /// Not written yet (the recorder is failing and keeps them): not settled.
+    Pending,
+    /// Dropped by the recorder: settled as unrecorded.
+    Lost,
+}
+
+/// A change of the recorder's state, for the player to raise as a built-in event.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum RecorderChange {
+    /// It could not write (`recorder_failed(reason)`).
+    Failed(String),
+    /// It wrote everything again (`recorder_restored`).
+    Restored,
+}
+
+/// Default of [`Journal::with_backlog`]: what a failing recorder keeps in memory before it
+/// drops records (a minute of a busy vehicle's steps, and more).
+pub const DEFAULT_BACKLOG: usize = 32 << 20;
+
+/// The journal of a running player: a writer, or none (`--no-journal`), and the recorder's
+/// state.
+///
+/// A failure to write never stops the player (a vehicle must keep flying). The recorder goes
+/// **failing**: records stay queued in memory, the events they hold are not acknowledged
+/// ([`Settlement::Pending`]), and every [`flush`](Self::flush) (each heartbeat) tries again;
+/// when one succeeds it is **ok** again and everything is on record. Past the backlog it goes
+/// **dropping**: the queued records are dropped and counted, and so is every later one
+/// ([`Settlement::Lost`]), until a [`checkpoint`](Self::checkpoint) (an [`Entry::Gap`] and an
+/// [`Entry::Checkpoint`] of the engine) can be written, from which replay and `--resume` go
+/// on. Each change is said once in the log (not once per record) and handed to the player
+/// ([`take_changes`](Self::take_changes)) to raise `recorder_failed` or `recorder_restored`.
 pub struct Journal {
     writer: Option<JournalWriter>,
-    /// Entries that could not be written or flushed.
+    state: RecorderState,
+    reason: String,
+    backlog: usize,
+    since: Instant,
+    changes: Vec<RecorderChange>,
+    /// Write or flush attempts that failed.
     pub failures: u64,
+    /// Entries the recorder dropped.
+    pub lost: u64,
+    /// Of them, those a [`Entry::Gap`] on record accounts for.
+    lost_in_gaps: u64,
 }
 
 impl Journal {
-    /// A journal writing through `writer`, if any.
+    /// A journal writing through `writer`, if any, with the default backlog.
     pub fn new(writer: Option<JournalWriter>) -> Self {
+        Self::with_backlog(writer, DEFAULT_BACKLOG)
+    }
+
+    /// A journal that keeps up to `backlog` bytes of records in memory while it cannot write.
+    pub fn with_backlog(writer: Option<JournalWriter>, backlog: usize) -> Self {
         Journal {
+            state: if writer.is_some() {
+                RecorderState::Ok
+            } else {
+                RecorderState::None
+            },
             writer,
+            reason: String::new(),
+            backlog,
+            since: Instant::now(),
+            changes: Vec::new(),
             failures: 0,
+            lost: 0,
+            lost_in_gaps: 0,
         }
     }
 
-    /// Appends one entry (if there is a journal).
+    /// The recorder's state.
+    pub fn state(&self) -> RecorderState {
+        self.state
+    }
+
+    /// Why it last failed (empty when it is ok).
+    pub fn reason(&self) -> &str {
+        &self.reason
+    }
+
+    /// Records and bytes waiting in memory.
+    pub fn backlog(&self) -> (usize, usize) {
+        self.writer
+            .as_ref()
+            .map_or((0, 0), |w| (w.queued_records(), w.queued_bytes()))
+    }
+
+    /// The state changes since the last call, oldest first.
+    pub fn take_changes(&mut self) -> Vec<RecorderChange> {
+        std::mem::take(&mut self.changes)
+    }
+
+    /// True when a change waits for [`take_changes`](Self::take_changes).
+    pub fn has_changes(&self) -> bool {
+        !self.changes.is_empty()
+    }
+
+    fn fail(&mut self, e: &std::io::Error) {
+        self.failures += 1;
+        self.reason = e.to_string();
+        if self.state == RecorderState::Ok {
+            self.state = RecorderState::Failing;
+            self.since = Instant::now();
+            tracing::error!(error = %e, "the flight recorder cannot write: its records wait in memory and the events they hold are not acknowledged until it can; raising recorder_failed");
+            self.changes
+                .push(RecorderChange::Failed(self.reason.clone()));
+        } else {
+            tracing::debug!(error = %e, "the flight recorder still cannot write");
+        }
+    }
+
+    fn start_dropping(&mut self, why: String) {
+        let dropped = self
+            .writer
+            .as_mut()
+            .map_or(0, JournalWriter::discard_queued);
+        self.lost += dropped as u64;
+        if self.state == RecorderState::Ok {
+            self.changes.push(RecorderChange::Failed(why.clone()));
+        }
+        self.state = RecorderState::Dropping;
+        self.reason = why;
+        tracing::error!(dropped, reason = %self.reason, "the flight recorder drops records: the journal will go on from a checkpoint of the state once it can write");
+    }
+
+    /// Appends one entry (if there is a journal): written now or later, or dropped (and
+    /// counted) while the recorder is dropping.
     pub fn append(&mut self, entry: &Entry) {
-        if let Some(w) = self.writer.as_mut() {
-            if let Err(e) = w.append(entry) {
-                self.failures += 1;
-                tracing::error!(error = %e, "journal write failed: the flight recorder is missing this entry");
-            }
+        let Some(w) = self.writer.as_mut() else {
+            return;
+        };
+        match self.state {
+            RecorderState::Dropping => self.lost += 1,
+            RecorderState::Ok => match w.push(entry) {
+                Err(e) => self.start_dropping(format!("an entry cannot be recorded: {e}")),
+                Ok(()) => {
+                    let due = match w.policy {
+                        FlushPolicy::EveryRecord | FlushPolicy::Sync => true,
+                        FlushPolicy::Interval(p) => w.last_flush.elapsed() >= p,
+                    };
+                    if due {
+                        if let Err(e) = w.flush() {
+                            self.fail(&e);
+                        }
+                    }
+                }
+            },
+            // Retried at the next flush, not at every record.
+            _ => match w.push(entry) {
+                Err(e) => self.start_dropping(format!("an entry cannot be recorded: {e}")),
+                Ok(()) if w.queued_bytes() > self.backlog => {
+                    let why = format!(
+                        "{} (and more than {} bytes of records waited in memory)",
+                        self.reason, self.backlog
+                    );
+                    self.start_dropping(why);
+                }
+                Ok(()) => {}
+            },
         }
     }
 
-    /// Hands everything written to the operating system.
-    pub fn flush(&mut self) {
-        if let Some(w) = self.writer.as_mut() {
-            if let Err(e) = w.flush() {
+    /// Writes what waits (each heartbeat calls it, before the acknowledgements go out) and
+    /// says what that means for the events taken since the last flush.
+    pub fn flush(&mut self) -> Settlement {
+        let Some(w) = self.writer.as_mut() else {
+            return Settlement::Recorded;
+        };
+        match self.state {
+            RecorderState::Dropping => Settlement::Lost,
+            _ => match w.flush() {
+                Ok(()) => {
+                    if self.state == RecorderState::Failing {
+                        tracing::warn!(
+                            after_s = self.since.elapsed().as_secs_f64(),
+                            "the flight recorder writes again: every record waiting in memory is written; raising recorder_restored"
+                        );
+                        self.state = RecorderState::Ok;
+                        self.reason.clear();
+                        self.changes.push(RecorderChange::Restored);
+                    }
+                    Settlement::Recorded
+                }
+                Err(e) => {
+                    self.fail(&e);
+                    Settlement::Pending
+                }
+            },
+        }
+    }
+
+    /// True when the recorder is dropping and waits for a checkpoint to go on.
+    pub fn wants_checkpoint(&self) -> bool {
+        self.state == RecorderState::Dropping
+    }
+
+    /// While dropping: tries to write an [`Entry::Gap`] (what was lost) and `checkpoint` (an
+    /// [`Entry::Checkpoint`] of the engine now). True when they are on record: the recorder is
+    /// ok again, and the journal goes on from the checkpoint.
+    pub fn checkpoint(&mut self, checkpoint: &Entry) -> bool {
+        let Some(w) = self.writer.as_mut() else {
+            return false;
+        };
+        if self.state != RecorderState::Dropping {
+            return false;
+        }
+        let gap = Entry::Gap {
+            time: checkpoint.time().unwrap_or(0),
+            lost: self.lost - self.lost_in_gaps,
+            reason: self.reason.clone(),
+        };
+        let written = w
+            .push(&gap)
+            .and_then(|()| w.push(checkpoint))
+            .and_then(|()| w.flush());
+        if w.queued_records() < 2 {
+            // The gap is on record, with or without its checkpoint.
+            self.lost_in_gaps = self.lost;
+        }
+        match written {
+            Ok(()) => {
+                tracing::warn!(
+                    lost = self.lost,
+                    after_s = self.since.elapsed().as_secs_f64(),
+                    "the flight recorder writes again, from a checkpoint of the state; raising recorder_restored"
+                );
+                self.state = RecorderState::Ok;
+                self.reason.clear();
+                self.changes.push(RecorderChange::Restored);
+                true
+            }
+            Err(e) => {
+                w.discard_queued();
                 self.failures += 1;
-                tracing::error!(error = %e, "journal flush failed");
+                self.reason = e.to_string();
+                false
             }
         }
     }
@@ -450,6 +897,13 @@ pub fn read_journal(path: &Path) -> Result<JournalRead, JournalError> {
                 what,
             };
             let rest = bytes.len() - pos;
+            if last_file && all_zero(&bytes[pos..]) {
+                // A power loss after the file grew but before its data reached the disk.
+                read.torn = Some(damage(format!(
+                    "{rest} zero bytes at the end of the segment (a power loss before the data reached the disk)"
+                )));
+                return Ok(read);
+            }
             if rest < 8 {
                 let d = damage(format!("{rest} bytes left, less than a record header"));
                 if last_file {
@@ -477,21 +931,19 @@ pub fn read_journal(path: &Path) -> Result<JournalRead, JournalError> {
             let body = &bytes[pos + 8..end];
             if crc32fast::hash(body) != crc {
                 let d = damage("checksum mismatch".into());
-                if last_file && end == bytes.len() {
+                // The last record written, or one whose data only partly reached the disk
+                // before a power loss (zeros after it): torn, not damage.
+                if last_file && all_zero(&bytes[end..]) {
                     read.torn = Some(d);
                 } else {
                     read.corrupt = Some(d);
                 }
                 return Ok(read);
             }
-            match bincode::decode_from_slice::<Entry, _>(body, bincode::config::standard()) {
-                Ok((entry, used)) if used == body.len() => read.entries.push(entry),
-                Ok(_) => {
-                    read.corrupt = Some(damage("bytes left over after the entry".into()));
-                    return Ok(read);
-                }
-                Err(e) => {
-                    read.corrupt = Some(damage(format!("undecodable entry: {e}")));
+            match decode_entry(body) {
+                Ok(entry) => read.entries.push(entry),
+                Err(what) => {
+                    read.corrupt = Some(damage(what));
                     return Ok(read);
                 }
             }
@@ -500,6 +952,194 @@ pub fn read_journal(path: &Path) -> Result<JournalRead, JournalError> {
         }
     }
     Ok(read)
+}
+
+fn all_zero(bytes: &[u8]) -> bool {
+    bytes.iter().all(|&b| b == 0)
+}
+
+/// Cuts a torn tail off its segment, so that the journal ends at its last good record before a
+/// player writes on (a torn record in a segment that is no longer the last would read as
+/// corruption). A segment torn before its first record is removed.
+pub fn cut_torn_tail(torn: &Damage) -> std::io::Result<()> {
+    if torn.offset < MAGIC.len() as u64 {
+        return std::fs::remove_file(&torn.segment);
+    }
+    let file = OpenOptions::new().write(true).open(&torn.segment)?;
+    file.set_len(torn.offset)?;
+    file.sync_all()
+}
+
+/// The lock file of a journal directory: held (an exclusive `flock`) by the one player that
+/// writes there, and holding its vehicle's name and process id.
+pub const LOCK_FILE: &str = "petrel.lock";
+
+/// Who holds (or held) a journal directory's lock.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct LockOwner {
+    /// The vehicle.
+    pub vehicle: String,
+    /// The player's process id.
+    pub pid: u32,
+}
+
+impl LockOwner {
+    fn parse(text: &str) -> Option<LockOwner> {
+        let mut vehicle = None;
+        let mut pid = None;
+        for line in text.lines() {
+            if let Some(v) = line.strip_prefix("vehicle=") {
+                vehicle = Some(v.to_string());
+            } else if let Some(p) = line.strip_prefix("pid=") {
+                pid = p.parse().ok();
+            }
+        }
+        Some(LockOwner {
+            vehicle: vehicle?,
+            pid: pid?,
+        })
+    }
+}
+
+/// A journal directory could not be locked.
+#[derive(Debug)]
+pub enum LockError {
+    /// Another player writes there.
+    InUse {
+        /// The journal directory.
+        dir: PathBuf,
+        /// Who, if its lock file says.
+        owner: Option<LockOwner>,
+    },
+    /// The directory or the lock file could not be created, read or locked.
+    Io(PathBuf, std::io::Error),
+}
+
+impl std::fmt::Display for LockError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            LockError::InUse { dir, owner } => {
+                write!(f, "the journal directory {} is in use by ", dir.display())?;
+                match owner {
+                    Some(o) => write!(f, "the player of vehicle `{}` (pid {})", o.vehicle, o.pid)?,
+                    None => write!(f, "another player")?,
+                }
+                write!(
+                    f,
+                    ": a journal directory holds one vehicle's mission; give this player another --journal"
+                )
+            }
+            LockError::Io(p, e) => write!(f, "cannot lock {}: {e}", p.display()),
+        }
+    }
+}
+
+impl std::error::Error for LockError {}
+
+/// The exclusive hold of a player on its journal directory ([`LOCK_FILE`]).
+///
+/// The lock is an `flock` on the lock file, which the kernel releases when the process dies,
+/// however it dies; the file itself stays. It names the vehicle and the process once
+/// [`claimed`](Self::claim), and is emptied when the hold is dropped in good order: a lock file
+/// that still names someone when it is acquired was left by a process that died (a stale
+/// lock, [`stale_owner`](Self::stale_owner)).
+#[derive(Debug)]
+pub struct JournalLock {
+    file: File,
+    path: PathBuf,
+    stale: Option<LockOwner>,
+    claimed: bool,
+}
+
+impl JournalLock {
+    /// Locks journal directory `dir` (created if needed), or says who holds it.
+    pub fn acquire(dir: &Path) -> Result<JournalLock, LockError> {
+        let io = |e: std::io::Error| LockError::Io(dir.to_path_buf(), e);
+        std::fs::create_dir_all(dir).map_err(io)?;
+        let path = dir.join(LOCK_FILE);
+        let mut file = OpenOptions::new()
+            .read(true)
+            .write(true)
+            .create(true)
+            .truncate(false)
+            .open(&path)
+            .map_err(io)?;
+        let mut text = String::new();
+        match file.try_lock() {
+            Ok(()) => {}
+            Err(std::fs::TryLockError::WouldBlock) => {
+                let _ = file.read_to_string(&mut text);
+                return Err(LockError::InUse {
+                    dir: dir.to_path_buf(),
+                    owner: LockOwner::parse(&text),
+                });
+            }
+            Err(std::fs::TryLockError::Error(e)) => return Err(io(e)),
+        }
+        // Unreadable content is as good as none: the lock is ours.
+        let _ = file.read_to_string(&mut text);
+        Ok(JournalLock {
+            file,
+            path,
+            stale: LockOwner::parse(&text),
+            claimed: false,
+        })
+    }
+
+    /// The owner named by a lock file found unlocked: a player that died holding it.
+    pub fn stale_owner(&self) -> Option<&LockOwner> {
+        self.stale.as_ref()
+    }
+
+    /// Writes this process's vehicle and pid into the lock file (until then, a refused player
+    /// leaves what the file said untouched).
+    pub fn claim(&mut self, vehicle: &str) -> std::io::Result<()> {
+        let text = format!("vehicle={vehicle}\npid={}\n", std::process::id());
+        self.file.set_len(0)?;
+        self.file.write_all_at(text.as_bytes(), 0)?;
+        self.file.sync_data()?;
+        self.claimed = true;
+        Ok(())
+    }
+
+    /// The lock file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl Drop for JournalLock {
+    fn drop(&mut self) {
+        if self.claimed {
+            // Released in good order: an empty lock file is nobody's.
+            let _ = self.file.set_len(0);
+        }
+    }
+}
+
+/// The header of a journal directory's first segment, if it has one that reads.
+pub fn first_header(dir: &Path) -> Option<Entry> {
+    let first = segments(dir).ok()?.into_iter().next()?;
+    let mut file = File::open(first).ok()?;
+    let mut head = [0u8; 16];
+    file.read_exact(&mut head).ok()?;
+    if &head[..8] != MAGIC {
+        return None;
+    }
+    let len = u32::from_le_bytes(head[8..12].try_into().ok()?);
+    if len > MAX_RECORD {
+        return None;
+    }
+    let crc = u32::from_le_bytes(head[12..16].try_into().ok()?);
+    let mut body = vec![0u8; len as usize];
+    file.read_exact(&mut body).ok()?;
+    if crc32fast::hash(&body) != crc {
+        return None;
+    }
+    match decode_entry(&body) {
+        Ok(header @ Entry::Header { .. }) => Some(header),
+        _ => None,
+    }
 }
 
 /// A stable digest of a compiled project (FNV-1a over its debug text), so a journal is only

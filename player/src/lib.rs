@@ -5,12 +5,14 @@
 //!   player's steps goes through.
 //! - [`script`]: missions as unit tests, in virtual time (`petrel run --script`); [`expect`]:
 //!   what a script's `expect` lines say and how they are checked.
-//! - [`runtime`]: the player process on iceoryx2 (`petrel play`).
+//! - [`runtime`]: the player process on iceoryx2 (`petrel play`); [`ack`], its ledger of what
+//!   it took from each sender, refused and recorded (the acknowledgements of its heartbeat).
 //! - [`journal`], [`replay`]: the flight recorder and its replay (`--resume` too).
 //! - [`shadow`]: the ground-station copy that follows a vehicle's steps.
 //!
 //! The command line is the `petrel-cli` crate (binary `petrel`).
 
+pub mod ack;
 pub mod engine;
 pub mod expect;
 pub mod journal;

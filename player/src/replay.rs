@@ -3,8 +3,11 @@
 //! The journal's inputs (the start, each submitted event with its time) are fed to a fresh
 //! engine; at each recorded step the engine takes its next event, and the event, the transitions
 //! fired and the state after must be the recorded ones. The first difference is a divergence,
-//! reported with both markings and the event that caused it. Recovery (`petrel play --resume`)
-//! is the same replay, after which the player carries on live.
+//! reported with both markings and the event that caused it. The journal itself must hold
+//! together: every segment's header names the same vehicle, project and mission start, and
+//! time never goes backwards from one entry to the next; segments spliced from another journal
+//! are reported like a divergence ([`DivergenceKind::Journal`]). Recovery (`petrel play
+//! --resume`) is the same replay, after which the player carries on live.
 
 use crate::engine::{Engine, Micros};
 use crate::journal::Entry;
@@ -12,9 +15,21 @@ use crate::record::{outcome_name, StepRecord};
 use petrel_nets::compiled::CompiledProject;
 use petrel_nets::semantics::Layout;
 
+/// What kind of difference a [`Divergence`] is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DivergenceKind {
+    /// The engine did not reproduce a recorded step or state.
+    Replay,
+    /// The journal does not hold together: a segment of another vehicle, project or mission,
+    /// or time going backwards (segments spliced from another journal).
+    Journal,
+}
+
 /// The first place where the replay differs from the journal.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Divergence {
+    /// What kind of difference.
+    pub kind: DivergenceKind,
     /// Index of the journal entry.
     pub entry: usize,
     /// Its mission time, microseconds.
@@ -42,6 +57,11 @@ pub struct ReplayReport {
     pub last_time: Micros,
     /// Replay stopped at `--until` before the end of the journal.
     pub stopped_early: bool,
+    /// Gaps: places where the recorder dropped entries (it could not write them) and the
+    /// journal goes on from a checkpoint of the state.
+    pub gaps: u64,
+    /// Entries the recorder dropped, all gaps together.
+    pub lost: u64,
 }
 
 /// A state as `NET.place` / `global.place` names, active nets as `NET+`, running timers.
@@ -66,6 +86,11 @@ pub fn replay<'p>(
     let mut engine = Engine::new(project);
     let mut log = StepRecord::new(project);
     let mut report = ReplayReport::default();
+    // After a gap, the next checkpoint is where the replay starts over.
+    let mut after_gap = false;
+    // The journal's first header, and the time of the last entry that had one.
+    let mut first: Option<(&str, u64, Option<u64>)> = None;
+    let mut previous: Option<(usize, u64)> = None;
     for (i, entry) in entries.iter().enumerate() {
         if let (Some(limit), Some(t)) = (until, entry.time()) {
             if t > limit {
@@ -73,12 +98,25 @@ pub fn replay<'p>(
                 break;
             }
         }
+        if let Some(what) = inconsistency(entry, &mut first, &mut previous, i) {
+            report.divergence = Some(Divergence {
+                kind: DivergenceKind::Journal,
+                entry: i,
+                time: entry.time().unwrap_or(report.last_time),
+                event: "(journal)".into(),
+                what,
+                recorded: Vec::new(),
+                replayed: describe(project, engine.layout(), engine.state()),
+            });
+            break;
+        }
         report.entries = i + 1;
         if let Some(t) = entry.time() {
             report.last_time = t;
         }
         let diverge =
             |engine: &Engine, what: String, event: &str, time: u64, recorded: &[u64]| Divergence {
+                kind: DivergenceKind::Replay,
                 entry: i,
                 time,
                 event: event.to_string(),
@@ -87,7 +125,45 @@ pub fn replay<'p>(
                 replayed: describe(project, engine.layout(), engine.state()),
             };
         match entry {
-            Entry::Header { .. } | Entry::Refused { .. } | Entry::Resume { .. } => {}
+            Entry::Header { .. } | Entry::Refused { .. } => {}
+            // The player came back at this mission time: timers whose deadline passed while it
+            // was down expire now, as they did live.
+            Entry::Resume { time } => engine.advance_to(*time),
+            Entry::Gap { lost, .. } => {
+                report.gaps += 1;
+                report.lost += lost;
+                after_gap = true;
+            }
+            Entry::Checkpoint {
+                time,
+                state,
+                deadlines,
+            } => {
+                if after_gap {
+                    after_gap = false;
+                    if !engine.restore(*time, state, deadlines) {
+                        report.divergence = Some(diverge(
+                            &engine,
+                            "the checkpoint is not of this project's size".into(),
+                            "(checkpoint)",
+                            *time,
+                            state,
+                        ));
+                        break;
+                    }
+                } else if engine.state() != state.as_slice()
+                    || engine.deadlines() != deadlines.as_slice()
+                {
+                    report.divergence = Some(diverge(
+                        &engine,
+                        "the state at the checkpoint differs".into(),
+                        "(checkpoint)",
+                        *time,
+                        state,
+                    ));
+                    break;
+                }
+            }
             Entry::Start { time, state } => {
                 engine.start(*time, &mut log);
                 log.clear();
@@ -112,6 +188,7 @@ pub fn replay<'p>(
                 let params = params.clone();
                 if let Err(r) = engine.submit_named(event, params) {
                     report.divergence = Some(Divergence {
+                        kind: DivergenceKind::Replay,
                         entry: i,
                         time: *time,
                         event: event.clone(),
@@ -171,4 +248,60 @@ pub fn replay<'p>(
         }
     }
     (engine, report)
+}
+
+/// What is inconsistent about entry `i` of a journal, given its first header and the previous
+/// entry with a time: a header that disagrees with the first one, or time going backwards.
+fn inconsistency<'e>(
+    entry: &'e Entry,
+    first: &mut Option<(&'e str, u64, Option<u64>)>,
+    previous: &mut Option<(usize, u64)>,
+    i: usize,
+) -> Option<String> {
+    if let Entry::Header {
+        version,
+        vehicle,
+        digest,
+        started_unix_ms,
+        ..
+    } = entry
+    {
+        // Before format 2, a resumed segment's header held the resume's time, not the
+        // mission's start: only the vehicle and the project can be compared.
+        let start = (*version >= 2).then_some(*started_unix_ms);
+        let Some((v, d, s)) = *first else {
+            *first = Some((vehicle, *digest, start));
+            return None;
+        };
+        if vehicle != v {
+            return Some(format!(
+                "a segment of vehicle `{vehicle}` in the journal of vehicle `{v}`: segments of two journals were put together"
+            ));
+        }
+        if *digest != d {
+            return Some(
+                "a segment recorded with another project in this journal: segments of two journals were put together"
+                    .into(),
+            );
+        }
+        if let (Some(a), Some(b)) = (start, s) {
+            if a != b {
+                return Some(format!(
+                    "a segment of another mission of vehicle `{v}` (started at {a} ms since the Unix epoch, not {b}): segments of two journals were put together"
+                ));
+            }
+        }
+    }
+    let t = entry.time()?;
+    if let Some((j, before)) = *previous {
+        if t < before {
+            return Some(format!(
+                "time goes backwards: {:.6} s after {:.6} s at entry {j} (segments spliced from another journal?)",
+                t as f64 / 1e6,
+                before as f64 / 1e6
+            ));
+        }
+    }
+    *previous = Some((i, t));
+    None
 }

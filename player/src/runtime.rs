@@ -3,18 +3,27 @@
 //! [`play`] builds a [`PlayerLoop`] and runs it. One reactor thread waits, with the chosen
 //! strategy, on the events service, the next timer deadline, the heartbeat and the liveness
 //! check. On each wake-up it moves time forward, drains incoming events into the engine
-//! (refusing malformed ones with a `bad_message` event), turns dead programs into
+//! (refusing malformed ones, and built-in events that other processes send, with a
+//! `bad_message` event), turns dead programs into
 //! `program_lost`, processes the queue, sends calls (an absent program gives `call_failed`),
 //! journals every input and step, and publishes marking deltas and a heartbeat carrying the
-//! live status. The heartbeat is the acknowledgement senders wait for, and it goes out only
-//! after the journal is flushed: an acknowledged event is on record.
+//! live status (JSON, for people and tools) and, typed, the acknowledgement of each sender
+//! ([`crate::ack`]). The heartbeat is the acknowledgement senders wait for, and an event is
+//! acknowledged as settled only after the journal holding it is flushed: an acknowledged event
+//! is on record. The heartbeat's publisher is sized from the project, so that the status of
+//! the largest marking and the fullest ledger always fit; a heartbeat that cannot be sent
+//! anyway is logged and counted (`heartbeats_refused` in the status).
 
+use crate::ack::Ledger;
 use crate::engine::{Args, Engine, Micros, Refusal, Sink, Stats};
-use crate::journal::{Entry, FlushPolicy, Journal, JournalWriter};
+use crate::journal::{
+    Entry, FlushPolicy, Journal, JournalLock, JournalWriter, RecorderChange, Settlement,
+};
 use crate::record::{marked_places, outcome_name, StepRecord};
 use petrel_ipc::{
-    CallMsg, CallSender, EventReceiver, HeartbeatPublisher, MarkingMsg, MarkingPublisher,
-    Participant, ProgramWatch, Reactor, RecvError, Role, SendError, Vehicle, WaitStrategy,
+    CallMsg, CallSender, EventReceiver, Heartbeat, HeartbeatPublisher, MarkingMsg,
+    MarkingPublisher, Participant, ProgramWatch, Reactor, RecvError, Role, SendError, Vehicle,
+    WaitStrategy,
 };
 use petrel_nets::compiled::{
     CompiledProject, EventId, FunctionId, NetId, ProgramId, TimerId, Value,
@@ -43,10 +52,16 @@ pub struct PlayOptions {
     pub flush: FlushPolicy,
     /// Start a new journal segment past this size.
     pub rotate_bytes: u64,
+    /// Bytes of journal records kept in memory while the journal cannot be written (a full
+    /// disk); past it the recorder drops records and starts over from a checkpoint.
+    pub journal_backlog: usize,
     /// Restore the mission from the journal and carry on.
     pub resume: bool,
     /// The project directory, recorded in the journal header.
     pub project_dir: String,
+    /// The Unix group (name or number) given the vehicle's files, for operator accounts
+    /// (`petrel play --group`); `None`: the user's alone (or `PETREL_GROUP`'s).
+    pub group: Option<String>,
 }
 
 impl PlayOptions {
@@ -61,8 +76,10 @@ impl PlayOptions {
             journal: None,
             flush: FlushPolicy::EveryRecord,
             rotate_bytes: 64 << 20,
+            journal_backlog: crate::journal::DEFAULT_BACKLOG,
             resume: false,
             project_dir: String::new(),
+            group: None,
         }
     }
 }
@@ -105,10 +122,19 @@ pub struct PlayReport {
     pub calls_failed: u64,
     /// Journal records written.
     pub journal_records: u64,
+    /// Attempts to write the journal that failed (a full disk...).
+    pub journal_failures: u64,
+    /// Journal entries the recorder had to drop.
+    pub journal_lost: u64,
     /// Time the reactor thread spent writing the journal.
     pub journal_busy: Duration,
     /// Steps restored from the journal by `--resume`.
     pub resumed_steps: u64,
+    /// Heartbeats published.
+    pub heartbeats_sent: u64,
+    /// Heartbeats that could not be published at all (no shared memory, a bug in their size):
+    /// each is logged (the first, then one in a hundred) and counted here.
+    pub heartbeats_refused: u64,
 }
 
 /// Runs the player until SIGINT/SIGTERM (or `run_for`).
@@ -217,6 +243,8 @@ struct Builtins {
     program_lost: Option<EventId>,
     call_failed: Option<EventId>,
     bad_message: Option<EventId>,
+    recorder_failed: Option<EventId>,
+    recorder_restored: Option<EventId>,
 }
 
 fn unix_ms() -> u64 {
@@ -224,6 +252,60 @@ fn unix_ms() -> u64 {
         .duration_since(std::time::UNIX_EPOCH)
         .map(|d| d.as_millis() as u64)
         .unwrap_or(0)
+}
+
+/// Locks the journal directory for this player and checks that it may write there: a new
+/// mission needs a directory without a journal, a resumed one its own vehicle's journal.
+/// Returns the lock and the mission's start (wall clock, milliseconds since the Unix epoch):
+/// now for a new mission, the journal's for a resumed one.
+fn take_journal(
+    dir: &std::path::Path,
+    opts: &PlayOptions,
+    now_ms: u64,
+) -> Result<(JournalLock, u64), PlayError> {
+    let mut lock = JournalLock::acquire(dir).map_err(|e| PlayError::Journal(e.to_string()))?;
+    let has_segments = crate::journal::segments(dir)
+        .map(|s| !s.is_empty())
+        .map_err(|e| PlayError::Journal(format!("cannot read {}: {e}", dir.display())))?;
+    let header = crate::journal::first_header(dir);
+    let start = match (&header, opts.resume) {
+        (
+            Some(Entry::Header {
+                vehicle,
+                started_unix_ms,
+                ..
+            }),
+            true,
+        ) => {
+            if *vehicle != opts.vehicle {
+                return Err(PlayError::Journal(format!(
+                    "{} holds the journal of vehicle `{vehicle}`, not `{}`: refusing to resume another vehicle's mission",
+                    dir.display(),
+                    opts.vehicle
+                )));
+            }
+            *started_unix_ms
+        }
+        // An unreadable first header is said by the replay, with the record it is.
+        (_, true) => now_ms,
+        (_, false) if has_segments => {
+            let whose = match &header {
+                Some(Entry::Header { vehicle, .. }) => format!("vehicle `{vehicle}`"),
+                _ => "an unknown vehicle".to_string(),
+            };
+            return Err(PlayError::Journal(format!(
+                "{} already holds the journal of a mission of {whose}: carry that mission on with --resume, or record this one elsewhere (--journal DIR)",
+                dir.display()
+            )));
+        }
+        (_, false) => now_ms,
+    };
+    if let Some(owner) = lock.stale_owner() {
+        warn!(lock = %lock.path().display(), vehicle = %owner.vehicle, pid = owner.pid, "took over the stale lock of a player that died without releasing it");
+    }
+    lock.claim(&opts.vehicle)
+        .map_err(|e| PlayError::Journal(format!("cannot write {}: {e}", lock.path().display())))?;
+    Ok((lock, start))
 }
 
 /// Rebuilds the engine from the journal (`--resume`): the mission time it reached, and the
@@ -246,7 +328,13 @@ fn resume<'p>(
         )));
     }
     if let Some(t) = &read.torn {
-        warn!(segment = %t.segment.display(), offset = t.offset, what = %t.what, "the last journal record was torn by the crash: dropped");
+        warn!(segment = %t.segment.display(), offset = t.offset, what = %t.what, "the end of the journal was torn by the crash: dropped, and cut off so that the journal goes on from its last good record");
+        crate::journal::cut_torn_tail(t).map_err(|e| {
+            PlayError::Journal(format!(
+                "cannot cut the torn tail off {}: {e}",
+                t.segment.display()
+            ))
+        })?;
     }
     let digest = crate::journal::project_digest(project);
     if let Some(Entry::Header { digest: d, .. }) = read.entries.first() {
@@ -266,6 +354,30 @@ fn resume<'p>(
     let restored = engine.marking();
     info!(steps = r.steps, time_s = r.last_time as f64 / 1e6, queued = engine.queued(), ?restored, timers = ?engine.deadlines(), "resumed from the journal");
     Ok((engine, r.last_time, r.steps))
+}
+
+/// Why an event that arrived on the events service names a built-in event it may not: `None`
+/// when it may.
+///
+/// Built-in events (`program_lost`, `call_failed`, `safety_violation`, `livelock`,
+/// `bad_message`) tell the nets what the player itself saw, and the player raises them without
+/// the events service: one arriving there comes from another process, whatever origin it
+/// claims (`player` included), and is refused. The one exception is `call_failed` from the CAN
+/// data server, which reports the CAN commands it could not carry out as the failed calls they
+/// are (see `petrel_can_bridge::runtime`).
+fn builtin_refusal(name: &str, origin: &str) -> Option<String> {
+    if !petrel_nets::model::builtin_events()
+        .iter()
+        .any(|b| b.name.text == name)
+    {
+        return None;
+    }
+    if name == "call_failed" && origin == Role::CanBridge.node_name() {
+        return None;
+    }
+    Some(format!(
+        "`{name}` is a built-in event: only the player raises it (refused from `{origin}`)"
+    ))
 }
 
 /// Submits an event raised by the player itself, journaled like any input.
@@ -298,6 +410,8 @@ pub struct PlayerLoop<'p> {
     reactor: Reactor,
     builtins: Builtins,
     report: PlayReport,
+    /// What was taken from each sender, refused and settled: the heartbeat's acknowledgements.
+    ledger: Ledger,
     /// When the loop started, and the mission time it started at (after a resume).
     t0: Instant,
     base: Micros,
@@ -306,6 +420,8 @@ pub struct PlayerLoop<'p> {
     step_no: u64,
     next_heartbeat: Instant,
     next_liveness: Instant,
+    /// The hold on the journal directory: released last, after the journal is closed.
+    _lock: Option<JournalLock>,
 }
 
 impl<'p> PlayerLoop<'p> {
@@ -313,7 +429,13 @@ impl<'p> PlayerLoop<'p> {
     /// `--resume`, joins the vehicle, opens the journal and starts the mission (or carries on
     /// the restored one).
     pub fn new(project: &'p CompiledProject, opts: &PlayOptions) -> Result<Self, PlayError> {
-        let vehicle = Vehicle::new(&opts.vehicle).map_err(|e| PlayError::Vehicle(e.to_string()))?;
+        let mut vehicle =
+            Vehicle::new(&opts.vehicle).map_err(|e| PlayError::Vehicle(e.to_string()))?;
+        if let Some(group) = &opts.group {
+            let group =
+                petrel_ipc::Group::lookup(group).map_err(|e| PlayError::Setup(e.to_string()))?;
+            vehicle = vehicle.with_group(group);
+        }
         match petrel_ipc::cleanup_dead_nodes(&vehicle, Duration::from_millis(500)) {
             Ok(r) if !r.cleaned.is_empty() => {
                 info!(
@@ -324,6 +446,16 @@ impl<'p> PlayerLoop<'p> {
             Ok(_) => {}
             Err(e) => warn!(error = %e, "could not look for dead processes"),
         }
+        // Mission time is wall-clock time since the mission started; a new mission starts now.
+        let (mut t0, now_ms) = (Instant::now(), unix_ms());
+        // The journal directory is this player's alone, and this vehicle's.
+        let (lock, mission_start_ms) = match &opts.journal {
+            Some(dir) => {
+                let (lock, start) = take_journal(dir, opts, now_ms)?;
+                (Some(lock), start)
+            }
+            None => (None, now_ms),
+        };
         // Recovery first: the engine is rebuilt from the journal before anything else happens.
         let resumed = if opts.resume {
             Some(resume(project, opts)?)
@@ -333,6 +465,14 @@ impl<'p> PlayerLoop<'p> {
 
         let setup = |e: petrel_ipc::SetupError| PlayError::Setup(e.to_string());
         let me = Participant::join(&vehicle, Role::Player).map_err(setup)?;
+        // The largest status this project can have, and the fullest ledger, always fit.
+        let heartbeat_max = Heartbeat::max_encoded_len(status_bound(project));
+        if heartbeat_max > petrel_ipc::wire::MAX_BODY_LEN {
+            warn!(
+                bytes = heartbeat_max,
+                "the status of this project may exceed what a heartbeat carries: it will leave out the marking when it does"
+            );
+        }
         let ports = Ports {
             events: me.event_receiver().map_err(setup)?,
             calls: project
@@ -342,7 +482,7 @@ impl<'p> PlayerLoop<'p> {
                 .collect::<Result<_, _>>()
                 .map_err(setup)?,
             marking: me.marking_publisher().map_err(setup)?,
-            heartbeat: me.heartbeat_publisher().map_err(setup)?,
+            heartbeat: me.heartbeat_publisher_sized(heartbeat_max).map_err(setup)?,
             _me: me,
         };
         let watch = ProgramWatch::new(&vehicle, project.programs.iter().map(|p| p.name.clone()));
@@ -352,12 +492,13 @@ impl<'p> PlayerLoop<'p> {
             None => None,
             Some(dir) => {
                 let header = Entry::Header {
-                    version: 1,
+                    version: crate::journal::FORMAT_VERSION,
                     project: project.name.clone(),
                     project_dir: opts.project_dir.clone(),
                     digest: crate::journal::project_digest(project),
                     vehicle: opts.vehicle.clone(),
-                    started_unix_ms: unix_ms(),
+                    // Every segment of a mission names its start: replay checks they agree.
+                    started_unix_ms: mission_start_ms,
                 };
                 let w = JournalWriter::open(dir, header, opts.flush, opts.rotate_bytes).map_err(
                     |e| PlayError::Journal(format!("cannot write {}: {e}", dir.display())),
@@ -366,14 +507,40 @@ impl<'p> PlayerLoop<'p> {
                 Some(w)
             }
         };
-        let mut journal = Journal::new(writer);
+        let mut journal = Journal::with_backlog(writer, opts.journal_backlog);
         let mut record = StepRecord::new(project);
         let mut failed = Vec::new();
         let mut report = PlayReport::default();
         let (engine, base) = match resumed {
-            Some((engine, time, steps)) => {
+            Some((mut engine, last, steps)) => {
                 report.resumed_steps = steps;
+                // Mission time went on while the player was down: timers keep their wall-clock
+                // deadlines, and those that passed expire now, in deadline order. The resume
+                // entry says when, so that replay expires them at the same time.
+                t0 = Instant::now();
+                let wall = unix_ms()
+                    .saturating_sub(mission_start_ms)
+                    .saturating_mul(1000);
+                if wall < last {
+                    warn!(
+                        wall_s = wall as f64 / 1e6,
+                        journal_s = last as f64 / 1e6,
+                        "the wall clock is behind the journal's last entry: mission time goes on from the journal's"
+                    );
+                }
+                let time = wall.max(last);
+                let overdue = engine
+                    .deadlines()
+                    .iter()
+                    .flatten()
+                    .filter(|&&d| d <= time)
+                    .count();
                 journal.append(&Entry::Resume { time });
+                engine.advance_to(time);
+                info!(
+                    down_s = (time - last) as f64 / 1e6,
+                    overdue, "resumed at the mission's wall-clock time; overdue timers expire now"
+                );
                 (engine, time)
             }
             None => {
@@ -411,18 +578,23 @@ impl<'p> PlayerLoop<'p> {
                 program_lost: project.event_id("program_lost"),
                 call_failed: project.event_id("call_failed"),
                 bad_message: project.event_id("bad_message"),
+                recorder_failed: project.event_id("recorder_failed"),
+                recorder_restored: project.event_id("recorder_restored"),
             },
             report,
-            t0: Instant::now(),
+            ledger: Ledger::new(),
+            t0,
             base,
             previous: vec![0u64; words],
             step_no: 0,
             next_heartbeat: Instant::now(),
             next_liveness: Instant::now() + opts.liveness,
+            _lock: lock,
         })
     }
 
-    /// Mission time now: it goes on from where the journal left it.
+    /// Mission time now: wall-clock time since the mission started, read from the monotonic
+    /// clock within a run (so it never goes backwards), from the wall clock across a resume.
     fn now(&self) -> Micros {
         self.base + self.t0.elapsed().as_micros().min(u64::MAX as u128) as u64
     }
@@ -438,6 +610,10 @@ impl<'p> PlayerLoop<'p> {
         loop {
             self.process_queue();
             self.heartbeat_if_due();
+            if self.journal.has_changes() {
+                // The heartbeat's flush changed the recorder's state: tell the nets now.
+                continue;
+            }
             if let Some(limit) = self.opts.run_for {
                 if self.t0.elapsed() >= limit {
                     info!("run time over");
@@ -469,17 +645,16 @@ impl<'p> PlayerLoop<'p> {
                 self.check_liveness();
             }
         }
-        self.journal.flush();
-        if let Some((records, busy)) = self.journal.written() {
-            self.report.journal_records = records;
-            self.report.journal_busy = busy;
-        }
-        if self.journal.failures > 0 {
+        if self.journal.flush() != Settlement::Recorded {
             error!(
-                failures = self.journal.failures,
-                "the journal missed entries"
+                state = self.journal.state().as_str(),
+                reason = self.journal.reason(),
+                backlog = ?self.journal.backlog(),
+                lost = self.journal.lost,
+                "the player stops with journal records not written: the journal ends at its last good record"
             );
         }
+        self.count_journal();
         self.report.stats = self.engine.stats();
         info!(report = ?self.report, "player stopped");
         Ok(self.report)
@@ -493,6 +668,7 @@ impl<'p> PlayerLoop<'p> {
     /// Processes everything queued (by the start, a timer, an event), journals and publishes
     /// each step, and raises `call_failed` for the calls that could not be delivered.
     fn process_queue(&mut self) {
+        self.raise_recorder_changes();
         loop {
             let mut sink = RuntimeSink {
                 record: &mut self.record,
@@ -504,6 +680,10 @@ impl<'p> PlayerLoop<'p> {
                 if self.step_no == 0 {
                     self.publish_delta();
                     self.step_no += 1;
+                }
+                // Journaling these steps may have changed the recorder's state.
+                if self.raise_recorder_changes() {
+                    continue;
                 }
                 break;
             };
@@ -533,28 +713,97 @@ impl<'p> PlayerLoop<'p> {
         }
     }
 
-    /// Publishes the heartbeat, with the live status, when its period is over. The heartbeat
-    /// acknowledges what the player took: the journal is flushed first.
+    /// Raises `recorder_failed` and `recorder_restored` for the recorder's changes of state;
+    /// true when it raised any.
+    fn raise_recorder_changes(&mut self) -> bool {
+        let changes = self.journal.take_changes();
+        for change in &changes {
+            match change {
+                RecorderChange::Failed(reason) => {
+                    let mut reason = reason.clone();
+                    petrel_ipc::wire::cut_text(&mut reason, petrel_ipc::wire::MAX_REASON_LEN);
+                    self.raise(self.builtins.recorder_failed, vec![Value::Text(reason)]);
+                }
+                RecorderChange::Restored => self.raise(self.builtins.recorder_restored, vec![]),
+            }
+        }
+        !changes.is_empty()
+    }
+
+    fn count_journal(&mut self) {
+        if let Some((records, busy)) = self.journal.written() {
+            self.report.journal_records = records;
+            self.report.journal_busy = busy;
+        }
+        self.report.journal_failures = self.journal.failures;
+        self.report.journal_lost = self.journal.lost;
+    }
+
+    /// Publishes the heartbeat, with the live status and the acknowledgements, when its period
+    /// is over. The journal is flushed first: what it holds is then settled, what it still
+    /// keeps in memory stays pending, what it dropped is unrecorded.
     fn heartbeat_if_due(&mut self) {
         let instant = Instant::now();
         if instant < self.next_heartbeat {
             return;
         }
-        self.journal.flush();
-        if let Some((records, busy)) = self.journal.written() {
-            self.report.journal_records = records;
-            self.report.journal_busy = busy;
+        self.next_heartbeat = instant + self.opts.heartbeat;
+        match self.journal.flush() {
+            Settlement::Recorded => self.ledger.settle(),
+            Settlement::Pending => {}
+            Settlement::Lost => self.ledger.lose_unsettled(),
         }
-        let status = status_json(&self.engine, &self.report, &self.ports.events);
-        let hb = petrel_ipc::Heartbeat {
+        // A recorder that dropped records goes on from a checkpoint of the engine, taken
+        // between two steps (the queue is empty after `process_queue`).
+        if self.journal.wants_checkpoint() && self.engine.queued() == 0 {
+            let checkpoint = Entry::Checkpoint {
+                time: self.engine.now(),
+                state: self.engine.state().to_vec(),
+                deadlines: self.engine.deadlines().to_vec(),
+            };
+            self.journal.checkpoint(&checkpoint);
+        }
+        self.count_journal();
+        for gone in self.ledger.prune(&self.ports.events.live_senders()) {
+            self.ports.events.forget_sender(gone);
+        }
+        let max = self.ports.heartbeat.spec().max_body_len;
+        let mut hb = Heartbeat {
             uptime_ms: self.t0.elapsed().as_millis() as u64,
             period_ms: self.opts.heartbeat.as_millis() as u32,
             progress: self.step_no,
-            status,
+            status: String::new(),
+            acks: self.ledger.acks(),
+            recorder: petrel_ipc::Recorder {
+                state: self.journal.state(),
+                reason: self.journal.reason().to_string(),
+            },
         };
-        // Latest-value service: a heartbeat nobody reads is not an error.
-        let _ = self.ports.heartbeat.send(&hb);
-        self.next_heartbeat = instant + self.opts.heartbeat;
+        hb.bound();
+        let snapshot = StatusSnapshot::of(&self.engine, &self.report, &self.ledger, &self.journal);
+        hb.status = status_json(&snapshot);
+        if Heartbeat::max_encoded_len(hb.status.len()) > max {
+            // Only a project past the largest body a service carries gets here (see `new`).
+            hb.status = status_json(&StatusSnapshot {
+                marking: None,
+                ..snapshot
+            });
+        }
+        match self.ports.heartbeat.send(&hb) {
+            // Latest-value service: a heartbeat nobody reads is not an error, and one that
+            // missed a receiver still connecting (buffers never fill: they overwrite) reaches
+            // it with the next period.
+            Ok(_) | Err(SendError::NoReceiver { .. } | SendError::Refused { .. }) => {
+                self.report.heartbeats_sent += 1
+            }
+            Err(e) => {
+                self.report.heartbeats_refused += 1;
+                let n = self.report.heartbeats_refused;
+                if n == 1 || n.is_multiple_of(100) {
+                    error!(error = %e, refused = n, "heartbeat not published: status and acknowledgements are not seen");
+                }
+            }
+        }
     }
 
     /// Drains the events service into the engine; true when iceoryx2 saw a sender die.
@@ -562,13 +811,32 @@ impl<'p> PlayerLoop<'p> {
         let engine = &mut self.engine;
         let journal = &mut self.journal;
         let report = &mut self.report;
+        let ledger = &mut self.ledger;
         let bad_message = self.builtins.bad_message;
         let drained = self.ports.events.drain(|r| {
             report.messages += 1;
             match r {
                 Ok(rcv) => {
+                    let (sender, who, seq, missed) = (rcv.sender, rcv.origin, rcv.seq, rcv.missed);
                     let origin = rcv.origin.to_string();
                     let time = engine.now();
+                    if let Some(reason) = builtin_refusal(&rcv.msg.name, &origin) {
+                        report.bad_messages += 1;
+                        warn!(from = %origin, seq = rcv.seq, %reason, "event refused");
+                        journal.append(&Entry::Refused {
+                            time,
+                            what: rcv.msg.name.clone(),
+                            reason: reason.clone(),
+                            origin: origin.clone(),
+                        });
+                        raise(
+                            engine,
+                            journal,
+                            bad_message,
+                            vec![Value::Text(origin), Value::Text(reason)],
+                        );
+                        return;
+                    }
                     let record = Entry::Submit {
                         time,
                         event: rcv.msg.name.clone(),
@@ -579,8 +847,12 @@ impl<'p> PlayerLoop<'p> {
                     let mut params = engine.param_buffer();
                     params.extend(rcv.msg.params);
                     match engine.submit_named(&rcv.msg.name, params) {
-                        Ok(()) => journal.append(&record),
+                        Ok(()) => {
+                            journal.append(&record);
+                            ledger.taken(sender, who, seq, missed);
+                        }
                         Err(refusal) => {
+                            ledger.refused(sender, who, seq, missed, &refusal.to_string(), false);
                             journal.append(&Entry::Refused {
                                 time,
                                 what: rcv.msg.name.clone(),
@@ -600,9 +872,15 @@ impl<'p> PlayerLoop<'p> {
                     }
                 }
                 Err(RecvError::Undecodable {
-                    origin, seq, error, ..
+                    origin,
+                    seq,
+                    error,
+                    sender,
+                    ..
                 }) => {
                     report.bad_messages += 1;
+                    let reason = format!("undecodable: {error}");
+                    ledger.refused(sender, origin, seq, 0, &reason, true);
                     warn!(from = %origin, seq, error = %error, "undecodable event refused");
                     journal.append(&Entry::Refused {
                         time: engine.now(),
@@ -705,45 +983,255 @@ impl<'p> PlayerLoop<'p> {
     }
 }
 
-/// The live status carried by the heartbeat: JSON with the marking of every active net, the
-/// counters, and the last sequence number taken from each sender (read by `petrel status`, and
-/// by `petrel send` as its acknowledgement).
-fn status_json(engine: &Engine, report: &PlayReport, events: &EventReceiver) -> String {
-    let senders: serde_json::Map<String, serde_json::Value> = events
-        .senders()
-        .into_iter()
-        .map(|a| {
+/// What the status JSON shows: a snapshot of the player, or the largest one its project can
+/// have ([`status_bound`]).
+struct StatusSnapshot {
+    project: String,
+    time_s: f64,
+    over: bool,
+    /// The marked places of each active net (`global` last); `None`: left out (too large).
+    marking: Option<Vec<(String, Vec<String>)>>,
+    /// The counters of `stats`, in [`STATS_FIELDS`] order.
+    stats: [u64; 13],
+    /// Each sender: origin, last_seq, received, undecodable, missing, taken, refused, pending,
+    /// unrecorded, settled_seq.
+    senders: Vec<(String, [u64; 9])>,
+    /// The flight recorder: its state, why it fails, and its counters in [`RECORDER_FIELDS`]
+    /// order.
+    recorder: (&'static str, String, [u64; 4]),
+}
+
+/// The names of the recorder's counters in the status JSON's `recorder`.
+const RECORDER_FIELDS: [&str; 4] = [
+    "failures",
+    "lost_entries",
+    "backlog_records",
+    "backlog_bytes",
+];
+
+/// The names of the counters in the status JSON's `stats`, in [`StatusSnapshot::stats`] order.
+const STATS_FIELDS: [&str; 13] = [
+    "messages",
+    "bad_messages",
+    "received",
+    "processed",
+    "unused",
+    "refused",
+    "queued",
+    "calls_sent",
+    "calls_failed",
+    "journal_records",
+    "resumed_steps",
+    "heartbeats_sent",
+    "heartbeats_refused",
+];
+
+/// The names of a sender's counters in the status JSON, in [`StatusSnapshot::senders`] order.
+const SENDER_FIELDS: [&str; 9] = [
+    "last_seq",
+    "received",
+    "undecodable",
+    "missing",
+    "taken",
+    "refused",
+    "pending",
+    "unrecorded",
+    "settled_seq",
+];
+
+impl StatusSnapshot {
+    fn of(engine: &Engine, report: &PlayReport, ledger: &Ledger, journal: &Journal) -> Self {
+        let s = engine.stats();
+        // Oldest first, so that two senders of one origin show the most recent one.
+        let mut senders: Vec<(String, [u64; 9])> = ledger
+            .recent()
+            .into_iter()
+            .map(|a| {
+                let k = &a.ack;
+                (
+                    k.origin.clone(),
+                    [
+                        k.last_seq,
+                        k.received,
+                        a.undecodable,
+                        k.missing,
+                        k.taken,
+                        k.refused,
+                        k.pending,
+                        k.unrecorded,
+                        k.settled_seq,
+                    ],
+                )
+            })
+            .collect();
+        senders.reverse();
+        let (records, bytes) = journal.backlog();
+        let mut reason = journal.reason().to_string();
+        petrel_ipc::wire::cut_text(&mut reason, petrel_ipc::wire::MAX_REASON_LEN);
+        StatusSnapshot {
+            recorder: (
+                journal.state().as_str(),
+                reason,
+                [journal.failures, journal.lost, records as u64, bytes as u64],
+            ),
+            project: engine.project().name.clone(),
+            time_s: engine.now() as f64 / 1e6,
+            over: engine.is_over(),
+            marking: Some(engine.marking()),
+            stats: [
+                report.messages,
+                report.bad_messages,
+                s.received,
+                s.processed,
+                s.unused,
+                s.refused,
+                engine.queued() as u64,
+                report.calls_sent,
+                report.calls_failed,
+                report.journal_records,
+                report.resumed_steps,
+                report.heartbeats_sent,
+                report.heartbeats_refused,
+            ],
+            senders,
+        }
+    }
+}
+
+/// The live status carried by the heartbeat, for people and tools: JSON with the marking of
+/// every active net, the counters, and each sender's account (read by `petrel status`; the
+/// acknowledgements senders wait for are the heartbeat's typed [`Heartbeat::acks`]).
+fn status_json(s: &StatusSnapshot) -> String {
+    let mut doc = serde_json::Map::new();
+    doc.insert("project".into(), s.project.clone().into());
+    doc.insert("time".into(), s.time_s.into());
+    doc.insert("over".into(), s.over.into());
+    match &s.marking {
+        Some(m) => {
+            let marking: serde_json::Map<String, serde_json::Value> = m
+                .iter()
+                .map(|(n, places)| (n.clone(), places.clone().into()))
+                .collect();
+            doc.insert("marking".into(), marking.into());
+        }
+        None => {
+            doc.insert("marking".into(), serde_json::Map::new().into());
+            doc.insert("marking_omitted".into(), true.into());
+        }
+    }
+    let stats: serde_json::Map<String, serde_json::Value> = STATS_FIELDS
+        .iter()
+        .zip(&s.stats)
+        .map(|(k, v)| (k.to_string(), (*v).into()))
+        .collect();
+    doc.insert("stats".into(), stats.into());
+    let senders: serde_json::Map<String, serde_json::Value> = s
+        .senders
+        .iter()
+        .map(|(origin, counts)| {
+            let fields: serde_json::Map<String, serde_json::Value> = SENDER_FIELDS
+                .iter()
+                .zip(counts)
+                .map(|(k, v)| (k.to_string(), (*v).into()))
+                .collect();
+            (origin.clone(), fields.into())
+        })
+        .collect();
+    doc.insert("senders".into(), senders.into());
+    let (state, reason, counts) = &s.recorder;
+    let mut recorder = serde_json::Map::new();
+    recorder.insert("state".into(), (*state).into());
+    recorder.insert("reason".into(), reason.clone().into());
+    for (k, v) in RECORDER_FIELDS.iter().zip(counts) {
+        recorder.insert(k.to_string(), (*v).into());
+    }
+    doc.insert("recorder".into(), recorder.into());
+    serde_json::Value::Object(doc).to_string()
+}
+
+/// The length of the largest status JSON `project` can give: every net active with every place
+/// marked, the ledger full of senders whose origins need the most escaping, every counter at
+/// its largest. The heartbeat's publisher is sized from it, so that no status is ever refused.
+fn status_bound(project: &CompiledProject) -> usize {
+    let mut marking: Vec<(String, Vec<String>)> = project
+        .nets
+        .iter()
+        .map(|n| {
             (
-                a.origin.to_string(),
-                serde_json::json!({"last_seq": a.last_seq, "received": a.received, "undecodable": a.undecodable, "missing": a.missing}),
+                n.name.clone(),
+                n.places.iter().map(|p| p.name.clone()).collect(),
             )
         })
         .collect();
-    let marking: serde_json::Map<String, serde_json::Value> = engine
-        .marking()
-        .into_iter()
-        .map(|(n, places)| (n, places.into()))
-        .collect();
-    let s = engine.stats();
-    serde_json::json!({
-        "project": engine.project().name,
-        "time": engine.now() as f64 / 1e6,
-        "over": engine.is_over(),
-        "marking": marking,
-        "stats": {
-            "messages": report.messages,
-            "bad_messages": report.bad_messages,
-            "received": s.received,
-            "processed": s.processed,
-            "unused": s.unused,
-            "refused": s.refused,
-            "queued": engine.queued(),
-            "calls_sent": report.calls_sent,
-            "calls_failed": report.calls_failed,
-            "journal_records": report.journal_records,
-            "resumed_steps": report.resumed_steps,
-        },
-        "senders": senders,
-    })
-    .to_string()
+    marking.push((
+        "global".into(),
+        project.globals.iter().map(|g| g.name.clone()).collect(),
+    ));
+    // A control character is escaped in six bytes (`\u0001`), the most any byte takes; the
+    // ledger keys senders by id, so that every one of them may show under its own origin:
+    // origins of control characters 1 and 2 only, distinct by the bits of their index.
+    let origin = |i: usize| -> String {
+        (0..petrel_ipc::wire::ORIGIN_LEN)
+            .map(|k| char::from(1 + ((i >> (k % 8)) & 1) as u8))
+            .collect()
+    };
+    let worst = StatusSnapshot {
+        project: project.name.clone(),
+        time_s: -f64::MAX,
+        over: false,
+        marking: Some(marking),
+        stats: [u64::MAX; 13],
+        senders: (0..petrel_ipc::wire::MAX_ACKS)
+            .map(|i| (origin(i), [u64::MAX; 9]))
+            .collect(),
+        recorder: (
+            "dropping",
+            "\u{1}".repeat(petrel_ipc::wire::MAX_REASON_LEN),
+            [u64::MAX; 4],
+        ),
+    };
+    status_json(&worst).len()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use petrel_ipc::Origin;
+
+    fn project() -> CompiledProject {
+        let manifest = "[project]\nname = \"p\"\nfiles = [\"a.pn\"]\nstart = [\"A\", \"B\"]\n\n[globals]\ng_one = 1\n\n[events]\ngo = { category = \"nominal\" }\n";
+        let net = "net A {\n    place a_very_long_place_name_one = 1\n    place two = 1\n    transition t on go: two -> two\n}\nnet B {\n    place b = 1\n    transition u on go: b -> b\n}\n";
+        let (_, c, d, _) = petrel_nets::project::from_sources(manifest, &[("a.pn", net)]);
+        assert!(!d.has_errors(), "{d:?}");
+        c.unwrap()
+    }
+
+    #[test]
+    fn the_status_never_exceeds_its_bound() {
+        let p = project();
+        let bound = status_bound(&p);
+        let mut engine = Engine::new(&p);
+        engine.start(0, &mut crate::engine::NullSink);
+        let mut ledger = Ledger::new();
+        // More senders than a heartbeat carries, with origins that escape the most.
+        for i in 0..200u64 {
+            let origin: String = format!("{i:03}")
+                .chars()
+                .chain((3..32).map(|k| char::from(((i + k) % 31 + 1) as u8)))
+                .collect();
+            ledger.taken(i, Origin::new(&origin), u64::MAX, u64::MAX / 2);
+        }
+        let report = PlayReport {
+            messages: u64::MAX,
+            heartbeats_refused: u64::MAX,
+            ..PlayReport::default()
+        };
+        let journal = Journal::new(None);
+        let json = status_json(&StatusSnapshot::of(&engine, &report, &ledger, &journal));
+        assert!(json.len() <= bound, "{} > {bound}", json.len());
+        let doc: serde_json::Value = serde_json::from_str(&json).unwrap();
+        assert_eq!(doc["marking"]["A"].as_array().map(Vec::len), Some(2));
+        assert_eq!(doc["senders"].as_object().map(|m| m.len()), Some(64));
+        assert!(Heartbeat::max_encoded_len(bound) < petrel_ipc::wire::MAX_BODY_LEN);
+    }
 }

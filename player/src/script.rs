@@ -159,10 +159,8 @@ fn parse_timed(line: &str, p: &CompiledProject, last: &mut f64) -> Result<Line, 
     let (time_text, rest) = line.split_once(char::is_whitespace).ok_or_else(|| {
         format!("expected `TIME EVENT(args)`, `TIME wait` or `expect ...`, found `{line}`")
     })?;
-    let time: f64 = time_text
-        .parse()
-        .map_err(|_| format!("`{time_text}` is not a time in seconds"))?;
-    if !time.is_finite() || time < *last {
+    let time = parse_time(time_text)?;
+    if time < *last {
         return Err(format!(
             "time {time_text} goes back: lines are in time order (the previous one was at {last})"
         ));
@@ -173,9 +171,11 @@ fn parse_timed(line: &str, p: &CompiledProject, last: &mut f64) -> Result<Line, 
         return Ok(Line::At { time, event: None });
     }
     let mut d = Diagnostics::new();
-    let Some(Action::Emit { event, args, .. }) =
-        petrel_nets::syntax::parse_action(FileId(0), &format!("emit {rest}"), &mut d)
-    else {
+    let parsed = petrel_nets::syntax::parse_action(FileId(0), &format!("emit {rest}"), &mut d);
+    // A number the lexer refused (`1e999`, `99999999999999999999`) is read as 0 so that the
+    // parser can go on: the action is not to be used then.
+    refused_literals(&d)?;
+    let Some(Action::Emit { event, args, .. }) = parsed else {
         return Err(format!(
             "`{rest}` is not an event such as `name` or `name(1, \"text\")`"
         ));
@@ -203,6 +203,40 @@ fn parse_timed(line: &str, p: &CompiledProject, last: &mut f64) -> Result<Line, 
         time,
         event: Some((event.text, params)),
     })
+}
+
+/// The largest script time, in seconds: mission time is counted in microseconds in a `u64`,
+/// and a time past it would silently saturate.
+pub const MAX_TIME_S: f64 = u64::MAX as f64 / 1e6;
+
+/// Reads a time in seconds: a finite number from 0 to [`MAX_TIME_S`], nothing else (`nan`,
+/// `inf` and `-1` are refused, not clamped).
+pub fn parse_time(text: &str) -> Result<f64, String> {
+    let time: f64 = text
+        .parse()
+        .map_err(|_| format!("`{text}` is not a time in seconds"))?;
+    if !time.is_finite() || !(0.0..=MAX_TIME_S).contains(&time) {
+        return Err(format!(
+            "`{text}` is not a time: a time is a number of seconds from 0 to {MAX_TIME_S:e}"
+        ));
+    }
+    Ok(time)
+}
+
+/// The errors the lexer and parser found in a line's action, as one message: a line is used
+/// only when its action reads without any (a refused number would otherwise become 0).
+fn refused_literals(d: &Diagnostics) -> Result<(), String> {
+    if !d.has_errors() {
+        return Ok(());
+    }
+    let why: Vec<String> = d
+        .iter()
+        .map(|e| match &e.help {
+            Some(h) => format!("{} ({h})", e.message),
+            None => e.message.clone(),
+        })
+        .collect();
+    Err(why.join("; "))
 }
 
 fn parse_expect(rest: &str, p: &CompiledProject) -> Result<(bool, Expectation), String> {

@@ -103,6 +103,10 @@ pub fn shadow(project: &CompiledProject, opts: &PlayOptions) -> Result<ShadowRep
                 }
                 let doc: serde_json::Value =
                     serde_json::from_str(&rcv.msg.status).unwrap_or_default();
+                // A status too large for a heartbeat leaves the marking out: not a marking.
+                if doc["marking_omitted"] == true {
+                    return;
+                }
                 if let Some(m) = doc["marking"].as_object() {
                     for (net, places) in m {
                         if net != "global" {

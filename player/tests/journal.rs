@@ -126,3 +126,210 @@ fn flush_policies_parse() {
     );
     assert!("often".parse::<FlushPolicy>().is_err());
 }
+
+/// A record with a valid checksum around `body`, appended to the journal's last segment.
+fn append_record(dir: &std::path::Path, body: &[u8]) {
+    use std::io::Write;
+    let f = segments(dir).unwrap().pop().unwrap();
+    let mut out = std::fs::OpenOptions::new().append(true).open(f).unwrap();
+    out.write_all(&(body.len() as u32).to_le_bytes()).unwrap();
+    out.write_all(&crc32fast_hash(body).to_le_bytes()).unwrap();
+    out.write_all(body).unwrap();
+}
+
+fn crc32fast_hash(bytes: &[u8]) -> u32 {
+    let mut crc = !0u32;
+    for &b in bytes {
+        crc ^= b as u32;
+        for _ in 0..8 {
+            crc = if crc & 1 != 0 {
+                (crc >> 1) ^ 0xEDB8_8320
+            } else {
+                crc >> 1
+            };
+        }
+    }
+    !crc
+}
+
+#[test]
+fn crafted_lengths_with_a_valid_checksum_are_corruption_not_a_crash() {
+    // Entry::Start { time: 0, state: 2^61 words }, then Entry::Submit { event: 2^40 bytes }.
+    let mut huge_vec = vec![1u8, 0, 253];
+    huge_vec.extend_from_slice(&(1u64 << 61).to_le_bytes());
+    let mut huge_text = vec![3u8, 0, 253];
+    huge_text.extend_from_slice(&(1u64 << 40).to_le_bytes());
+    let mut many_values = vec![3u8, 0, 1, b'e', 253];
+    many_values.extend_from_slice(&(1u64 << 33).to_le_bytes());
+    for body in [huge_vec, huge_text, many_values] {
+        let dir = tempfile::tempdir().unwrap();
+        write(dir.path(), 3, 64 << 20);
+        append_record(dir.path(), &body);
+        let read = read_journal(dir.path()).unwrap();
+        let c = read.corrupt.expect("refused as damage");
+        assert_eq!(c.record, 4, "{c}");
+        assert!(c.what.contains("undecodable"), "{c}");
+        assert_eq!(read.entries.len(), 4, "the good records before it");
+    }
+}
+
+#[test]
+fn the_widest_valid_records_decode_within_the_limit() {
+    // Entries whose in-memory size is largest for their encoded size.
+    let entries = [
+        Entry::Step {
+            time: 0,
+            event: String::new(),
+            params: vec![Value::Int(0); 5000],
+            outcome: String::new(),
+            fired: vec![String::new(); 5000],
+            actions: vec![String::new(); 5000],
+            state: vec![0; 5000],
+            deadlines: vec![None; 5000],
+        },
+        Entry::Submit {
+            time: 0,
+            event: "e".into(),
+            params: vec![Value::FloatList(vec![]); 3000],
+            origin: String::new(),
+            seq: 0,
+        },
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    let mut w =
+        JournalWriter::open(dir.path(), header(), FlushPolicy::EveryRecord, 64 << 20).unwrap();
+    for e in &entries {
+        w.append(e).unwrap();
+    }
+    w.flush().unwrap();
+    let read = read_journal(dir.path()).unwrap();
+    assert!(read.corrupt.is_none(), "{:?}", read.corrupt);
+    assert_eq!(&read.entries[1..], &entries[..]);
+}
+
+#[test]
+fn a_zero_filled_tail_is_torn_and_can_be_cut_off() {
+    for (cut, zeros) in [(0usize, 4096usize), (0, 3), (11, 4096)] {
+        let dir = tempfile::tempdir().unwrap();
+        write(dir.path(), 5, 64 << 20);
+        let f = segments(dir.path()).unwrap().pop().unwrap();
+        let mut bytes = std::fs::read(&f).unwrap();
+        let good = bytes.len();
+        // The last record's end did not reach the disk (`cut` bytes of it became zeros), then
+        // zeros where the file grew.
+        let n = bytes.len();
+        bytes[n - cut..].fill(0);
+        bytes.extend(std::iter::repeat_n(0u8, zeros));
+        std::fs::write(&f, &bytes).unwrap();
+        let read = read_journal(dir.path()).unwrap();
+        assert!(read.corrupt.is_none(), "{:?}", read.corrupt);
+        let torn = read.torn.clone().expect("a torn tail");
+        let complete = if cut == 0 { 6 } else { 5 };
+        assert_eq!(read.entries.len(), complete, "{torn}");
+        petrel_player::journal::cut_torn_tail(&torn).unwrap();
+        let len = std::fs::metadata(&f).unwrap().len() as usize;
+        assert!(len <= good, "{len} > {good}");
+        let again = read_journal(dir.path()).unwrap();
+        assert!(again.torn.is_none() && again.corrupt.is_none());
+        assert_eq!(again.entries.len(), complete);
+    }
+}
+
+#[test]
+fn zeros_in_the_middle_are_damage() {
+    let dir = tempfile::tempdir().unwrap();
+    write(dir.path(), 5, 64 << 20);
+    let f = segments(dir.path()).unwrap().pop().unwrap();
+    let mut bytes = std::fs::read(&f).unwrap();
+    let at = bytes.len() / 2;
+    bytes[at..at + 16].fill(0);
+    std::fs::write(&f, &bytes).unwrap();
+    let read = read_journal(dir.path()).unwrap();
+    assert!(read.corrupt.is_some(), "{:?}", read.torn);
+}
+
+#[test]
+fn a_journal_directory_is_locked_by_one_player_and_a_dead_ones_lock_is_stale() {
+    use petrel_player::journal::{JournalLock, LockError, LOCK_FILE};
+    let dir = tempfile::tempdir().unwrap();
+    let mut first = JournalLock::acquire(dir.path()).unwrap();
+    assert!(first.stale_owner().is_none());
+    first.claim("auv1").unwrap();
+    match JournalLock::acquire(dir.path()) {
+        Err(LockError::InUse { owner: Some(o), .. }) => {
+            assert_eq!((o.vehicle.as_str(), o.pid), ("auv1", std::process::id()));
+        }
+        other => panic!("{other:?}"),
+    }
+    drop(first);
+    // Released in good order: nobody's.
+    let again = JournalLock::acquire(dir.path()).unwrap();
+    assert!(again.stale_owner().is_none());
+    drop(again);
+    // A lock file naming a process, found unlocked: its player died holding it.
+    std::fs::write(dir.path().join(LOCK_FILE), "vehicle=auv2\npid=4242\n").unwrap();
+    let taken = JournalLock::acquire(dir.path()).unwrap();
+    let stale = taken.stale_owner().unwrap();
+    assert_eq!((stale.vehicle.as_str(), stale.pid), ("auv2", 4242));
+    // Not claimed (a refused player): what the file said stays.
+    drop(taken);
+    let text = std::fs::read_to_string(dir.path().join(LOCK_FILE)).unwrap();
+    assert!(text.contains("auv2"), "{text}");
+}
+
+#[test]
+fn replay_reports_spliced_headers_and_time_going_backwards() {
+    use petrel_player::replay::{replay, DivergenceKind};
+    let manifest = "[project]\nname = \"t\"\nfiles = [\"a.pn\"]\nstart = [\"A\"]\n\n[events]\ngo = { category = \"nominal\" }\n";
+    let net = "net A {\n    place p = 1\n    transition t on go: p -> p\n}\n";
+    let (_, c, d, _) = petrel_nets::project::from_sources(manifest, &[("a.pn", net)]);
+    assert!(!d.has_errors(), "{d:?}");
+    let c = c.unwrap();
+    let mut engine = petrel_player::engine::Engine::new(&c);
+    engine.start(0, &mut petrel_player::engine::NullSink);
+    let start = Entry::Start {
+        time: 0,
+        state: engine.state().to_vec(),
+    };
+    let header = |vehicle: &str, started| Entry::Header {
+        version: 2,
+        project: "t".into(),
+        project_dir: ".".into(),
+        digest: 1,
+        vehicle: vehicle.into(),
+        started_unix_ms: started,
+    };
+    let resume = |time| Entry::Resume { time };
+    let cases = [
+        (
+            vec![header("a", 5), start.clone(), header("b", 5)],
+            "vehicle `b`",
+        ),
+        (
+            vec![header("a", 5), start.clone(), header("a", 6)],
+            "another mission",
+        ),
+        (
+            vec![
+                header("a", 5),
+                start.clone(),
+                resume(9),
+                header("a", 5),
+                resume(3),
+            ],
+            "backwards",
+        ),
+    ];
+    for (entries, what) in cases {
+        let (_, r) = replay(&c, &entries, None);
+        let d = r.divergence.expect("an inconsistency");
+        assert_eq!(d.kind, DivergenceKind::Journal);
+        assert!(d.what.contains(what), "{}", d.what);
+    }
+    let (_, r) = replay(
+        &c,
+        &[header("a", 5), start, resume(9), header("a", 5), resume(9)],
+        None,
+    );
+    assert!(r.divergence.is_none(), "{:?}", r.divergence);
+}

@@ -9,7 +9,9 @@
 //!
 //! Each answer comes after `--think` simulated seconds (1 by default) scaled by `--speed` (600
 //! simulated seconds per second by default). The process stops on SIGINT or SIGTERM, or, with
-//! `--idle-exit SECONDS`, after that long without a call once calls have begun.
+//! `--idle-exit SECONDS`, after that long without a call once calls have begun. For tests of a
+//! supervisor, `--crash-after-answers N` exits with code 3 once its Nth answer is acknowledged
+//! by the player, in its first run only (not once `petrel up` has restarted it).
 //!
 //! `cargo run -p petrel-programs --example uav_dec -- --vehicle uav`
 
@@ -49,6 +51,11 @@ struct Args {
     /// Events kept while no player receives them.
     #[arg(long, value_name = "EVENTS", default_value_t = DEFAULT_OUTBOX_CAPACITY)]
     outbox: usize,
+    /// Exit with code 3, as a crash would, once the Nth answer is delivered (and acknowledged,
+    /// so the flight can go on). Only in the first run: a DEC that `petrel up` restarted
+    /// (environment PETREL_RESTARTS above 0) does not crash again.
+    #[arg(long, value_name = "N")]
+    crash_after_answers: Option<u32>,
 }
 
 fn positive(s: &str) -> Result<f64, String> {
@@ -218,9 +225,15 @@ fn main() -> ExitCode {
         answers: VecDeque::new(),
     };
     let idle = args.idle_exit.map(Duration::from_secs_f64);
+    let restarted = std::env::var("PETREL_RESTARTS")
+        .ok()
+        .and_then(|n| n.parse::<u32>().ok())
+        .is_some_and(|n| n > 0);
+    let crash_after = args.crash_after_answers.filter(|_| !restarted);
+    let mut answered = 0u32;
     let mut last_call: Option<Instant> = None;
     let mut status = ExitCode::SUCCESS;
-    loop {
+    'run: loop {
         while dec.answers.front().is_some_and(|a| a.due <= Instant::now()) {
             let Some(a) = dec.answers.pop_front() else {
                 break;
@@ -228,6 +241,12 @@ fn main() -> ExitCode {
             println!("uav_dec: DEC emits {}", event_text(a.event, &a.params));
             if let Err(e) = program.emit(a.event, a.params) {
                 eprintln!("uav_dec: {e}");
+            }
+            answered += 1;
+            if crash_after == Some(answered) {
+                println!("uav_dec: crashing after {answered} answers (--crash-after-answers)");
+                status = ExitCode::from(3);
+                break 'run;
             }
         }
         let now = Instant::now();

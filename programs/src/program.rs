@@ -97,8 +97,8 @@ pub struct ProgramStats {
     /// Times a player that had received events from this process was found gone (stopped,
     /// killed or not yet replaced).
     pub player_losses: u64,
-    /// At [`Program::close`]: the player had not acknowledged the last events delivered (they
-    /// may be lost).
+    /// At [`Program::close`]: the player had not acknowledged the last events delivered as on
+    /// its flight record (they may be lost), or its recorder lost some of this program's events.
     pub unacknowledged: bool,
 }
 
@@ -208,6 +208,20 @@ impl Program {
         if names.is_empty() {
             return Err(ProgramError::NoProgram);
         }
+        // Signals first: once a node of the program is alive, a supervisor (`petrel up`) takes
+        // the program as started and may stop it at once; a SIGTERM must then reach a handler
+        // (the program leaves in good order at its next `recv`), not the default action.
+        //
+        // A spinning reactor never sleeps in the wait set, which is what reports signals: leave
+        // them their default action rather than swallow them.
+        let handle_signals = config.handle_signals && config.wait != WaitStrategy::Spin;
+        let mut reactor = if handle_signals {
+            Reactor::new(WaitStrategy::Block)?
+        } else {
+            Reactor::without_signal_handling(WaitStrategy::Block)?
+        };
+        let terminated = handle_signals && install_signal_handlers(&reactor)?;
+        reactor.set_strategy(config.wait);
         let mut hosts: Vec<Hosted> = Vec::with_capacity(names.len());
         for name in names {
             if hosts.iter().any(|h| h.name == *name) {
@@ -228,16 +242,6 @@ impl Program {
                 participant,
             });
         }
-        // A spinning reactor never sleeps in the wait set, which is what reports signals: leave
-        // them their default action rather than swallow them.
-        let handle_signals = config.handle_signals && config.wait != WaitStrategy::Spin;
-        let mut reactor = if handle_signals {
-            Reactor::new(WaitStrategy::Block)?
-        } else {
-            Reactor::without_signal_handling(WaitStrategy::Block)?
-        };
-        let terminated = handle_signals && install_signal_handlers(&reactor)?;
-        reactor.set_strategy(config.wait);
         Ok(Program {
             hosts,
             reactor,
@@ -613,12 +617,12 @@ impl Program {
     /// Whether the player acknowledged every host's last delivered event by `deadline` (250 ms
     /// at least from now).
     fn wait_acknowledged(&self, deadline: Instant) -> bool {
-        let pending: Vec<(String, u64)> = self
+        let pending: Vec<(u64, u64)> = self
             .hosts
             .iter()
             .filter_map(|h| {
                 let sender = h.events.as_ref()?;
-                (h.last_seq > 0).then(|| (sender.origin().to_string(), h.last_seq))
+                (h.last_seq > 0).then(|| (sender.sender_id(), h.last_seq))
             })
             .collect();
         if pending.is_empty() {
@@ -628,11 +632,11 @@ impl Program {
             return false;
         };
         let floor = Instant::now() + Duration::from_millis(250);
-        pending.iter().all(|(origin, seq)| {
+        pending.iter().all(|(sender, seq)| {
             let left = deadline
                 .max(floor)
                 .saturating_duration_since(Instant::now());
-            petrel_ipc::wait_acknowledged(&beats, origin, *seq, left)
+            petrel_ipc::wait_acknowledged(&beats, *sender, *seq, left).is_safe(*seq)
         })
     }
 

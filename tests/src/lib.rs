@@ -102,12 +102,24 @@ impl Player {
 
     /// The same, with its journal and log in `work` (another player's, for `--resume`).
     pub fn start_in(work: &Workdir, dir: &Path, vehicle: &str, extra: &[&str]) -> Player {
+        Self::start_journaled(work, dir, vehicle, &work.path().join("journal"), extra)
+    }
+
+    /// The same, with its journal in `journal` (a directory anywhere: a small tmpfs...) and its
+    /// log in `work`.
+    pub fn start_journaled(
+        work: &Workdir,
+        dir: &Path,
+        vehicle: &str,
+        journal: &Path,
+        extra: &[&str],
+    ) -> Player {
         use std::sync::atomic::{AtomicU32, Ordering};
         static N: AtomicU32 = AtomicU32::new(0);
         let log = work
             .path()
             .join(format!("play-{}.log", N.fetch_add(1, Ordering::Relaxed)));
-        let journal = work.path().join("journal");
+        let journal = journal.to_path_buf();
         let child = Command::new(petrel_bin())
             .arg("play")
             .arg(dir)
@@ -172,6 +184,18 @@ impl Player {
             .arg(&self.dir)
             .arg(event)
             .args(["--vehicle", &self.vehicle, "--count", &count.to_string()])
+            .output()
+            .expect("petrel send runs")
+    }
+
+    /// `petrel send` to this player with more arguments (`--timeout`...).
+    pub fn send_with(&self, event: &str, extra: &[&str]) -> std::process::Output {
+        Command::new(petrel_bin())
+            .arg("send")
+            .arg(&self.dir)
+            .arg(event)
+            .args(["--vehicle", &self.vehicle])
+            .args(extra)
             .output()
             .expect("petrel send runs")
     }
@@ -251,5 +275,183 @@ fn stop_all(children: &mut [std::process::Child]) -> Vec<Option<i32>> {
 impl Drop for Processes {
     fn drop(&mut self) {
         stop_all(&mut self.0);
+    }
+}
+
+/// Runs `petrel ARGS` to completion.
+pub fn petrel(args: &[&str]) -> std::process::Output {
+    Command::new(petrel_bin())
+        .args(args)
+        .output()
+        .expect("petrel runs")
+}
+
+/// True when a process ended by itself with an exit code (not a panic's 101, not an abort or
+/// any other signal): what "refused cleanly" means for a command given bad input.
+pub fn ended_cleanly(o: &std::process::Output) -> bool {
+    matches!(o.status.code(), Some(0..=2))
+}
+
+/// A project written into a temporary directory (removed when dropped): the files of `from`
+/// (a project directory of the repository), each edited by `edit(file name, text)`, plus
+/// `extra` files.
+pub struct TempProject(tempfile::TempDir);
+
+impl TempProject {
+    /// Copies the project `from`, passing each file through `edit`.
+    pub fn copy(from: &Path, edit: impl Fn(&str, String) -> String) -> Self {
+        let dir = tempfile::Builder::new()
+            .prefix("petrel-project-")
+            .tempdir()
+            .expect("a temporary directory");
+        for entry in std::fs::read_dir(from).expect("the project directory") {
+            let path = entry.expect("a directory entry").path();
+            if path.is_file() {
+                let name = path
+                    .file_name()
+                    .and_then(|n| n.to_str())
+                    .unwrap_or_default();
+                let text = std::fs::read_to_string(&path).expect("a project file");
+                std::fs::write(dir.path().join(name), edit(name, text)).expect("written");
+            }
+        }
+        TempProject(dir)
+    }
+
+    /// A project of the given files (name, text).
+    pub fn new(files: &[(&str, &str)]) -> Self {
+        let dir = tempfile::Builder::new()
+            .prefix("petrel-project-")
+            .tempdir()
+            .expect("a temporary directory");
+        for (name, text) in files {
+            std::fs::write(dir.path().join(name), text).expect("written");
+        }
+        TempProject(dir)
+    }
+
+    /// Its directory.
+    pub fn path(&self) -> &Path {
+        self.0.path()
+    }
+}
+
+/// A small tmpfs mounted for one test (a full disk on demand), unmounted when dropped, pass or
+/// fail. Mounting needs root: [`Tmpfs::mount`] returns `None` (and says so) where it is not.
+pub struct Tmpfs {
+    path: PathBuf,
+}
+
+impl Tmpfs {
+    /// Mounts a tmpfs of `kib` KiB at `path` (created if needed).
+    pub fn mount(path: &Path, kib: u64) -> Option<Tmpfs> {
+        std::fs::create_dir_all(path).expect("mount point");
+        let ok = Command::new("mount")
+            .args([
+                "-t",
+                "tmpfs",
+                "-o",
+                &format!("size={kib}k,mode=0700"),
+                "tmpfs",
+            ])
+            .arg(path)
+            .status()
+            .is_ok_and(|s| s.success());
+        if !ok {
+            eprintln!(
+                "cannot mount a tmpfs at {} (this test needs root): skipped",
+                path.display()
+            );
+            return None;
+        }
+        Some(Tmpfs {
+            path: path.to_path_buf(),
+        })
+    }
+
+    /// Gives the tmpfs `kib` KiB (the disk is no longer full).
+    pub fn resize(&self, kib: u64) {
+        let ok = Command::new("mount")
+            .args(["-o", &format!("remount,size={kib}k"), "tmpfs"])
+            .arg(&self.path)
+            .status()
+            .is_ok_and(|s| s.success());
+        assert!(ok, "cannot resize the tmpfs at {}", self.path.display());
+    }
+
+    /// The mount point.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl Drop for Tmpfs {
+    fn drop(&mut self) {
+        let unmounted = Command::new("umount")
+            .arg(&self.path)
+            .status()
+            .is_ok_and(|s| s.success());
+        if !unmounted {
+            // A process still holds a file there: detach it now, it goes when they close.
+            let _ = Command::new("umount").arg("-l").arg(&self.path).status();
+        }
+    }
+}
+
+/// A journal record as the flight recorder writes it: little-endian length, CRC-32 of the
+/// body, the body. For tests that craft records (valid checksums around hostile bodies).
+pub fn journal_record(body: &[u8]) -> Vec<u8> {
+    let mut crc = !0u32;
+    for &b in body {
+        crc ^= b as u32;
+        for _ in 0..8 {
+            crc = if crc & 1 != 0 {
+                (crc >> 1) ^ 0xEDB8_8320
+            } else {
+                crc >> 1
+            };
+        }
+    }
+    let mut out = (body.len() as u32).to_le_bytes().to_vec();
+    out.extend_from_slice(&(!crc).to_le_bytes());
+    out.extend_from_slice(body);
+    out
+}
+
+/// The segment files of a journal directory, in order.
+pub fn journal_segments(dir: &Path) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map(|rd| {
+            rd.filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.extension().is_some_and(|x| x == "pj"))
+                .collect()
+        })
+        .unwrap_or_default();
+    v.sort();
+    v
+}
+
+/// `petrel journal show DIR --format json`, one document per entry (and the exit status).
+pub fn journal_json(dir: &Path) -> (Vec<serde_json::Value>, std::process::Output) {
+    let o = petrel(&[
+        "journal",
+        "show",
+        &dir.display().to_string(),
+        "--format",
+        "json",
+    ]);
+    let docs = String::from_utf8_lossy(&o.stdout)
+        .lines()
+        .filter_map(|l| serde_json::from_str(l).ok())
+        .collect();
+    (docs, o)
+}
+
+/// Removes what a vehicle left in shared memory (dead nodes, then its files): for a test whose
+/// processes of that vehicle were started by hand and have ended.
+pub fn forget_vehicle(vehicle: &str) {
+    if let Ok(v) = petrel_ipc::Vehicle::new(vehicle) {
+        let _ = petrel_ipc::cleanup_dead_nodes(&v, std::time::Duration::from_millis(200));
+        let _ = petrel_ipc::remove_vehicle_files(&v);
     }
 }

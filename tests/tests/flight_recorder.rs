@@ -214,57 +214,80 @@ fn a_shadow_follows_the_vehicle_and_raises_an_alarm_on_divergence() {
         );
         std::fs::write(dir.path().join(f), text).unwrap();
     }
-    // Each shadow's standard error, read as it comes: the events are sent once both follow.
+    // A shadow's standard error, read as it comes: the test waits on what it says, not on
+    // time (each shadow stops on SIGTERM; --run-for only bounds a test gone wrong).
+    struct Shadow {
+        child: std::process::Child,
+        lines: std::sync::mpsc::Receiver<String>,
+        text: std::sync::Arc<std::sync::Mutex<String>>,
+    }
+    impl Shadow {
+        fn wait_for(&self, what: &str) -> bool {
+            let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
+            while std::time::Instant::now() < deadline {
+                if self.text.lock().unwrap().contains(what) {
+                    return true;
+                }
+                let _ = self
+                    .lines
+                    .recv_timeout(std::time::Duration::from_millis(100));
+            }
+            false
+        }
+        fn stop(mut self) -> (Option<i32>, String) {
+            let _ = Command::new("kill")
+                .args(["-TERM", &self.child.id().to_string()])
+                .status();
+            let status = self.child.wait().unwrap();
+            // The reader ends with the process's standard error.
+            while self.lines.recv().is_ok() {}
+            let text = self.text.lock().unwrap().clone();
+            (status.code(), text)
+        }
+    }
     let spawn_shadow = |project: &Path| {
-        use std::io::BufRead;
         let mut child = Command::new(petrel_bin())
             .arg("play")
             .arg(project)
-            .args(["--vehicle", &vehicle, "--shadow", "--run-for", "8"])
+            .args(["--vehicle", &vehicle, "--shadow", "--run-for", "120"])
+            // Its "synchronised" line is an info log.
+            .env("RUST_LOG", "info")
             .stderr(std::process::Stdio::piped())
             .spawn()
             .unwrap();
         let stderr = child.stderr.take().unwrap();
-        let (tx, rx) = std::sync::mpsc::channel::<String>();
-        let reader = std::thread::spawn(move || {
-            let mut all = String::new();
+        let (tx, lines) = std::sync::mpsc::channel();
+        let text = std::sync::Arc::new(std::sync::Mutex::new(String::new()));
+        let sink = text.clone();
+        std::thread::spawn(move || {
+            use std::io::BufRead;
             for line in std::io::BufReader::new(stderr)
                 .lines()
                 .map_while(Result::ok)
             {
-                let _ = tx.send(line.clone());
-                all.push_str(&line);
-                all.push('\n');
+                sink.lock().unwrap().push_str(&format!("{line}\n"));
+                let _ = tx.send(line);
             }
-            all
         });
-        (child, rx, reader)
+        Shadow { child, lines, text }
     };
-    let started = |rx: &std::sync::mpsc::Receiver<String>| {
-        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(30);
-        while std::time::Instant::now() < deadline {
-            if let Ok(line) = rx.recv_timeout(std::time::Duration::from_millis(100)) {
-                if line.contains("shadow started") {
-                    return true;
-                }
-            }
-        }
-        false
-    };
-    let (mut same, same_rx, same_log) = spawn_shadow(&uav());
-    let (mut different, different_rx, different_log) = spawn_shadow(dir.path());
-    assert!(
-        started(&same_rx) && started(&different_rx),
-        "the shadows did not start"
-    );
+    let same = spawn_shadow(&uav());
+    let different = spawn_shadow(dir.path());
+    // Both follow the vehicle before it moves.
+    for shadow in [&same, &different] {
+        assert!(
+            shadow.wait_for("shadow synchronised"),
+            "{}",
+            shadow.text.lock().unwrap()
+        );
+    }
     send_all(&player, &EVENTS[..4]);
-    let same_status = same.wait().unwrap();
-    let different_status = different.wait().unwrap();
-    let same_err = same_log.join().unwrap();
-    let diff_err = different_log.join().unwrap();
-    assert_eq!(same_status.code(), Some(0), "{same_err}");
+    different.wait_for("ALARM step");
+    let (same_code, same_err) = same.stop();
+    let (diff_code, diff_err) = different.stop();
+    assert_eq!(same_code, Some(0), "{same_err}");
     assert!(same_err.contains("0 divergence alarm"), "{same_err}");
-    assert_eq!(different_status.code(), Some(1), "{diff_err}");
+    assert_eq!(diff_code, Some(1), "{diff_err}");
     assert!(
         diff_err.contains("ALARM step")
             && diff_err.contains("(event airborne)")

@@ -309,10 +309,14 @@ impl Checker<'_> {
             let source = match (p.get_ref(), ty) {
                 (RawParam::Bool(b), Type::Bool) => Some(ParamSource::Literal(Value::Bool(*b))),
                 (RawParam::Int(i), Type::Int) => Some(ParamSource::Literal(Value::Int(*i))),
-                (RawParam::Int(i), Type::Float) => {
+                // Exactly, or not at all: an int a float does not hold exactly (beyond 2^53),
+                // and TOML's `nan` and `inf`, are refused below.
+                (RawParam::Int(i), Type::Float) if (*i as f64) as i128 == i128::from(*i) => {
                     Some(ParamSource::Literal(Value::Float(*i as f64)))
                 }
-                (RawParam::Float(f), Type::Float) => Some(ParamSource::Literal(Value::Float(*f))),
+                (RawParam::Float(f), Type::Float) if f.is_finite() => {
+                    Some(ParamSource::Literal(Value::Float(*f)))
+                }
                 (RawParam::Table(t), Type::Text) => {
                     Some(ParamSource::Literal(Value::Text(t.text.clone())))
                 }
@@ -348,7 +352,11 @@ impl Checker<'_> {
                 (found, _) => {
                     let what = match found {
                         RawParam::Bool(_) => "a bool",
+                        RawParam::Int(_) if *ty == Type::Float => {
+                            "an int that no float holds exactly (above 2^53)"
+                        }
                         RawParam::Int(_) => "an int",
+                        RawParam::Float(f) if !f.is_finite() => "a float that is not finite",
                         RawParam::Float(_) => "a float",
                         RawParam::Table(_) => "a text",
                         RawParam::Signal(_) => "a signal",

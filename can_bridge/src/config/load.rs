@@ -54,7 +54,24 @@ pub fn load_project_can(
         );
         return Ok(None);
     };
-    let dbc_path = dir.join(dbc_name.get_ref());
+    let dbc_path = match petrel_nets::paths::confine(dir, dbc_name.get_ref()) {
+        Ok(p) => p,
+        Err(why) => {
+            diags.push(
+                Diagnostic::error(
+                    "E0711",
+                    Span::new(file, dbc_name.span().start, dbc_name.span().end),
+                    format!(
+                        "the DBC file `{}` is outside the project directory: {why}",
+                        dbc_name.get_ref().escape_debug()
+                    ),
+                )
+                .label("named here")
+                .help("keep the DBC in the project directory and name it relative to it, without `..`"),
+            );
+            return Ok(None);
+        }
+    };
     let dbc_text = match std::fs::read(&dbc_path) {
         Ok(b) => match String::from_utf8(b) {
             Ok(s) => s,

@@ -22,7 +22,7 @@ pub fn project() -> CompiledProject {
 }
 
 pub fn dbc() -> Arc<Dbc> {
-    Arc::new(Dbc::load(&data("auv.dbc")).unwrap())
+    Arc::new(Dbc::load(&data("auv/auv.dbc")).unwrap())
 }
 
 pub fn can_toml() -> String {

@@ -4,13 +4,15 @@
 use std::collections::HashMap;
 
 use super::read::{parse_document, RawNet, PETREL_DATA_HELP};
-use super::view::{sanitize, structure, Layout, Unique};
+use super::view::{nodes, sanitize, structure, Layout, Unique};
 use super::xml::Node;
+use super::PETREL_VERSION;
 use crate::diag::{Diagnostic, Diagnostics};
+use crate::instances::{instances, Instances, MAX_INSTANCES};
 use crate::model::*;
 use crate::pt::PtNode;
 use crate::source::{FileId, Span};
-use crate::syntax::parse_action;
+use crate::syntax::{parse_action, parse_args, parse_guard};
 
 /// The hint for nets Petrel cannot take as mission nets but can still analyse.
 const VERIFY_HINT: &str = "`petrel verify FILE.pnml` analyses weighted, unsafe P/T nets directly";
@@ -251,7 +253,46 @@ fn plain_project(raws: &[RawNet], diags: &mut Diagnostics) -> Project {
     Project { manifest, files }
 }
 
-/// Rebuilds a project from an export's Petrel blocks, reporting every problem (`E0506`).
+/// The P/T net's places and transitions by id (the first of an id: a repeated id is E0501).
+struct Ids<'r> {
+    places: HashMap<&'r str, usize>,
+    transitions: HashMap<&'r str, usize>,
+}
+
+impl<'r> Ids<'r> {
+    fn of(pt: &'r crate::pt::PtNet) -> Self {
+        let mut places = HashMap::new();
+        for (i, p) in pt.places.iter().enumerate() {
+            places.entry(p.id.as_str()).or_insert(i);
+        }
+        let mut transitions = HashMap::new();
+        for (i, t) in pt.transitions.iter().enumerate() {
+            transitions.entry(t.id.as_str()).or_insert(i);
+        }
+        Ids {
+            places,
+            transitions,
+        }
+    }
+}
+
+/// One node's P/T ids, as the Petrel block gives them: one copy per instance of its net.
+struct NodeCopies {
+    /// The node's Petrel data, for messages.
+    span: Span,
+    copies: Vec<Copy>,
+}
+
+/// `<copy net="R1" ref="R1.moving"/>` (version 2), or `<item ref="nav.idle"/>` (version 1,
+/// which names no instance: each net is its one instance).
+struct Copy {
+    id: String,
+    net: Option<String>,
+    span: Span,
+}
+
+/// Rebuilds a project from an export's Petrel blocks, reporting every problem (`E0506`,
+/// `E0507` for a version this Petrel does not read).
 struct Rebuild<'r, 'd> {
     file: FileId,
     diags: &'d mut Diagnostics,
@@ -269,6 +310,28 @@ impl Rebuild<'_, '_> {
         );
     }
 
+    /// E0508: a net file path that would leave the project directory the import writes.
+    fn confined(&mut self, path: &str, span: Span) {
+        // A missing `path` is reported by `req`, and `project::write` refuses an empty one.
+        if path.is_empty() {
+            return;
+        }
+        if let Err(why) = crate::paths::check_relative(path) {
+            self.diags.push(
+                Diagnostic::error(
+                    "E0508",
+                    span,
+                    format!(
+                        "net file path `{}` is outside the project directory: {why}",
+                        path.escape_debug()
+                    ),
+                )
+                .label("this path")
+                .help("the imported project's net files go in its directory: paths relative to it, without `..`"),
+            );
+        }
+    }
+
     fn req<'n>(&mut self, n: &'n Node, key: &str) -> &'n str {
         match n.attr(key) {
             Some(v) => v,
@@ -282,11 +345,36 @@ impl Rebuild<'_, '_> {
         }
     }
 
+    /// A name attribute, which must be a Petrel identifier: a file that passes import must
+    /// give a project `petrel fmt` can write and the parser read back.
     fn name(&mut self, n: &Node, key: &str) -> Name {
-        Name {
-            text: self.req(n, key).to_string(),
-            span: n.span,
+        let text = self.req(n, key).to_string();
+        if n.attr(key).is_some() && !is_identifier(&text) {
+            self.bad(
+                n.span,
+                format!(
+                    "petrel attribute `{key}` of `<{}>` is `{text}`, which is not a Petrel name",
+                    n.name
+                ),
+            );
         }
+        Name { text, span: n.span }
+    }
+
+    /// A place named in an arc: a name, or a child's completion place `CHILD.done`.
+    fn place_ref(&mut self, n: &Node, key: &str) -> Name {
+        let text = self.req(n, key).to_string();
+        let plain = text.strip_suffix(".done").unwrap_or(&text);
+        if n.attr(key).is_some() && !is_identifier(plain) {
+            self.bad(
+                n.span,
+                format!(
+                    "petrel attribute `{key}` of `<{}>` is `{text}`, which is not a place name",
+                    n.name
+                ),
+            );
+        }
+        Name { text, span: n.span }
     }
 
     fn flag(&mut self, n: &Node, key: &str) -> bool {
@@ -351,6 +439,51 @@ impl Rebuild<'_, '_> {
             .collect()
     }
 
+    /// `<allow code="W0602" reason="..."/>`: warnings intended for a net or an item.
+    fn allows(&mut self, n: &Node) -> Vec<Allow> {
+        n.children("allow")
+            .map(|a| Allow {
+                code: self.name(a, "code"),
+                reason: a.attr("reason").map(str::to_string),
+            })
+            .collect()
+    }
+
+    /// Text of the net language carried in a block (an action, a guard, arguments, a
+    /// formula), read by the language's own parser. Its diagnostics have offsets into the
+    /// text, not the file, so a failure is summarised at the element that holds it.
+    fn parsed<T>(
+        &mut self,
+        at: &Node,
+        what: &str,
+        text: &str,
+        parse: impl FnOnce(FileId, &str, &mut Diagnostics) -> Option<T>,
+    ) -> Option<T> {
+        let mut inner = Diagnostics::new();
+        match parse(self.file, text, &mut inner) {
+            Some(v) if !inner.has_errors() => Some(v),
+            _ => {
+                let why = inner
+                    .iter()
+                    .next()
+                    .map(|d| d.message.clone())
+                    .unwrap_or_else(|| format!("it is not {what}"));
+                self.bad(
+                    at.span,
+                    format!("petrel {what} `{text}` does not parse: {why}"),
+                );
+                None
+            }
+        }
+    }
+
+    /// Arguments written as text in an attribute (`args="&quot;r1&quot;, 0.5"`).
+    fn args(&mut self, n: &Node, key: &str) -> Option<Vec<Expr>> {
+        let text = n.attr(key)?.to_string();
+        let args = self.parsed(n, "argument list", &text, parse_args)?;
+        Some(args.into_iter().map(|e| respan_expr(e, n.span)).collect())
+    }
+
     fn manifest(&mut self, n: &Node) -> Manifest {
         let mut m = Manifest {
             name: self.req(n, "name").to_string(),
@@ -358,19 +491,55 @@ impl Rebuild<'_, '_> {
             ..Manifest::default()
         };
         for f in n.children("file") {
-            m.files.push(FileRef {
-                path: self.req(f, "path").to_string(),
-                span: f.span,
-            });
+            let path = self.req(f, "path").to_string();
+            self.confined(&path, f.span);
+            m.files.push(FileRef { path, span: f.span });
         }
         for s in n.children("start") {
             m.start.push(self.name(s, "net"));
         }
         for g in n.children("global") {
+            // `<scope>` present: the place is visible to the nets listed (maybe none).
+            let nets = g
+                .child("scope")
+                .map(|s| s.children("net").map(|x| self.name(x, "name")).collect());
             m.globals.push(GlobalPlaceDecl {
-                nets: None,
+                nets,
                 name: self.name(g, "name"),
                 tokens: self.number(g, "tokens"),
+            });
+        }
+        for i in n.children("instance") {
+            let name = self.name(i, "name");
+            let net = self.name(i, "net");
+            if i.attr("args").is_none() {
+                self.req(i, "args");
+            }
+            let args = self.args(i, "args").unwrap_or_default();
+            // The manifest holds values only: a name would not survive `petrel.toml`.
+            if args
+                .iter()
+                .any(|a| matches!(a, Expr::Var(_) | Expr::SelfParam(_)))
+            {
+                self.bad(
+                    i.span,
+                    format!("the arguments of instance `{name}` are not all values"),
+                );
+            }
+            m.instances.push(InstanceDecl { name, net, args });
+        }
+        for i in n.children("invariant") {
+            let name = self.name(i, "name");
+            let text = i.text.clone();
+            let formula = self
+                .parsed(i, "invariant", &text, |file, t, d| {
+                    crate::formula::parse_formula(file, 0, t, "E0506", d)
+                })
+                .map(|f| respan_formula(f, i.span));
+            m.invariants.push(InvariantDecl {
+                name,
+                text,
+                formula,
             });
         }
         for e in n.children("event") {
@@ -386,6 +555,7 @@ impl Rebuild<'_, '_> {
                 category,
                 params: self.params(e),
                 description: e.child("description").map(|d| d.text.clone()),
+                internal: false,
             });
         }
         for p in n.children("program") {
@@ -394,6 +564,7 @@ impl Rebuild<'_, '_> {
                 .map(|f| FunctionDecl {
                     name: self.name(f, "name"),
                     params: self.params(f),
+                    answers: Vec::new(),
                 })
                 .collect();
             m.programs.push(ProgramDecl {
@@ -421,7 +592,7 @@ impl Rebuild<'_, '_> {
         m
     }
 
-    /// The data node (`<place>` or `<transition>`) of an element's Petrel block.
+    /// The data node (`<place>` or `<transition>`) of an element's version-1 Petrel block.
     fn element_data<'n>(
         &mut self,
         block: Option<&'n Node>,
@@ -443,7 +614,7 @@ impl Rebuild<'_, '_> {
         let tokens = self.number(n, "tokens");
         let tokens_span = self.flag(n, "marking-written").then_some(n.span);
         Item {
-            allows: Vec::new(),
+            allows: self.allows(n),
             trivia: self.trivia(n),
             kind: ItemKind::Place(PlaceDecl {
                 name: self.name(n, "name"),
@@ -465,21 +636,33 @@ impl Rebuild<'_, '_> {
                 })
                 .collect(),
         });
-        let inputs = n.children("input").map(|i| self.name(i, "place")).collect();
+        let guard = n.child("guard").and_then(|g| {
+            let text = g.text.clone();
+            self.parsed(g, "guard", &text, parse_guard)
+                .map(|guard| respan_guard(guard, g.span))
+        });
+        let inputs = n
+            .children("input")
+            .map(|i| self.place_ref(i, "place"))
+            .collect();
+        let empty = n
+            .children("empty")
+            .map(|i| self.place_ref(i, "place"))
+            .collect();
         let outputs = n
             .children("output")
-            .map(|o| self.name(o, "place"))
+            .map(|o| self.place_ref(o, "place"))
             .collect();
         let actions = n
             .children("action")
             .filter_map(|a| self.action(a))
             .collect();
         Item {
-            allows: Vec::new(),
+            allows: self.allows(n),
             trivia: self.trivia(n),
             kind: ItemKind::Transition(TransitionDecl {
-                guard: None,
-                empty: Vec::new(),
+                guard,
+                empty,
                 name: self.name(n, "name"),
                 trigger,
                 inputs,
@@ -491,30 +674,55 @@ impl Rebuild<'_, '_> {
         }
     }
 
+    /// A `children` line, and the P/T copies of each child's completion place.
+    fn children_line(&mut self, n: &Node) -> (Item, Vec<NodeCopies>) {
+        let mut list = Vec::new();
+        let mut copies = Vec::new();
+        for c in n.children("child") {
+            // No `args` attribute: written without parentheses.
+            let args = c
+                .attr("args")
+                .map(|_| self.args(c, "args").unwrap_or_default());
+            list.push(ChildDecl {
+                net: self.name(c, "net"),
+                args,
+            });
+            copies.push(self.copies(c));
+        }
+        if list.is_empty() {
+            self.bad(n.span, "a petrel `<children>` line names no child");
+        }
+        let item = Item {
+            allows: self.allows(n),
+            trivia: self.trivia(n),
+            kind: ItemKind::Children(list),
+            trailing: n.child("trailing").map(|t| t.text.clone()),
+        };
+        (item, copies)
+    }
+
+    /// The `<copy>`s of a version-2 node.
+    fn copies(&mut self, n: &Node) -> NodeCopies {
+        let copies = n
+            .children("copy")
+            .map(|c| Copy {
+                id: self.req(c, "ref").to_string(),
+                net: Some(self.req(c, "net").to_string()),
+                span: c.span,
+            })
+            .collect();
+        NodeCopies {
+            span: n.span,
+            copies,
+        }
+    }
+
     fn action(&mut self, n: &Node) -> Option<ActionItem> {
         let Some(code) = n.child("code") else {
             self.bad(n.span, "petrel `<action>` lacks its `<code>`");
             return None;
         };
-        // The action text has its own offsets, so its diagnostics are summarised at the
-        // `<code>` element, and its spans all point there.
-        let mut inner = Diagnostics::new();
-        let parsed = parse_action(self.file, &code.text, &mut inner);
-        let action = match parsed {
-            Some(a) if !inner.has_errors() => a,
-            _ => {
-                let why = inner
-                    .iter()
-                    .next()
-                    .map(|d| d.message.clone())
-                    .unwrap_or_else(|| "it is not an action".into());
-                self.bad(
-                    code.span,
-                    format!("petrel action `{}` does not parse: {why}", code.text),
-                );
-                return None;
-            }
-        };
+        let action = self.parsed(code, "action", &code.text, parse_action)?;
         Some(ActionItem {
             trivia: self.trivia(n),
             action: respan_action(action, code.span),
@@ -522,104 +730,201 @@ impl Rebuild<'_, '_> {
         })
     }
 
+    /// The items of a version-1 net: `<item ref>` in written order, each P/T element holding
+    /// its own Petrel data.
+    fn items_v1(
+        &mut self,
+        n: &Node,
+        ids: &Ids,
+        items: &mut Vec<Item>,
+        nodes: &mut Vec<NodeCopies>,
+    ) {
+        let raw = self.raw;
+        let pt = &raw.net;
+        for item in n.children("item") {
+            let id = self.req(item, "ref").to_string();
+            let copy = NodeCopies {
+                span: item.span,
+                copies: vec![Copy {
+                    id: id.clone(),
+                    net: None,
+                    span: item.span,
+                }],
+            };
+            if let Some(&i) = ids.places.get(id.as_str()) {
+                let data = raw.place_petrel.get(i).and_then(Option::as_ref);
+                let span = pt.places.get(i).map(|p| p.span).unwrap_or(item.span);
+                if let Some(d) = self.element_data(data, "place", &id, span) {
+                    items.push(self.place(d));
+                    nodes.push(copy);
+                }
+            } else if let Some(&i) = ids.transitions.get(id.as_str()) {
+                let data = raw.transition_petrel.get(i).and_then(Option::as_ref);
+                let span = pt.transitions.get(i).map(|t| t.span).unwrap_or(item.span);
+                if let Some(d) = self.element_data(data, "transition", &id, span) {
+                    items.push(self.transition(d));
+                    nodes.push(copy);
+                }
+            } else {
+                self.bad(
+                    item.span,
+                    format!("item `{id}` is no place or transition of the P/T net"),
+                );
+            }
+        }
+    }
+
+    /// The items of a version-2 net, inline in written order, each with its P/T copies.
+    fn items_v2(&mut self, n: &Node, items: &mut Vec<Item>, nodes: &mut Vec<NodeCopies>) {
+        for c in &n.children {
+            match c.name.as_str() {
+                "place" => {
+                    items.push(self.place(c));
+                    nodes.push(self.copies(c));
+                }
+                "transition" => {
+                    items.push(self.transition(c));
+                    nodes.push(self.copies(c));
+                }
+                "children" => {
+                    let (item, copies) = self.children_line(c);
+                    items.push(item);
+                    nodes.extend(copies);
+                }
+                // The net's own data (`param`, `allow`, `comment`...) is read apart.
+                _ => {}
+            }
+        }
+    }
+
     fn project(mut self) -> Option<Project> {
         let raw = self.raw;
         let pt = &raw.net;
         let block = raw.petrel.as_ref()?;
-        if block.attr("version") != Some("1") {
-            self.bad(
-                block.span,
-                format!(
-                    "petrel data version `{}` is not version 1, the one this Petrel reads",
-                    block.attr("version").unwrap_or("")
-                ),
-            );
-            return None;
-        }
+        let v1 = match block.attr("version") {
+            Some("1") => true,
+            Some(v) if v == PETREL_VERSION => false,
+            other => {
+                self.diags.push(
+                    Diagnostic::error(
+                        "E0507",
+                        block.span,
+                        format!(
+                            "this Petrel export is of version `{}`; this Petrel reads versions 1 and {PETREL_VERSION}",
+                            other.unwrap_or("")
+                        ),
+                    )
+                    .label("unknown version of the Petrel data")
+                    .help("import it with the Petrel that exported it, or export the project again with this one"),
+                );
+                return None;
+            }
+        };
         let Some(mnode) = block.child("manifest") else {
             self.bad(block.span, "the petrel block has no `<manifest>`");
             return None;
         };
         let manifest = self.manifest(mnode);
-
-        let place_ids: HashMap<&str, usize> = pt
-            .places
-            .iter()
-            .enumerate()
-            .map(|(i, p)| (p.id.as_str(), i))
-            .collect();
-        let transition_ids: HashMap<&str, usize> = pt
-            .transitions
-            .iter()
-            .enumerate()
-            .map(|(i, t)| (t.id.as_str(), i))
-            .collect();
-        let mut place_used = vec![false; pt.places.len()];
-        let mut transition_used = vec![false; pt.transitions.len()];
-        let mut layout = Layout::default();
-
-        for g in mnode.children("global") {
-            let id = self.req(g, "ref").to_string();
-            match place_ids.get(id.as_str()) {
-                Some(&i) if !place_used[i] => place_used[i] = true,
-                Some(_) => self.bad(g.span, format!("place `{id}` is claimed twice")),
-                None => self.bad(
-                    g.span,
-                    format!("global place `{id}` is not a place of the P/T net"),
-                ),
-            }
-            layout.globals.push(id);
-        }
+        let ids = Ids::of(pt);
 
         let mut files = Vec::new();
+        // Per net in project order, per node: its P/T copies.
+        let mut net_copies: Vec<Vec<NodeCopies>> = Vec::new();
         for f in block.children("netfile") {
             let mut nets = Vec::new();
             for n in f.children("net") {
                 let mut items = Vec::new();
-                let mut ids = Vec::new();
-                for item in n.children("item") {
-                    let id = self.req(item, "ref").to_string();
-                    if let Some(&i) = place_ids.get(id.as_str()) {
-                        if std::mem::replace(&mut place_used[i], true) {
-                            self.bad(item.span, format!("place `{id}` is claimed twice"));
-                        }
-                        let span = pt.places[i].span;
-                        let data = raw.place_petrel.get(i).and_then(Option::as_ref);
-                        if let Some(d) = self.element_data(data, "place", &id, span) {
-                            items.push(self.place(d));
-                        }
-                    } else if let Some(&i) = transition_ids.get(id.as_str()) {
-                        if std::mem::replace(&mut transition_used[i], true) {
-                            self.bad(item.span, format!("transition `{id}` is claimed twice"));
-                        }
-                        let span = pt.transitions[i].span;
-                        let data = raw.transition_petrel.get(i).and_then(Option::as_ref);
-                        if let Some(d) = self.element_data(data, "transition", &id, span) {
-                            items.push(self.transition(d));
-                        }
-                    } else {
-                        self.bad(
-                            item.span,
-                            format!("item `{id}` is no place or transition of the P/T net"),
-                        );
-                    }
-                    ids.push(id);
+                let mut nodes = Vec::new();
+                if v1 {
+                    self.items_v1(n, &ids, &mut items, &mut nodes);
+                } else {
+                    self.items_v2(n, &mut items, &mut nodes);
                 }
-                layout.nets.push(ids);
+                net_copies.push(nodes);
                 nets.push(NetDecl {
-                    allows: Vec::new(),
-                    params: Vec::new(),
+                    allows: self.allows(n),
+                    params: self.params(n),
                     trivia: self.trivia(n),
                     name: self.name(n, "name"),
                     items,
                     end_comments: texts(n, "end-comment"),
                 });
             }
+            let path = self.req(f, "path").to_string();
+            self.confined(&path, f.span);
             files.push(NetFile {
-                path: self.req(f, "path").to_string(),
+                path,
                 nets,
                 end_comments: texts(f, "end-comment"),
             });
+        }
+        if self.diags.error_count() > self.before {
+            return None;
+        }
+        let project = Project { manifest, files };
+        let expanded = instances(&project);
+        if expanded.truncated {
+            self.bad(
+                block.span,
+                format!("the nets of this project expand into more than {MAX_INSTANCES} instances"),
+            );
+            return None;
+        }
+
+        // Every P/T element must be claimed by exactly one node of one instance.
+        let mut place_used = vec![false; pt.places.len()];
+        let mut transition_used = vec![false; pt.transitions.len()];
+        let mut claim = |this: &mut Self, id: &str, place: bool, span: Span| {
+            let (index, used, kind) = if place {
+                (ids.places.get(id), &mut place_used, "place")
+            } else {
+                (ids.transitions.get(id), &mut transition_used, "transition")
+            };
+            match index.copied() {
+                Some(i) if !used[i] => used[i] = true,
+                Some(_) => this.bad(span, format!("{kind} `{id}` is claimed twice")),
+                None => this.bad(
+                    span,
+                    format!(
+                        "{kind} `{id}` named in the petrel data is not a {kind} of the P/T net"
+                    ),
+                ),
+            }
+        };
+        let mut layout = Layout::default();
+        for g in mnode.children("global") {
+            let id = self.req(g, "ref").to_string();
+            claim(&mut self, &id, true, g.span);
+            layout.globals.push(id);
+        }
+        let by_net = expanded.names_by_net(net_copies.len());
+        for ((net, copies), names) in project.nets().zip(&net_copies).zip(&by_net) {
+            let mut net_ids = Vec::new();
+            for (node, nc) in nodes(net).iter().zip(copies) {
+                if nc.copies.len() != names.len() {
+                    self.bad(
+                        nc.span,
+                        format!(
+                            "`{}` of net `{}` has {} P/T copies, but the project runs {} instance(s) of the net",
+                            node.name(),
+                            net.name,
+                            nc.copies.len(),
+                            names.len()
+                        ),
+                    );
+                }
+                for (c, name) in nc.copies.iter().zip(names) {
+                    if let Some(named) = c.net.as_deref().filter(|n| n != name) {
+                        self.bad(
+                            c.span,
+                            format!("this copy is said to be instance `{named}`'s, but the instance in its place is `{name}`"),
+                        );
+                    }
+                    claim(&mut self, &c.id, node.is_place(), c.span);
+                }
+                net_ids.push(nc.copies.iter().map(|c| c.id.clone()).collect());
+            }
+            layout.nets.push(net_ids);
         }
         for (p, used) in pt.places.iter().zip(&place_used) {
             if !used {
@@ -646,24 +951,23 @@ impl Rebuild<'_, '_> {
         if self.diags.error_count() > self.before {
             return None;
         }
-        let project = Project { manifest, files };
-        self.check_structure(&project, &layout, &place_ids, &transition_ids);
+        self.check_structure(&project, &expanded, &layout, &ids);
         (self.diags.error_count() == self.before).then_some(project)
     }
 
-    /// Compares the P/T net with the structure the rebuilt project implies.
+    /// Compares the P/T net with the skeleton the rebuilt project implies.
     fn check_structure(
         &mut self,
         project: &Project,
+        expanded: &Instances,
         layout: &Layout,
-        place_ids: &HashMap<&str, usize>,
-        transition_ids: &HashMap<&str, usize>,
+        ids: &Ids,
     ) {
         let raw = self.raw;
         let pt = &raw.net;
-        let expected = structure(project, layout);
+        let expected = structure(project, expanded, layout);
         for (id, tokens) in &expected.marking {
-            if let Some(p) = place_ids.get(id.as_str()).and_then(|&i| pt.places.get(i)) {
+            if let Some(p) = ids.places.get(id.as_str()).and_then(|&i| pt.places.get(i)) {
                 if p.initial != *tokens {
                     self.bad(
                         p.span,
@@ -723,7 +1027,8 @@ impl Rebuild<'_, '_> {
         }
         for (key, _) in &expected.arcs {
             if !index.contains_key(key) {
-                let span = transition_ids
+                let span = ids
+                    .transitions
                     .get(key.1.as_str())
                     .and_then(|&i| pt.transitions.get(i))
                     .map(|t| t.span)
@@ -731,7 +1036,7 @@ impl Rebuild<'_, '_> {
                 self.bad(
                     span,
                     format!(
-                        "the P/T net lacks the arc {} that the transition's Petrel inputs and outputs imply",
+                        "the P/T net lacks the arc {} that the transition's Petrel inputs, outputs and `finish` imply",
                         describe(key)
                     ),
                 );
@@ -803,5 +1108,37 @@ fn respan_expr(e: Expr, span: Span) -> Expr {
         ),
         Expr::Var(n) => Expr::Var(Name { text: n.text, span }),
         Expr::SelfParam(n) => Expr::SelfParam(Name { text: n.text, span }),
+    }
+}
+
+/// Points every span of a guard read from a Petrel block at its `<guard>` element.
+fn respan_guard(g: Guard, span: Span) -> Guard {
+    match g {
+        Guard::Or(a, b) => Guard::Or(
+            Box::new(respan_guard(*a, span)),
+            Box::new(respan_guard(*b, span)),
+        ),
+        Guard::And(a, b) => Guard::And(
+            Box::new(respan_guard(*a, span)),
+            Box::new(respan_guard(*b, span)),
+        ),
+        Guard::Not(a) => Guard::Not(Box::new(respan_guard(*a, span))),
+        Guard::Compare(op, a, b) => Guard::Compare(op, respan_expr(a, span), respan_expr(b, span)),
+        Guard::Value(e) => Guard::Value(respan_expr(e, span)),
+    }
+}
+
+/// Points every span of an invariant read from a Petrel block at its `<invariant>` element.
+fn respan_formula(f: Formula, span: Span) -> Formula {
+    let name = |n: Name| Name { text: n.text, span };
+    let sub = |f: Box<Formula>| Box::new(respan_formula(*f, span));
+    match f {
+        Formula::Marked(n) => Formula::Marked(name(n)),
+        Formula::Active(n) => Formula::Active(name(n)),
+        Formula::Const(b, _) => Formula::Const(b, span),
+        Formula::Not(a) => Formula::Not(sub(a)),
+        Formula::And(a, b) => Formula::And(sub(a), sub(b)),
+        Formula::Or(a, b) => Formula::Or(sub(a), sub(b)),
+        Formula::Implies(a, b) => Formula::Implies(sub(a), sub(b)),
     }
 }

@@ -534,6 +534,7 @@ pub(super) fn finish_net(
             transitions: b.transitions,
             arcs,
             has_nupn: b.has_nupn,
+            petrel_export: b.petrel.is_some(),
         },
         span,
         petrel: b.petrel,
@@ -545,7 +546,8 @@ pub(super) fn finish_net(
 /// Reads every P/T net of a PNML document.
 ///
 /// Pages are flattened (nested ones too), absent inscriptions weigh 1, absent initial markings
-/// are 0, and tool-specific blocks are ignored (a `nupn` block only sets [`PtNet::has_nupn`]).
+/// are 0, and tool-specific blocks are ignored (a `nupn` block only sets [`PtNet::has_nupn`], a
+/// net-level `petrel` block [`PtNet::petrel_export`]).
 /// Problems go to `diags` with codes `E0501` (malformed PNML), `E0502` (bad arc ends) and
 /// `E0503` (not a P/T net); the result holds the nets that could be read.
 pub fn parse_pnml(file: FileId, text: &str, diags: &mut Diagnostics) -> Vec<PtNet> {

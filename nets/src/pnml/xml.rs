@@ -14,6 +14,11 @@ use quick_xml::Reader;
 use crate::diag::{Diagnostic, Diagnostics};
 use crate::source::{FileId, Span};
 
+/// Deepest nesting of elements in a Petrel block ([`Xml::node`]). The data Petrel writes nests
+/// five deep; the bound keeps a crafted block from building a tree whose (recursive) drop
+/// overflows the stack: 300,000 nested elements aborted `petrel import`.
+pub(super) const MAX_NODE_DEPTH: usize = 64;
+
 /// Marks a problem already reported that stops reading the document (the XML itself is broken,
 /// so nothing after it can be trusted).
 pub(super) struct Fatal;
@@ -363,6 +368,20 @@ impl<'a> Xml<'a> {
                         Some((_, parent)) => parent.children.push(done),
                         None => return Ok(done),
                     }
+                }
+                Some(Child::Open(c)) if stack.len() >= MAX_NODE_DEPTH => {
+                    diags.push(
+                        Diagnostic::error(
+                            "E0501",
+                            c.span,
+                            format!(
+                                "elements are nested more than {MAX_NODE_DEPTH} deep in a petrel block"
+                            ),
+                        )
+                        .label("too deep")
+                        .help("Petrel's own blocks nest a few elements deep: this one was not written by Petrel"),
+                    );
+                    return Err(Fatal);
                 }
                 Some(Child::Open(c)) => {
                     let n = head(self, &c, diags)?;

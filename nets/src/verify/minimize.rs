@@ -1,0 +1,118 @@
+//! The events of a trace that matter to a finding.
+//!
+//! A finding's trace is the shortest path to the state that shows it. Some of its events may
+//! not matter (another net moved meanwhile, and moved back): each event is taken out in turn,
+//! the rest replayed from the start with the same firing code, and if the finding still shows
+//! the event did not matter. What is left is printed with `...` where events were elided.
+
+use super::env::Env;
+use super::explore::{run_step, Graph, Recorder, Via, NO_EVENT};
+use super::Trace;
+use crate::compiled::CompiledProject;
+use crate::semantics::{Scratch, Semantics, State};
+use std::cell::RefCell;
+
+/// Longest trace worth minimizing: each event costs a replay of the whole trace.
+const MAX_MINIMIZED: usize = 64;
+
+/// Replays traces of one exploration.
+pub(super) struct Minimizer<'a> {
+    p: &'a CompiledProject,
+    sem: &'a Semantics<'a>,
+    env: &'a Env,
+    g: &'a Graph,
+    rec: RefCell<Recorder>,
+    scratch: RefCell<Scratch>,
+}
+
+impl<'a> Minimizer<'a> {
+    /// A minimizer over the graph `g` built with `sem` and `env`.
+    pub fn new(p: &'a CompiledProject, sem: &'a Semantics<'a>, env: &'a Env, g: &'a Graph) -> Self {
+        let guards = sem
+            .layout
+            .rules
+            .iter()
+            .map(|r| {
+                p.nets[r.net as usize].transitions[r.transition as usize]
+                    .guard
+                    .clone()
+            })
+            .collect();
+        Minimizer {
+            p,
+            sem,
+            env,
+            g,
+            rec: RefCell::new(Recorder::with_guards(guards)),
+            scratch: RefCell::new(Scratch::default()),
+        }
+    }
+
+    /// The state reached by replaying `steps` (labels) from `root`.
+    fn replay(&self, root: &State, steps: &[u32]) -> State {
+        let mut rec = self.rec.borrow_mut();
+        let mut scratch = self.scratch.borrow_mut();
+        let mut s = root.clone();
+        for &l in steps {
+            let label = &self.g.labels[l as usize];
+            let d = &self.g.deliveries[label.delivery as usize];
+            s = run_step(
+                self.sem,
+                self.env,
+                &mut rec,
+                &mut scratch,
+                &s,
+                Some(d),
+                &label.choices,
+                label.counter,
+            );
+        }
+        s
+    }
+
+    /// The trace to state `i`, with the events that `keep` does not need elided: an event is
+    /// dropped when the state the rest of the trace leads to still satisfies `keep`.
+    pub fn trace(&self, i: u32, keep: &dyn Fn(&[u64]) -> bool) -> Trace {
+        let full = self.g.trace(self.p, i);
+        let steps = self.g.steps(i);
+        // The environment's own moves (single-net mode) are not replayed: keep the trace.
+        if steps.len() < 2 || steps.len() > MAX_MINIMIZED || steps.iter().any(Option::is_none) {
+            return full;
+        }
+        if steps
+            .iter()
+            .flatten()
+            .any(|&l| self.g.labels[l as usize].event == NO_EVENT)
+        {
+            return full;
+        }
+        let mut root = i;
+        while let Via::Step(prev, _) | Via::Global(prev, ..) = self.g.via[root as usize] {
+            root = prev;
+        }
+        let root = self.g.states[root as usize].clone();
+        let labels: Vec<u32> = steps.into_iter().flatten().collect();
+        let mut needed = vec![true; labels.len()];
+        for k in 0..labels.len() {
+            needed[k] = false;
+            let rest: Vec<u32> = labels
+                .iter()
+                .zip(&needed)
+                .filter(|(_, n)| **n)
+                .map(|(l, _)| *l)
+                .collect();
+            if !keep(&self.replay(&root, &rest)) {
+                needed[k] = true;
+            }
+        }
+        let mut out: Trace = Vec::new();
+        for (k, text) in full.into_iter().enumerate() {
+            if needed[k] {
+                out.push(text);
+            } else if out.last().map(String::as_str) != Some("...") {
+                out.push("...".into());
+            }
+        }
+        out
+    }
+}
