@@ -522,3 +522,63 @@ fn bridge_replays_a_recorded_bus_to_its_events() {
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("no can.toml"), "{}", stderr(&o));
 }
+
+/// `@allow(CODE)` next to a construct silences the verifier's warning of that code on it when
+/// `petrel check` runs its verification (W0601 on the transition that loses the conflict, W0602
+/// on an observer that must never fire); an `@allow` that silences nothing is W0105.
+#[test]
+fn check_silences_the_verifiers_warnings_that_an_allow_intends() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("petrel.toml"),
+        "[project]\nname = \"w\"\nfiles = [\"a.pn\"]\nstart = [\"A\"]\n\n[events]\ngo = { category = \"nominal\" }\n",
+    )
+    .unwrap();
+    let nets = |allows: bool| {
+        let allow = |text: &str| {
+            if allows {
+                text.to_string()
+            } else {
+                String::new()
+            }
+        };
+        format!(
+            "net A {{\n    place a = 1\n    place b\n    place never\n    transition t on go: a -> b\n{}    transition t2 on go: a -> b\n{}    transition watch on go: never -> never\n{}    transition back on go: b -> a\n}}\n",
+            allow("    @allow(W0601, \"t first, by written order\")\n"),
+            allow("    @allow(W0602, \"an observer: fires only if the mission breaks\")\n"),
+            allow("    @allow(W0603, \"nothing to silence here\")\n"),
+        )
+    };
+    let codes = |o: &Output| -> Vec<String> {
+        let json: serde_json::Value = serde_json::from_str(&stdout(o)).expect("JSON");
+        json["diagnostics"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|d| {
+                format!(
+                    "{}@{}",
+                    d["code"].as_str().unwrap(),
+                    d["line"].as_u64().unwrap_or(0)
+                )
+            })
+            .collect()
+    };
+    let a = dir.path().join("a.pn");
+    let path = dir.path().display().to_string();
+    // Without the allows: the verifier warns about t2 (conflict, and it never fires) and watch.
+    std::fs::write(&a, nets(false)).unwrap();
+    let o = petrel(&["check", &path, "--format", "json"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let before = codes(&o);
+    for code in ["W0601@6", "W0602@6", "W0602@7"] {
+        assert!(before.contains(&code.to_string()), "{code}: {before:?}");
+    }
+    // With them: the warnings they name are gone, W0602 of t2 (not allowed) stays, and the idle
+    // allow is reported where it is written.
+    std::fs::write(&a, nets(true)).unwrap();
+    let o = petrel(&["check", &path, "--format", "json"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let after = codes(&o);
+    assert_eq!(after, ["W0602@7", "W0105@10"], "{after:?}");
+}

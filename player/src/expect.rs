@@ -230,7 +230,8 @@ fn parse_name(rest: &str, p: &CompiledProject) -> Result<Expectation, String> {
 /// `always FORMULA` / `never FORMULA`, in the language of the manifest's invariants.
 fn parse_always(text: &str, never: bool, p: &CompiledProject) -> Result<Expectation, String> {
     let mut d = Diagnostics::new();
-    let Some(formula) = petrel_nets::formula::parse_formula(FileId(0), 0, text, "E0612", &mut d)
+    // The code never leaves this function: the problems become the script line's message.
+    let Some(formula) = petrel_nets::formula::parse_formula(FileId(0), 0, text, "E0108", &mut d)
     else {
         let why: Vec<String> = d.iter().map(|x| x.message.clone()).collect();
         return Err(format!(
