@@ -375,16 +375,26 @@ fn verify_and_check_report_each_flaw_with_its_trace() {
 
 #[test]
 fn run_plays_the_mission_scripts_in_virtual_time_as_json_lines() {
-    for (mission, name) in [
-        ("uav", "nominal"),
-        ("uav", "payload_failure"),
-        ("uav", "engine_failure"),
-        ("auv", "nominal"),
-        ("auv", "leak"),
-        ("auv", "bus_lost"),
-    ] {
-        let dir = repo().join("missions").join(mission);
-        let script = dir.join(format!("scripts/{name}.script"));
+    // Every script of every mission: a new one is covered as soon as it is written.
+    let mut scripts = Vec::new();
+    for mission in std::fs::read_dir(repo().join("missions"))
+        .unwrap()
+        .flatten()
+    {
+        let Ok(list) = std::fs::read_dir(mission.path().join("scripts")) else {
+            continue;
+        };
+        for script in list.flatten() {
+            if script.path().extension().is_some_and(|e| e == "script") {
+                scripts.push((mission.path(), script.path()));
+            }
+        }
+    }
+    scripts.sort();
+    assert!(scripts.len() >= 8, "{scripts:?}");
+    let mut outcomes = std::collections::BTreeSet::new();
+    for (dir, script) in &scripts {
+        let name = script.display();
         let o = petrel(&[
             "run",
             &dir.display().to_string(),
@@ -408,9 +418,16 @@ fn run_plays_the_mission_scripts_in_virtual_time_as_json_lines() {
                 ["start", "processed", "unused", "refused"].contains(&outcome),
                 "{line}"
             );
+            outcomes.insert(outcome.to_string());
         }
         assert!(stderr(&o).contains("expectations met"), "{}", stderr(&o));
     }
+    // The missions' scripts show every outcome (UGV's emergency stop, a catastrophic event,
+    // makes the later events refused).
+    assert_eq!(
+        outcomes.into_iter().collect::<Vec<_>>(),
+        ["processed", "refused", "start", "unused"]
+    );
     // A failed expectation exits 1 and shows what was found.
     let dir = tempfile::tempdir().unwrap();
     let bad = dir.path().join("bad.script");
@@ -581,4 +598,85 @@ fn check_silences_the_verifiers_warnings_that_an_allow_intends() {
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     let after = codes(&o);
     assert_eq!(after, ["W0602@7", "W0105@10"], "{after:?}");
+}
+
+/// Each kind of expectation, failing on a mission, names its line, what it expected and what
+/// the run found; a line that does not read names its line and what is wrong (exit 2).
+#[test]
+fn run_says_what_each_failed_expectation_expected_and_found() {
+    let ugv = repo().join("missions/ugv").display().to_string();
+    let dir = tempfile::tempdir().unwrap();
+    let script = dir.path().join("s.script");
+    let run = |text: &str, project: &str| {
+        std::fs::write(&script, text).unwrap();
+        petrel(&[
+            "run",
+            project,
+            "--script",
+            &script.display().to_string(),
+            "-q",
+        ])
+    };
+    let start = "0 start_mission\n1 next_move(\"r1\", \"enter_bottleneck\")\n";
+    for (expect, found) in [
+        // What became of the event: after the catastrophic emergency stop, refused.
+        (
+            "3 emergency_stop\n4 move_done(\"r1\")\nexpect processed\n",
+            "expected event `move_done` (line 4) processed\n  found: refused: event `move_done` refused: a catastrophic event ended the mission",
+        ),
+        (
+            "3 emergency_stop\nexpect refused\n",
+            "expected event `emergency_stop` (line 3) refused\n  found: processed",
+        ),
+        // Calls: counted, in order.
+        (
+            "expect 2 calls MOVES_R1.execute(_)\n",
+            "expected 2 calls MOVES_R1.execute(_) since line 2\n  found: 1, among calls MOVES_R1.execute(\"enter_bottleneck\")",
+        ),
+        (
+            "3 emergency_stop\nexpect calls MOVES_R2.stop() then MOVES_R1.stop()\n",
+            "expected calls MOVES_R2.stop() then MOVES_R1.stop() in this order since line 3\n  found: calls MOVES_R1.stop(), MOVES_R2.stop() (no MOVES_R1.stop() after MOVES_R2.stop())",
+        ),
+        // Emissions.
+        (
+            "expect emit granted(\"r2\")\n",
+            "expected emit granted(\"r2\")\n  found: emits request(\"r1\"), granted(\"r1\")",
+        ),
+        // Always: broken by a later step, which is named.
+        (
+            "expect always active R1/PASS\n2 move_done(\"r1\")\n3 move_done(\"r1\")\n",
+            "expected always active R1/PASS (from line 3 on)\n  found: broken at 3 by the step of `move_done` (timed line 5)",
+        ),
+    ] {
+        let o = run(&format!("{start}{expect}"), &ugv);
+        assert_eq!(o.status.code(), Some(1), "{expect}: {}", stderr(&o));
+        assert!(stderr(&o).contains(found), "{expect}:\n{}", stderr(&o));
+    }
+    // A timer (the UAV has one).
+    let o = run(
+        "0 start_mission\n8 rotation_speed\n10 airborne\n60 altitude_reached\nexpect timer dec_answer expires at 80\n",
+        &uav(),
+    );
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("s.script:5: expectation failed: expected timer dec_answer running, expiring at 80\n  found: running dec_answer (expires at 70)"),
+        "{}",
+        stderr(&o)
+    );
+    // Lines that do not read: each with its line and what is wrong.
+    let o = run(
+        "0 start_mission\nexpect 2 calls NOPE.f()\nexpect calls MOVES_R1.stop() then request(\"r1\")\nexpect timer t expires\nexpect always R1.nowhere\nexpect not always active R1\n",
+        &ugv,
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let err = stderr(&o);
+    for line in [
+        "s.script:2: unknown program `NOPE`",
+        "s.script:3: `request(\"r1\")` is not a call such as `PROGRAM.function(1, _)`",
+        "s.script:4: expected `timer NAME` or `timer NAME expires at SECONDS`",
+        "s.script:5: unknown place `R1.nowhere` in the formula",
+        "s.script:6: `not always` does not read",
+    ] {
+        assert!(err.contains(line), "{line}:\n{err}");
+    }
 }
