@@ -680,3 +680,26 @@ fn run_says_what_each_failed_expectation_expected_and_found() {
         assert!(err.contains(line), "{line}:\n{err}");
     }
 }
+
+/// The example at the top of docs/scripts.md is a script that runs on missions/uav as shown.
+#[test]
+fn the_example_of_docs_scripts_md_runs_on_the_uav() {
+    let doc = std::fs::read_to_string(repo().join("docs/scripts.md")).unwrap();
+    let start = doc
+        .find("```text\n# The nominal flight, abridged.")
+        .expect("the example")
+        + "```text\n".len();
+    let end = start + doc[start..].find("```").unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let script = dir.path().join("example.script");
+    std::fs::write(&script, &doc[start..end]).unwrap();
+    let o = petrel(&[
+        "run",
+        &uav(),
+        "--script",
+        &script.display().to_string(),
+        "-q",
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stderr(&o).contains("expectations met"), "{}", stderr(&o));
+}

@@ -287,17 +287,11 @@ fn parse_timer(text: &str, p: &CompiledProject) -> Result<Expectation, String> {
     })
 }
 
-/// A deadline in seconds, as microseconds: a finite number, 0 or more, that the engine's
-/// clock can hold.
+/// A deadline in seconds, as microseconds: read as a timed line's time is
+/// ([`crate::script::parse_time`]), so that what a line may say and a deadline may be agree.
 fn seconds(text: &str) -> Result<Micros, String> {
-    let bad = || format!("`{text}` is not a time in seconds (a number, 0 or more)");
-    let s: f64 = text.parse().map_err(|_| bad())?;
-    let micros = s * 1e6;
-    // `u64::MAX as f64` rounds up to 2^64, which does not fit: compare strictly.
-    if !micros.is_finite() || micros < 0.0 || micros >= u64::MAX as f64 {
-        return Err(bad());
-    }
-    Ok(micros.round() as Micros)
+    let s = crate::script::parse_time(text)?;
+    Ok((s * 1e6).round() as Micros)
 }
 
 /// The items after `call`/`calls`/`emit`/`emits`, with an optional count before and an

@@ -313,10 +313,11 @@ fn expect_timer_running_and_its_deadline() {
     let msg = fails_at("0 go\nexpect not timer t\n", 2);
     assert!(msg.starts_with("expected not timer t running\n"), "{msg}");
     one_error("expect timer u\n", 1, "unknown timer `u`");
+    // Deadlines read as timed lines' times do.
     one_error(
         "expect timer t expires at -1\n",
         1,
-        "`-1` is not a time in seconds",
+        "`-1` is not a time: a time is a number of seconds from 0",
     );
     one_error(
         "expect timer t expires at 1e400\n",
