@@ -147,6 +147,22 @@ pub fn parse_expect(rest: &str, p: &CompiledProject) -> Result<(bool, Expectatio
         Some(r) => (true, r),
         None => (false, rest),
     };
+    if not && strip_word(rest, "not").is_some() {
+        return Err("`not not` does not read: write the expectation without both".into());
+    }
+    // A keyword with nothing after it: say what it needs rather than that nothing matched.
+    let needs = match rest {
+        "not" => Some("an expectation after it, such as `expect not MISSION.landed`"),
+        "always" | "never" => Some("a formula, such as `MISSION.landed and not global.in_flight`"),
+        "timer" => Some("a timer: `timer NAME` or `timer NAME expires at SECONDS`"),
+        "active" | "inactive" => Some("a net, such as `MISSION`"),
+        "call" | "calls" => Some("a call, such as `GUI.roll()`"),
+        "emit" | "emits" => Some("an event, such as `name` or `name(1, _)`"),
+        _ => None,
+    };
+    if let Some(needs) = needs {
+        return Err(format!("`expect {rest}` needs {needs}"));
+    }
     if let Some(o) = Outcome::from_name(rest) {
         return Ok((not, Expectation::Outcome(o)));
     }
@@ -185,8 +201,13 @@ pub fn parse_expect(rest: &str, p: &CompiledProject) -> Result<(bool, Expectatio
         return parse_items(kind, count, body[word.len()..].trim_start(), p).map(|w| (not, w));
     }
     if count.is_some() {
+        let found = if body.is_empty() {
+            "nothing".to_string()
+        } else {
+            format!("`{body}`")
+        };
         return Err(format!(
-            "a count is followed by `calls P.f(args)` or `emits EVENT(args)`, found `{body}`"
+            "a count is followed by `calls P.f(args)` or `emits EVENT(args)`, found {found}"
         ));
     }
     parse_name(rest, p).map(|w| (not, w))

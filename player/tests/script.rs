@@ -263,7 +263,7 @@ fn expect_always_errors_name_their_line() {
         1,
         "`not always` does not read",
     );
-    one_error("expect never\n", 1, "expected");
+    one_error("expect never\n", 1, "needs a formula");
 }
 
 #[test]
@@ -446,6 +446,17 @@ fn reading_errors_each_name_their_line() {
     one_error("expect A.x\n", 1, "net `A` has no place or transition `x`");
     one_error("expect active B\n", 1, "unknown net `B`");
     one_error("expect global.nope\n", 1, "no global place `nope`");
+    // A keyword alone says what it needs.
+    one_error("expect timer\n", 1, "`expect timer` needs a timer");
+    one_error("expect never\n", 1, "`expect never` needs a formula");
+    one_error("expect not\n", 1, "`expect not` needs an expectation");
+    one_error(
+        "expect 3 calls\n",
+        1,
+        "expected a call such as `GUI.roll()`",
+    );
+    one_error("expect 3\n", 1, "found nothing");
+    one_error("expect not not A.idle\n", 1, "`not not` does not read");
     // Several errors: each on its line; a timed line that does not read gives no second error.
     let e = errors("0 gone\nexpect processed\nexpect timer\n");
     assert_eq!(
