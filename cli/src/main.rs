@@ -71,7 +71,8 @@ enum Command {
     /// Print the live marking of every active net and the player's counters.
     Status(vehicle::StatusArgs),
     /// Run a mission script in virtual time, with no process: events at given times and
-    /// expectations; each step prints as a JSON line. A failed expectation exits 1.
+    /// expectations; each step prints as a JSON line. A failed expectation exits 1. The format
+    /// is in docs/scripts.md.
     Run(script::RunArgs),
     /// Rewrite the project's net files in canonical layout (running it twice changes nothing).
     Fmt(project::FmtArgs),

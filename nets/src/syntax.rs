@@ -905,22 +905,31 @@ impl Parser<'_> {
 
     /// A guard: `or` of `and` of `not` of comparisons.
     fn guard(&mut self) -> PResult<Guard> {
-        self.depth += 1;
-        if self.depth > MAX_GUARD_DEPTH {
-            self.depth = 0;
+        self.nested_guard(|p| {
+            let mut g = p.guard_and()?;
+            while p.at_ident("or") {
+                p.bump();
+                let rhs = p.guard_and()?;
+                g = Guard::Or(Box::new(g), Box::new(rhs));
+            }
+            Ok(g)
+        })
+    }
+
+    /// Runs `read` one guard level deeper, refusing past [`MAX_GUARD_DEPTH`]. The level is
+    /// given back on every path, errors included: a guard that does not read must not count
+    /// against the guards after it.
+    fn nested_guard(&mut self, read: impl FnOnce(&mut Self) -> PResult<Guard>) -> PResult<Guard> {
+        if self.depth >= MAX_GUARD_DEPTH {
             return Err(self.error(
                 "a simpler guard",
                 &format!("guards nest at most {MAX_GUARD_DEPTH} levels deep"),
             ));
         }
-        let mut g = self.guard_and()?;
-        while self.at_ident("or") {
-            self.bump();
-            let rhs = self.guard_and()?;
-            g = Guard::Or(Box::new(g), Box::new(rhs));
-        }
+        self.depth += 1;
+        let g = read(self);
         self.depth -= 1;
-        Ok(g)
+        g
     }
 
     fn guard_and(&mut self) -> PResult<Guard> {
@@ -936,16 +945,7 @@ impl Parser<'_> {
     fn guard_not(&mut self) -> PResult<Guard> {
         if self.at_ident("not") {
             self.bump();
-            self.depth += 1;
-            if self.depth > MAX_GUARD_DEPTH {
-                self.depth = 0;
-                return Err(self.error(
-                    "a simpler guard",
-                    &format!("guards nest at most {MAX_GUARD_DEPTH} levels deep"),
-                ));
-            }
-            let inner = self.guard_not()?;
-            self.depth -= 1;
+            let inner = self.nested_guard(Self::guard_not)?;
             return Ok(Guard::Not(Box::new(inner)));
         }
         if self.at(&Tok::LParen) {

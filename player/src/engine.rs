@@ -103,8 +103,8 @@ pub trait Sink {
     fn fired(&mut self, _net: NetId, _transition: u32) {}
     /// `call PROGRAM.FUNCTION(args)`: deliver it (the engine does not wait for an answer).
     fn call(&mut self, _program: ProgramId, _function: FunctionId, _args: Args<'_>) {}
-    /// An event was emitted by a net (it is queued by the engine).
-    fn emitted(&mut self, _event: EventId) {}
+    /// An event was emitted by a net, with its arguments (it is queued by the engine).
+    fn emitted(&mut self, _event: EventId, _params: &[Value]) {}
     /// A timer was started; it expires at `deadline`.
     fn timer_started(&mut self, _timer: TimerId, _deadline: Micros) {}
     /// A timer was cancelled.
@@ -739,12 +739,12 @@ impl<S: Sink> Effects for Adapter<'_, '_, S> {
             net_params: &self.net_args[net],
         };
         params.extend(a.iter().map(ArgValue::to_value));
+        self.sink.emitted(event, &params);
         self.emitted.push(Queued {
             event,
             params,
             target,
         });
-        self.sink.emitted(event);
     }
 
     fn guard(&mut self, rule: u32) -> bool {

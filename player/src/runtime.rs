@@ -187,8 +187,8 @@ impl Sink for RuntimeSink<'_, '_> {
         }
     }
 
-    fn emitted(&mut self, event: EventId) {
-        self.record.emitted(event);
+    fn emitted(&mut self, event: EventId, params: &[Value]) {
+        self.record.emitted(event, params);
     }
 
     fn timer_started(&mut self, timer: TimerId, deadline: Micros) {
