@@ -2,7 +2,7 @@
 //!
 //! One module per family of commands: [`project`] (check, verify, fmt, dot, export, import),
 //! [`script`] (run), [`vehicle`] (play, send, status), [`recorder`] (replay, journal),
-//! [`bridge`], [`up`] (a whole vehicle from its vehicle.toml); [`common`] holds what they share, first of all the one way a project is loaded
+//! [`bridge`], [`up`] (a whole vehicle from its vehicle.toml), [`monitor`] (the web monitor); [`common`] holds what they share, first of all the one way a project is loaded
 //! and checked ([`common::check_project`]). A new command is a new module and one line in
 //! [`Command`].
 //!
@@ -11,6 +11,7 @@
 
 mod bridge;
 mod common;
+mod monitor;
 mod project;
 mod recorder;
 mod script;
@@ -69,6 +70,9 @@ enum Command {
     Send(vehicle::SendArgs),
     /// Print the live marking of every active net and the player's counters.
     Status(vehicle::StatusArgs),
+    /// A web monitor of a running mission (`--vehicle`), or the replay of a recorded one
+    /// (`--journal`): every net drawn, the marking in red, the event log, the programs.
+    Monitor(monitor::MonitorArgs),
     /// Run a mission script in virtual time, with no process: events at given times and
     /// expectations; each step prints as a JSON line. A failed expectation exits 1.
     Run(script::RunArgs),
@@ -106,6 +110,7 @@ fn main() -> ExitCode {
         Command::Play(a) => vehicle::play(a),
         Command::Send(a) => vehicle::send(a),
         Command::Status(a) => vehicle::status(a),
+        Command::Monitor(a) => monitor::monitor(a),
         Command::Replay(a) => recorder::replay(a),
         Command::Journal { command } => recorder::journal(command),
         Command::Bridge(a) => bridge::bridge(a),
