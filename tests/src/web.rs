@@ -243,7 +243,7 @@ impl Browser {
             "goog:chromeOptions": {
                 "binary": CHROMIUM,
                 "args": ["--headless", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
-                         "--window-size=1400,900",
+                         "--window-size=1600,900",
                          format!("--user-data-dir={}", profile.path().display()),
                          format!("--disk-cache-dir={}", profile.path().join("cache").display())],
             }
@@ -268,7 +268,11 @@ impl Browser {
             method,
             path,
             &[("Content-Type", "application/json")],
-            &body.to_string(),
+            &if body.is_null() {
+                String::new()
+            } else {
+                body.to_string()
+            },
         )
         .expect("chromedriver answers");
         let v = r.json();

@@ -299,3 +299,119 @@ fn operator_actions_need_operator_mode_and_its_token() {
     // The monitor is still there after all that.
     assert_eq!(op.get("/api/marking").json()["synced"], Value::Bool(true));
 }
+
+/// A project of `n` nets, each with a token that `tick` moves from `a` to `b` and `tock` back;
+/// the first four also share the global place `shared`.
+fn many_nets(n: usize) -> petrel_tests::TempProject {
+    let mut nets = String::new();
+    for i in 0..n {
+        let (take, give) = if i < 4 {
+            (", shared", ", shared")
+        } else {
+            ("", "")
+        };
+        nets.push_str(&format!(
+            "net N{i} {{\n    place a = 1\n    place b\n    transition go on tick: a{take} -> b{give} {{}}\n    transition back on tock: b -> a {{}}\n}}\n\n"
+        ));
+    }
+    let start: Vec<String> = (0..n).map(|i| format!("\"N{i}\"")).collect();
+    let manifest = format!(
+        "[project]\nname = \"many\"\nfiles = [\"nets.pn\"]\nstart = [{}]\n\n[globals]\nshared = 1\n\n[events]\ntick = {{ category = \"nominal\" }}\ntock = {{ category = \"nominal\" }}\n",
+        start.join(", ")
+    );
+    petrel_tests::TempProject::new(&[("petrel.toml", &manifest), ("nets.pn", &nets)])
+}
+
+#[test]
+fn forty_nets_stay_readable_select_zoom_and_filter() {
+    if !browser_available() {
+        return;
+    }
+    let project = many_nets(40);
+    let vehicle = unique_vehicle("monmany");
+    let player = Player::start(project.path(), &vehicle);
+    let dir = project.path().display().to_string();
+    let monitor = Monitor::start(&[&dir, "--vehicle", &vehicle]);
+    let b = Browser::start();
+    b.open(&monitor.url("/"));
+    b.wait_ready();
+    let mut start: Vec<String> = (0..40).map(|i| format!("N{i}.a")).collect();
+    start.push("global.shared".into());
+    let start = sorted(start);
+    let refs: Vec<&str> = start.iter().map(String::as_str).collect();
+    assert_eq!(wait_marked(&b, &refs), start);
+    let clusters = b.eval("return document.querySelectorAll('g.cluster').length");
+    assert_eq!(clusters, 40);
+    send(&player, "tick");
+    let mut after: Vec<String> = (0..40).map(|i| format!("N{i}.b")).collect();
+    after.push("global.shared".into());
+    let after = sorted(after);
+    let refs: Vec<&str> = after.iter().map(String::as_str).collect();
+    assert_eq!(wait_marked(&b, &refs), after);
+
+    // Selecting a net in the list zooms on its cluster (the view's area shrinks).
+    let width = |b: &Browser| {
+        b.eval("const v = document.querySelector('#canvas svg').viewBox.baseVal; return v.width * v.height")
+            .as_f64()
+            .unwrap_or(0.0)
+    };
+    let full = width(&b);
+    b.eval("document.querySelector('#netlist li[data-net=\"N17\"]').click(); return null");
+    assert_eq!(
+        b.eval("return document.getElementById('selected').textContent"),
+        "net N17"
+    );
+    let zoomed = width(&b);
+    assert!(zoomed > 0.0 && zoomed < full / 10.0, "{zoomed} of {full}");
+    b.eval("document.getElementById('fit').click(); return null");
+    assert_eq!(width(&b), full);
+    // The list filters by name.
+    b.eval("const f = document.getElementById('filter'); f.value = 'N3'; f.dispatchEvent(new Event('input')); return null");
+    let shown = b.eval("return Array.from(document.querySelectorAll('#netlist li')).filter(li => !li.hidden).map(li => li.dataset.net)");
+    assert_eq!(strings(&shown).len(), 11, "{shown}");
+}
+
+#[test]
+fn every_place_of_every_mission_is_in_the_drawing() {
+    let mut entries: Vec<_> = std::fs::read_dir(repo().join("missions"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.join("petrel.toml").is_file())
+        .collect();
+    entries.sort();
+    for mission in entries {
+        let dir = mission.display().to_string();
+        if !petrel(&["check", &dir]).status.success() {
+            continue;
+        }
+        // No player: the monitor serves the drawing and waits for one.
+        let vehicle = unique_vehicle("mondraw");
+        let monitor = Monitor::start(&[&dir, "--vehicle", &vehicle]);
+        let model = monitor.get("/api/model").json();
+        let svg = monitor.get("/api/nets.svg").body;
+        let titles: std::collections::BTreeSet<String> = svg
+            .split("<title>")
+            .skip(1)
+            .filter_map(|t| t.split_once("</title>").map(|x| x.0.replace("&#45;", "-")))
+            .collect();
+        let mut ids = strings(&model["globals"]);
+        for net in model["nets"].as_array().unwrap() {
+            ids.extend(strings(&net["places"]));
+            assert!(
+                titles.contains(&format!("cluster_{}", net["name"].as_str().unwrap())),
+                "{dir}: net {} is not drawn",
+                net["name"]
+            );
+        }
+        assert!(!ids.is_empty(), "{dir}");
+        for id in ids {
+            assert!(
+                titles.contains(&id),
+                "{dir}: place {id} is not in the drawing"
+            );
+        }
+        drop(monitor);
+        petrel_tests::forget_vehicle(&vehicle);
+    }
+}
