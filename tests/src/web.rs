@@ -221,8 +221,10 @@ impl Browser {
             .prefix("petrel-test-chromium-")
             .tempdir()
             .expect("a profile directory");
+        // Chromium's scratch directories go with the profile, not into /tmp.
         let driver = Command::new(CHROMEDRIVER)
             .arg(format!("--port={port}"))
+            .env("TMPDIR", profile.path())
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .spawn()
