@@ -10,7 +10,7 @@ const M = {
   model: null, token: null, mode: 'live',
   marked: new Set(), active: new Set(), step: 0, synced: false,
   places: new Map(), transitions: new Map(), clusters: new Map(), edges: [], treeNodes: new Map(),
-  netItems: new Map(), selected: null, view: null, full: null, svg: null,
+  netItems: new Map(), netNodes: new Map(), shown: null, selected: null, view: null, full: null, svg: null,
   frames: [], frameIndex: 0, playing: null,
 };
 window.petrelMonitor = M;
@@ -76,6 +76,11 @@ async function loadDrawing() {
       M.transitions.set(id, g);
     }
     g.addEventListener('click', () => selectNet(netOf(id), false));
+    if (!id.startsWith('global.')) {
+      const net = netOf(id);
+      if (!M.netNodes.has(net)) M.netNodes.set(net, []);
+      M.netNodes.get(net).push(g);
+    }
   }
   for (const g of svg.querySelectorAll('g.cluster')) {
     const t = g.querySelector('title').textContent;
@@ -177,19 +182,43 @@ function selectNet(name, zoomTo) {
 
 // ---- The marking ---------------------------------------------------------------------------
 
+// Redraws what changed since the last call: the places whose token came or went, the nets
+// activated or deactivated (their nodes, arcs and cluster), and their counts in the list.
 function render() {
-  for (const [id, g] of M.places) g.classList.toggle('marked', M.marked.has(id));
-  const activeNet = (net) => net === 'global' || M.active.has(net);
-  for (const g of M.places.values()) g.classList.toggle('inactive', !activeNet(netOf(g.dataset.name)));
-  for (const g of M.transitions.values()) g.classList.toggle('inactive', !activeNet(netOf(g.dataset.name)));
-  for (const [net, g] of M.clusters) g.classList.toggle('inactive', !M.active.has(net));
-  for (const [g, a, b] of M.edges) g.classList.toggle('inactive', !(activeNet(a) && activeNet(b)));
-  for (const [net, g] of M.treeNodes) g.classList.toggle('active', M.active.has(net));
-  for (const [net, li] of M.netItems) {
-    li.classList.toggle('inactive', !M.active.has(net));
-    const n = [...M.marked].filter((p) => netOf(p) === net).length;
+  const shown = M.shown || { marked: new Set(), active: new Set(), first: true };
+  const touchedNets = new Set();
+  const changed = shown.first ? [...M.places.keys()]
+    : [...M.marked].filter((p) => !shown.marked.has(p)).concat([...shown.marked].filter((p) => !M.marked.has(p)));
+  for (const id of changed) {
+    const g = M.places.get(id);
+    if (g) g.classList.toggle('marked', M.marked.has(id));
+    touchedNets.add(netOf(id));
+  }
+  const nets = shown.first ? M.model.nets.map((n) => n.name)
+    : [...M.active].filter((n) => !shown.active.has(n)).concat([...shown.active].filter((n) => !M.active.has(n)));
+  for (const net of nets) {
+    const on = M.active.has(net);
+    touchedNets.add(net);
+    for (const g of M.netNodes.get(net) || []) g.classList.toggle('inactive', !on);
+    const c = M.clusters.get(net);
+    if (c) c.classList.toggle('inactive', !on);
+    const t = M.treeNodes.get(net);
+    if (t) t.classList.toggle('active', on);
+    const li = M.netItems.get(net);
+    if (li) li.classList.toggle('inactive', !on);
+  }
+  if (nets.length || shown.first) {
+    const activeNet = (net) => net === 'global' || M.active.has(net);
+    for (const [g, a, b] of M.edges) g.classList.toggle('inactive', !(activeNet(a) && activeNet(b)));
+  }
+  for (const net of touchedNets) {
+    const li = M.netItems.get(net);
+    if (!li) continue;
+    let n = 0;
+    for (const p of M.marked) if (netOf(p) === net) n++;
     li.querySelector('.count').textContent = n ? n : '';
   }
+  M.shown = { marked: new Set(M.marked), active: new Set(M.active), first: false };
   document.body.dataset.step = String(M.step);
   document.body.dataset.synced = String(M.synced);
 }
@@ -222,7 +251,7 @@ function logRow(s, prepend) {
     el('td', {}, (s.actions || []).join('; ')));
   const body = $('log').tBodies[0];
   if (prepend) body.prepend(tr); else body.append(tr);
-  while (body.rows.length > 1000) body.deleteRow(prepend ? body.rows.length - 1 : 0);
+  while (prepend && body.rows.length > 300) body.deleteRow(body.rows.length - 1);
   return tr;
 }
 
@@ -242,6 +271,7 @@ function connect() {
 }
 
 function onSnapshot(m) {
+  M.pending = [];
   M.marked = new Set(m.marked);
   M.active = new Set(m.active);
   M.step = m.step;
@@ -258,8 +288,15 @@ function onSnapshot(m) {
   render();
 }
 
+// Steps change the state at once and the drawing once per frame: a burst of steps costs one
+// redraw, not one each. `M.shownAt[step]` is when a step was first on screen (the benchmark
+// of the time from a step to its display reads it).
+M.pending = [];
+M.shownAt = {};
+M.arrivedAt = {};
 function onStep(s) {
   if (s.step < M.step) return;
+  M.arrivedAt[s.step] = performance.timeOrigin + performance.now();
   for (const p of s.unmarked) M.marked.delete(p);
   for (const p of s.marked) M.marked.add(p);
   for (const n of s.deactivated) M.active.delete(n);
@@ -267,11 +304,27 @@ function onStep(s) {
   M.step = s.step + 1;
   M.synced = true;
   if (s.category === 'catastrophic') $('over').hidden = false;
-  header(s.time);
+  M.pending.push(s);
+  // A hidden tab draws no frames: keep the latest steps only (the state has them all).
+  if (M.pending.length > 1000) M.pending.splice(0, M.pending.length - 1000);
+  if (!M.frame) M.frame = requestAnimationFrame(drawPending);
+}
+
+function drawPending() {
+  M.frame = 0;
+  const steps = M.pending;
+  M.pending = [];
+  if (!steps.length) return;
+  const last = steps[steps.length - 1];
+  header(last.time);
   render();
-  flash(s.fired);
-  logRow(s, true);
+  // Only the latest steps are worth a row and a flash: a burst scrolls by anyway.
+  for (const s of steps.slice(-50)) { flash(s.fired); logRow(s, true); }
   if (!$('notice').textContent.startsWith('this page')) $('notice').textContent = '';
+  requestAnimationFrame(() => {
+    const at = performance.timeOrigin + performance.now();
+    for (const s of steps) M.shownAt[s.step] = at;
+  });
 }
 
 function onStatus(m) {
