@@ -415,3 +415,51 @@ fn every_place_of_every_mission_is_in_the_drawing() {
         petrel_tests::forget_vehicle(&vehicle);
     }
 }
+
+#[test]
+fn the_can_data_server_panel_shows_its_bus_and_signals() {
+    if !browser_available() {
+        return;
+    }
+    let auv = repo().join("missions/auv");
+    let vehicle = unique_vehicle("moncan");
+    let player = Player::start(&auv, &vehicle);
+    let work = petrel_tests::Workdir::new();
+    let bridge =
+        petrel_tests::Processes(vec![std::process::Command::new(petrel_tests::petrel_bin())
+            .arg("bridge")
+            .arg(&auv)
+            .args(["--vehicle", &vehicle, "--bus", "memory", "--record"])
+            .arg(work.path().join("bus.log"))
+            .env("RUST_LOG", "error")
+            .stdout(std::process::Stdio::null())
+            .spawn()
+            .expect("petrel bridge starts")]);
+    let dir = auv.display().to_string();
+    let monitor = Monitor::start(&[&dir, "--vehicle", &vehicle]);
+    let b = Browser::start();
+    b.open(&monitor.url("/"));
+    b.wait_ready();
+    let text = b.wait_for(
+        30.0,
+        "return document.getElementById('bridgebox').hidden ? '' : document.getElementById('bridge').textContent",
+        |v| v.as_str().is_some_and(|t| t.contains("bus ")),
+    );
+    assert!(text.as_str().unwrap_or_default().contains("bus "), "{text}");
+    let signals = b.wait_for(
+        30.0,
+        "return document.querySelectorAll('#signals tr').length",
+        |v| v.as_u64() > Some(0),
+    );
+    assert!(signals.as_u64() > Some(0), "no signal shown");
+    let can = b.wait_for(
+        30.0,
+        "const r = document.querySelector('#programs tr[data-program=CAN] td:last-child'); return r ? r.textContent : ''",
+        |v| v == "alive",
+    );
+    assert_eq!(can, "alive");
+    drop(b);
+    drop(monitor);
+    assert_eq!(bridge.stop(), vec![Some(0)]);
+    drop(player);
+}

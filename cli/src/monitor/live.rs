@@ -86,6 +86,14 @@ impl Live {
         snapshot(&self.lock(), Some(skipped), false)
     }
 
+    /// Says on every page why the monitor cannot follow the vehicle.
+    pub fn fail(&self, why: String) {
+        let mut s = self.lock();
+        s.synced = false;
+        s.notice = Some(why);
+        s.resynced(&self.tx);
+    }
+
     /// The marking as the test hooks and `/api/marking` give it.
     pub fn marking(&self) -> Json {
         let s = self.lock();
@@ -96,6 +104,24 @@ impl Live {
             "active": s.active,
         })
     }
+}
+
+/// What one page receives: the marking it starts from, then every change; when it falls more
+/// than [`PAGE_BACKLOG`] messages behind, the latest marking (saying how many it skipped)
+/// instead of the messages it missed.
+pub fn page_stream(live: Arc<Live>) -> impl futures_util::Stream<Item = Arc<str>> + Send {
+    use futures_util::StreamExt;
+    use tokio::sync::broadcast::error::RecvError;
+    let (first, rx) = live.attach();
+    let rest = futures_util::stream::unfold((rx, live), |(mut rx, live)| async move {
+        let msg = match rx.recv().await {
+            Ok(m) => m,
+            Err(RecvError::Lagged(n)) => live.resync(n),
+            Err(RecvError::Closed) => return None,
+        };
+        Some((msg, (rx, live)))
+    });
+    futures_util::stream::iter(first).chain(rest)
 }
 
 /// A snapshot message: the whole marking (and, for a page that opens, the latest steps).
@@ -216,33 +242,17 @@ pub fn follow(
                 s.notice = Some("the player restarted: taking its marking again".into());
             }
             if let Some((progress, (marked, active), time, over)) = beat_marking {
-                if !s.synced {
-                    s.marked = marked;
-                    s.active = active;
-                    s.next = progress;
-                    s.time = time.unwrap_or(s.time);
-                    s.over = over;
-                    s.synced = true;
-                    s.notice = None;
-                    // The deltas that came before this heartbeat and are newer than it.
-                    let held: Vec<_> = pending.drain(..).collect();
-                    for m in held {
-                        apply(&mut s, names, &live.tx, m);
-                    }
-                    s.resynced(&live.tx);
-                }
+                let beat = Beat {
+                    progress,
+                    marked,
+                    active,
+                    time,
+                    over,
+                };
+                heartbeat(&mut s, names, &live.tx, beat, &mut pending);
             }
-            // Step numbers tell a gap exactly (the receiver's own count of missed messages
-            // also counts those sent before this monitor joined).
             for msg in received {
-                if s.synced || msg.snapshot {
-                    apply(&mut s, names, &live.tx, msg);
-                } else {
-                    if pending.len() == PENDING_DELTAS {
-                        pending.pop_front();
-                    }
-                    pending.push_back(msg);
-                }
+                delta(&mut s, names, &live.tx, msg, &mut pending);
             }
         }
         let now = Instant::now();
@@ -291,6 +301,60 @@ pub fn follow(
         }
     }
     Ok(())
+}
+
+/// What a heartbeat of the player says of the marking.
+struct Beat {
+    /// Deltas published so far: the marking is the one after step `progress - 1`.
+    progress: u64,
+    marked: BTreeSet<String>,
+    active: BTreeSet<String>,
+    time: Option<f64>,
+    over: bool,
+}
+
+/// A heartbeat: when out of step, its marking, then the deltas held since that are newer.
+fn heartbeat(
+    s: &mut State,
+    names: &Names,
+    tx: &broadcast::Sender<Arc<str>>,
+    beat: Beat,
+    pending: &mut VecDeque<petrel_ipc::MarkingMsg>,
+) {
+    if s.synced {
+        return;
+    }
+    s.marked = beat.marked;
+    s.active = beat.active;
+    s.next = beat.progress;
+    s.time = beat.time.unwrap_or(s.time);
+    s.over = beat.over;
+    s.synced = true;
+    s.notice = None;
+    let held: Vec<_> = pending.drain(..).collect();
+    for m in held {
+        apply(s, names, tx, m);
+    }
+    s.resynced(tx);
+}
+
+/// A delta: applied when in step (step numbers tell a gap exactly: the receiver's own count of
+/// missed messages also counts those sent before this monitor joined), held otherwise.
+fn delta(
+    s: &mut State,
+    names: &Names,
+    tx: &broadcast::Sender<Arc<str>>,
+    msg: petrel_ipc::MarkingMsg,
+    pending: &mut VecDeque<petrel_ipc::MarkingMsg>,
+) {
+    if s.synced || msg.snapshot {
+        apply(s, names, tx, msg);
+    } else {
+        if pending.len() == PENDING_DELTAS {
+            pending.pop_front();
+        }
+        pending.push_back(msg);
+    }
 }
 
 /// Applies one delta of the player to the state, and pushes it to the pages.
@@ -357,4 +421,145 @@ fn apply(
     }
     s.log.push_back(text.clone());
     s.send(tx, text);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use futures_util::StreamExt;
+    use petrel_ipc::MarkingMsg;
+
+    fn project() -> petrel_nets::compiled::CompiledProject {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../missions/uav");
+        let (_, c, d) = petrel_nets::project::load_and_check(&dir).expect("the UAV mission");
+        assert!(!d.has_errors());
+        c.expect("it compiles")
+    }
+
+    fn step(n: u64, marked: &[&str], unmarked: &[&str]) -> MarkingMsg {
+        MarkingMsg {
+            step: n,
+            event: Some("start_mission".into()),
+            marked: marked.iter().map(|s| s.to_string()).collect(),
+            unmarked: unmarked.iter().map(|s| s.to_string()).collect(),
+            ..MarkingMsg::default()
+        }
+    }
+
+    fn set(items: &[&str]) -> BTreeSet<String> {
+        items.iter().map(|s| s.to_string()).collect()
+    }
+
+    fn json(m: &str) -> Json {
+        serde_json::from_str(m).unwrap()
+    }
+
+    #[test]
+    fn a_late_monitor_takes_the_heartbeat_then_the_newer_deltas() {
+        let p = project();
+        let names = Names::new(&p);
+        let live = Live::new();
+        let mut pending = VecDeque::new();
+        let mut s = State::default();
+        // Deltas 4 and 5 come before the heartbeat that says 5 were published (0 to 4).
+        delta(
+            &mut s,
+            &names,
+            &live.tx,
+            step(4, &["MISSION.rolling"], &["MISSION.ready"]),
+            &mut pending,
+        );
+        delta(
+            &mut s,
+            &names,
+            &live.tx,
+            step(5, &["MISSION.taking_off"], &["MISSION.rolling"]),
+            &mut pending,
+        );
+        assert!(!s.synced);
+        let beat = Beat {
+            progress: 5,
+            marked: set(&["MISSION.rolling", "EVENTS.watching"]),
+            active: set(&["MISSION", "EVENTS"]),
+            time: Some(1.0),
+            over: false,
+        };
+        heartbeat(&mut s, &names, &live.tx, beat, &mut pending);
+        assert!(s.synced);
+        assert_eq!(s.next, 6);
+        assert_eq!(s.marked, set(&["EVENTS.watching", "MISSION.taking_off"]));
+        // A gap: out of step, said, and in step again at the next heartbeat.
+        delta(
+            &mut s,
+            &names,
+            &live.tx,
+            step(8, &["MISSION.climbing"], &[]),
+            &mut pending,
+        );
+        assert!(!s.synced);
+        assert!(s
+            .notice
+            .as_deref()
+            .unwrap()
+            .contains("missed the player's steps 6 to 7"));
+        let beat = Beat {
+            progress: 9,
+            marked: set(&["MISSION.climbing"]),
+            active: set(&["MISSION"]),
+            time: None,
+            over: false,
+        };
+        heartbeat(&mut s, &names, &live.tx, beat, &mut pending);
+        assert!(s.synced && s.notice.is_none());
+        assert_eq!(s.marked, set(&["MISSION.climbing"]));
+        // A new player's snapshot replaces everything.
+        let mut snap = step(0, &["MISSION.ready", "global.on_ground"], &[]);
+        snap.snapshot = true;
+        snap.activated = vec!["MISSION".into()];
+        delta(&mut s, &names, &live.tx, snap, &mut pending);
+        assert_eq!((s.next, s.marked.len()), (1, 2));
+    }
+
+    #[test]
+    fn a_page_that_lags_skips_to_the_latest_marking_and_is_told() {
+        let p = project();
+        let names = Names::new(&p);
+        let live = Live::new();
+        {
+            let mut s = live.lock();
+            s.synced = true;
+            s.next = 1;
+        }
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .build()
+            .unwrap();
+        rt.block_on(async {
+            let mut page = Box::pin(page_stream(live.clone()));
+            let first = json(&page.next().await.unwrap());
+            assert_eq!(first["type"], "snapshot");
+            assert_eq!(first["step"], 1);
+            // The page reads nothing while 1,500 steps go by.
+            let mut pending = VecDeque::new();
+            for n in 1..=1_500u64 {
+                let (m, u) = if n % 2 == 1 {
+                    (["MISSION.rolling"], ["MISSION.ready"])
+                } else {
+                    (["MISSION.ready"], ["MISSION.rolling"])
+                };
+                let mut s = live.lock();
+                delta(&mut s, &names, &live.tx, step(n, &m, &u), &mut pending);
+            }
+            let next = json(&page.next().await.unwrap());
+            assert_eq!(next["type"], "snapshot", "{next}");
+            assert!(
+                next["skipped"].as_u64().unwrap() >= 1_500 - PAGE_BACKLOG as u64,
+                "{next}"
+            );
+            assert_eq!(next["step"], 1_501);
+            assert_eq!(next["marked"], serde_json::json!(["MISSION.ready"]));
+            // Then the steps that followed, one by one.
+            let later = json(&page.next().await.unwrap());
+            assert_eq!(later["type"], "step");
+        });
+    }
 }

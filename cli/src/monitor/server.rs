@@ -26,14 +26,13 @@ use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
 use axum::Router;
-use futures_util::stream::{self, Stream, StreamExt};
+use futures_util::stream::{Stream, StreamExt};
 use petrel_nets::compiled::CompiledProject;
 use serde_json::{json, Value as Json};
 use std::convert::Infallible;
 use std::net::SocketAddr;
 use std::sync::{mpsc, Arc, Mutex};
 use std::time::Duration;
-use tokio::sync::broadcast::error::RecvError;
 
 const INDEX_HTML: &str = include_str!("assets/index.html");
 const MONITOR_JS: &str = include_str!("assets/monitor.js");
@@ -120,6 +119,7 @@ pub fn serve(
             Some(std::thread::spawn(move || {
                 if let Err(e) = live::follow(&project, &names, &vehicle, &live) {
                     tracing::error!(error = %e, "the monitor cannot follow the vehicle");
+                    live.fail(format!("the monitor cannot follow the vehicle: {e}"));
                 }
             }))
         }
@@ -292,18 +292,8 @@ async fn events(State(app): State<Arc<App>>) -> Response {
             "this monitor replays a journal: there is no live stream",
         );
     };
-    let (first, rx) = live.attach();
-    let head = stream::iter(first.into_iter().map(|m| Ok(Event::default().data(&*m))));
-    let rest = stream::unfold((rx, live), |(mut rx, live)| async move {
-        let msg = match rx.recv().await {
-            Ok(m) => m,
-            Err(RecvError::Lagged(n)) => live.resync(n),
-            Err(RecvError::Closed) => return None,
-        };
-        Some((Ok(Event::default().data(&*msg)), (rx, live)))
-    });
     let s: std::pin::Pin<Box<dyn Stream<Item = Result<Event, Infallible>> + Send>> =
-        Box::pin(head.chain(rest));
+        Box::pin(live::page_stream(live).map(|m| Ok(Event::default().data(&*m))));
     Sse::new(s).keep_alive(KeepAlive::default()).into_response()
 }
 
