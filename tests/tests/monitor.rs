@@ -463,3 +463,40 @@ fn the_can_data_server_panel_shows_its_bus_and_signals() {
     assert_eq!(bridge.stop(), vec![Some(0)]);
     drop(player);
 }
+
+#[test]
+fn bad_arguments_are_clear_usage_errors() {
+    let work = petrel_tests::Workdir::new();
+    let missing = work.path().join("no-journal-here");
+    let cases: [(Vec<String>, &str); 4] = [
+        (vec!["monitor".into()], "give the project directory"),
+        (
+            vec![
+                "monitor".into(),
+                "--journal".into(),
+                missing.display().to_string(),
+            ],
+            "cannot read",
+        ),
+        (
+            vec![
+                "monitor".into(),
+                uav().display().to_string(),
+                "--listen".into(),
+                "192.0.2.1:80".into(),
+            ],
+            "cannot listen on 192.0.2.1:80",
+        ),
+        (
+            vec!["monitor".into(), work.path().display().to_string()],
+            "petrel.toml",
+        ),
+    ];
+    for (args, says) in cases {
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = petrel(&refs);
+        assert_eq!(o.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains(says), "{args:?}: {err}");
+    }
+}
