@@ -1,6 +1,6 @@
 //! The cost of `petrel monitor` to the player, and the time from a step to its display.
 //!
-//! `cargo run --release -p petrel-tests --example bench_monitor -- [EVENTS] [ROUNDS]`
+//! `cargo run --release -p petrel-tests --example bench_monitor -- [EVENTS] [ROUNDS] [EVERY_MS]`
 //! (after `cargo build --release --bin petrel`; docs/benchmarks.md has the figures).
 //!
 //! 1. Throughput: a 40-net project (every event moves the token of each net: 80 places change
@@ -9,7 +9,8 @@
 //!    processed them all gives events per second. With 0, 1 and 5 `petrel monitor` processes
 //!    following the vehicle, each with one event stream (`/api/events`) read as a page would,
 //!    interleaved, best of ROUNDS; ratios to 0 monitors of the same run.
-//! 2. Latency: one monitor and headless Chromium on its page; 200 events, one every 20 ms. For
+//! 2. Latency: one monitor and headless Chromium on its page; 200 events, one every EVERY_MS
+//!    (20 by default). For
 //!    each, the time from its sending to the player's marking delta at a plain subscriber in
 //!    this process (the baseline: what the player itself takes), and to the page's first frame
 //!    showing the step (`window.petrelMonitor.shownAt`, the page's clock; same machine).
@@ -85,11 +86,27 @@ fn read_stream(addr: std::net::SocketAddr) {
     });
 }
 
-fn throughput(dir: &str, monitors: usize, events: u64) -> f64 {
+/// CPU seconds (user and system) process `pid` has used so far (`/proc/PID/stat`).
+fn cpu_seconds(pid: u32) -> f64 {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+    // Fields after the command (which may hold spaces) in parentheses.
+    let rest = stat.rsplit_once(')').map(|x| x.1).unwrap_or_default();
+    let f: Vec<f64> = rest
+        .split_whitespace()
+        .filter_map(|x| x.parse().ok())
+        .collect();
+    // utime and stime are fields 14 and 15 of the whole line: 11 and 12 after the state.
+    let ticks = f.get(10).copied().unwrap_or(0.0) + f.get(11).copied().unwrap_or(0.0);
+    ticks / 100.0
+}
+
+/// Events per second, the player's CPU microseconds per event, and the monitors' (all of them).
+fn throughput(dir: &str, monitors: usize, events: u64) -> (f64, f64, f64) {
     let vehicle = unique_vehicle("benchmon");
     let _player = Play::start(dir, &vehicle);
     let v = Vehicle::new(&vehicle).unwrap();
     let me = Participant::join(&v, Role::tool("bench").unwrap()).unwrap();
+    let _ = &_player;
     let beats = me.heartbeat_subscriber().unwrap();
     let mut last = 0;
     let deadline = Instant::now() + Duration::from_secs(20);
@@ -109,6 +126,9 @@ fn throughput(dir: &str, monitors: usize, events: u64) -> f64 {
     let tx = me.event_sender().unwrap();
     let msgs = [EventMsg::new("tick", vec![]), EventMsg::new("tock", vec![])];
     let start_steps = progress(&beats, &mut last);
+    let player_pid = _player.0.id();
+    let cpu0 = cpu_seconds(player_pid);
+    let mons_cpu0: f64 = mons.iter().map(|m| cpu_seconds(m.pid())).sum();
     let t0 = Instant::now();
     for i in 0..events {
         loop {
@@ -124,8 +144,10 @@ fn throughput(dir: &str, monitors: usize, events: u64) -> f64 {
         std::thread::sleep(Duration::from_millis(1));
     }
     let rate = events as f64 / t0.elapsed().as_secs_f64();
+    let player_us = (cpu_seconds(player_pid) - cpu0) * 1e6 / events as f64;
+    let mons_cpu: f64 = mons.iter().map(|m| cpu_seconds(m.pid())).sum::<f64>() - mons_cpu0;
     drop(mons);
-    rate
+    (rate, player_us, mons_cpu * 1e6 / events as f64)
 }
 
 fn epoch_ms() -> f64 {
@@ -140,7 +162,7 @@ fn percentile(v: &mut [f64], p: f64) -> f64 {
     v[((v.len() - 1) as f64 * p).round() as usize]
 }
 
-fn latency(dir: &str, events: u64) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
+fn latency(dir: &str, events: u64, every: Duration) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
     let vehicle = unique_vehicle("benchlat");
     let _player = Play::start(dir, &vehicle);
     let v = Vehicle::new(&vehicle).unwrap();
@@ -208,7 +230,7 @@ fn latency(dir: &str, events: u64) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
             }
         }
         player.push(seen.unwrap_or(t) - t);
-        std::thread::sleep(Duration::from_millis(20));
+        std::thread::sleep(every);
     }
     let last_step = first + events - 1;
     b.wait_for(
@@ -239,28 +261,35 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let events: u64 = args.first().and_then(|a| a.parse().ok()).unwrap_or(200_000);
     let rounds: usize = args.get(1).and_then(|a| a.parse().ok()).unwrap_or(3);
+    let every_ms: u64 = args.get(2).and_then(|a| a.parse().ok()).unwrap_or(20);
     let project = many_nets(40);
     let dir = project.path().display().to_string();
     println!("petrel: {}", petrel_bin().display());
     let counts = [0usize, 1, 5];
     let mut best = [0f64; 3];
+    let mut cpu = [f64::MAX; 3];
+    let mut mon_cpu = [f64::MAX; 3];
     for round in 0..rounds {
         if events == 0 {
             break;
         }
         for (k, &m) in counts.iter().enumerate() {
-            let r = throughput(&dir, m, events);
-            println!("round {round}: {m} monitor(s): {r:.0} events/s");
+            let (r, us, mus) = throughput(&dir, m, events);
+            println!("round {round}: {m} monitor(s): {r:.0} events/s, player {us:.1} us CPU/event, monitors {mus:.1} us CPU/event");
             best[k] = best[k].max(r);
+            cpu[k] = cpu[k].min(us);
+            mon_cpu[k] = mon_cpu[k].min(mus);
         }
     }
     if events > 0 {
-        print_throughput(&counts, &best, rounds);
+        print_throughput(&counts, &best, &cpu, &mon_cpu, rounds);
     }
     if !petrel_tests::web::browser_available() {
         return;
     }
-    let (mut player, mut streamed, mut arrived, mut page) = latency(&dir, 200);
+    let (mut player, mut streamed, mut arrived, mut page) =
+        latency(&dir, 200, Duration::from_millis(every_ms));
+    println!("\n200 events, one every {every_ms} ms:");
     println!("\n| from sending an event to | p50 ms | p90 ms | p99 ms | max ms |\n|---|---:|---:|---:|---:|");
     for (what, v) in [
         ("the player's delta (a plain subscriber)", &mut player),
@@ -279,9 +308,16 @@ fn main() {
     println!("({} of 200 steps seen by the page)", page.len());
 }
 
-fn print_throughput(counts: &[usize], best: &[f64], rounds: usize) {
-    println!("\n| monitors | events/s (best of {rounds}) | ratio to none |\n|---:|---:|---:|");
+fn print_throughput(counts: &[usize], best: &[f64], cpu: &[f64], mon_cpu: &[f64], rounds: usize) {
+    println!("\n| monitors | events/s (best of {rounds}) | ratio to none | player CPU us/event (least) | ratio to none | monitors' CPU us/event |\n|---:|---:|---:|---:|---:|---:|");
     for (k, &m) in counts.iter().enumerate() {
-        println!("| {m} | {:.0} | {:.2} |", best[k], best[k] / best[0]);
+        println!(
+            "| {m} | {:.0} | {:.2} | {:.1} | {:.2} | {:.1} |",
+            best[k],
+            best[k] / best[0],
+            cpu[k],
+            cpu[k] / cpu[0],
+            mon_cpu[k]
+        );
     }
 }

@@ -154,6 +154,11 @@ impl Monitor {
         Monitor { child, addr, token }
     }
 
+    /// The process id.
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
     /// The page's address, `http://127.0.0.1:PORT/` plus `path_and_query`.
     pub fn url(&self, path_and_query: &str) -> String {
         format!("http://{}{path_and_query}", self.addr)
