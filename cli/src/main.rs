@@ -40,8 +40,9 @@ struct Cli {
 enum Command {
     /// Check a mission project: syntax, names, types, markings.
     Check(project::CheckArgs),
-    /// Verify a project (or one net of it): safety, dead markings, loops, conflicts, with the
-    /// shortest event sequence to each finding. Given a PNML file, explore it as a plain P/T
+    /// Verify a project (or one net of it): safety, dead markings, progress to the declared
+    /// ends, stuck nets, starvation, invariants, loops, conflicts, each finding located in the
+    /// text with the shortest event sequence to it (docs/verification.md). Given a PNML file, explore it as a plain P/T
     /// net (arc weights and token counts above one allowed).
     Verify(project::VerifyArgs),
     /// Play the mission: the player process on iceoryx2, talking to the vehicle's programs.

@@ -343,13 +343,17 @@ fn verify_and_check_report_each_flaw_with_its_trace() {
     assert_eq!(o.status.code(), Some(1));
     let out = stdout(&o);
     for line in [
-        "error: A.begin would put a second token in global.busy, after go → done → go",
-        "error: dead marking: A{stuck}, after spare",
-        "error: immediate transitions loop forever: A.wob → A.ble, after go → more",
-        "warning: on done, A.end fires and A.stop does not (written order), after go → done",
+        "error[E0601]: A.begin would put a second token in global.busy, after go → done → go",
+        "error[E0602]: dead marking: A{stuck}, after spare",
+        "error[E0603]: immediate transitions loop forever: A.wob → A.ble, after go → more",
+        "warning[W0601]: on done, A.end fires and A.stop does not (written order), after go → done",
         "nets never activated: Unused",
     ] {
         assert!(out.contains(line), "missing `{line}` in:\n{out}");
+    }
+    // Each finding is also shown where it is, as `petrel check` shows its own.
+    for at in ["a.pn:9:16", "a.pn:15:16", "a.pn:6:11", "a.pn:21:5"] {
+        assert!(out.contains(at), "missing `{at}` in:\n{out}");
     }
 
     // `check` runs the same verification and points at the transitions.
@@ -371,6 +375,93 @@ fn verify_and_check_report_each_flaw_with_its_trace() {
     assert!(stderr(&o).contains("--max-states"), "{}", stderr(&o));
     let o = petrel(&["verify", &flawed, "--net", "Nope"]);
     assert_eq!(o.status.code(), Some(2));
+}
+
+fn progress_data(name: &str) -> String {
+    repo()
+        .join("nets/tests/data/progress")
+        .join(name)
+        .display()
+        .to_string()
+}
+
+#[test]
+fn verify_groups_findings_and_all_lists_each() {
+    let leaked = progress_data("leaked_mutex");
+    let o = petrel(&["verify", &leaked]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    let out = stdout(&o);
+    // One diagnostic for the three dead markings, located at the place, with a count.
+    assert_eq!(out.matches("[E0602] Error").count(), 1, "{out}");
+    assert!(out.contains("3 dead markings; the first"), "{out}");
+    assert!(out.contains("robot.pn:3:11"), "{out}");
+    // E0605 and E0606 with their traces, the events that do not matter elided.
+    assert!(
+        out.contains("[E0605] Error: the mission cannot finish"),
+        "{out}"
+    );
+    assert_eq!(out.matches("[E0606] Error").count(), 2, "{out}");
+    assert!(
+        out.contains("error[E0602]: dead marking: R1{done} R2{waiting}, after start_mission → ... → granted(\"r2\") → shock(\"r2\")"),
+        "{out}"
+    );
+    assert!(out.ends_with("result: 6 error(s), 0 warning(s)\n"), "{out}");
+
+    let o = petrel(&["verify", &leaked, "--all"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(
+        stdout(&o).matches("[E0602] Error").count(),
+        3,
+        "{}",
+        stdout(&o)
+    );
+
+    // A catastrophic event's ends: one line, or each with --all.
+    let stuck = progress_data("stuck_transit");
+    let o = petrel(&["verify", &stuck]);
+    let out = stdout(&o);
+    assert!(out.contains("3 end(s) after a catastrophic event"), "{out}");
+    assert!(
+        out.contains("mission.pn:5:11"),
+        "E0605 at `transit1`: {out}"
+    );
+    let o = petrel(&["verify", &stuck, "--all"]);
+    assert_eq!(
+        stdout(&o)
+            .matches("end after a catastrophic event:")
+            .count(),
+        3,
+        "{}",
+        stdout(&o)
+    );
+}
+
+#[test]
+fn verify_exits_1_for_errors_only_and_json_locates_each_finding() {
+    // A warning (starvation) alone: exit 0.
+    let o = petrel(&["verify", &progress_data("starvation")]);
+    assert_eq!(o.status.code(), Some(0), "{}{}", stdout(&o), stderr(&o));
+    assert!(stdout(&o).contains("[W0606] Warning"), "{}", stdout(&o));
+    assert!(stdout(&o).ends_with("result: verified, no error, 1 warning(s)\n"));
+
+    // The lock-order deadlock: exit 1, and JSON with the resource cycle and the locations.
+    let o = petrel(&["verify", &progress_data("lock_order"), "--format", "json"]);
+    assert_eq!(o.status.code(), Some(1));
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON");
+    assert_eq!(doc["errors"], 2);
+    assert_eq!(doc["warnings"], 0);
+    assert_eq!(
+        doc["stuck_nets"][0]["resource_cycle"][0],
+        "A waits for global.y, which B holds"
+    );
+    let diags = doc["diagnostics"].as_array().expect("diagnostics");
+    assert_eq!(diags.len(), 2);
+    for (d, line) in diags.iter().zip([1, 11]) {
+        assert_eq!(d["code"], "E0606");
+        assert!(d["file"].as_str().unwrap().ends_with("nets.pn"), "{d}");
+        assert_eq!(d["line"], line);
+        assert_eq!(d["column"], 5);
+    }
 }
 
 #[test]
