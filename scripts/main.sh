@@ -85,6 +85,31 @@ wait "${pids[0]}" 2>/dev/null || true
 echo "== the flight recorder: target/journal/$vehicle"
 "$petrel" replay "target/journal/$vehicle"
 
+# Redermor's 22 nets in the monitor, after the first events of its current scenario (its
+# programs are not processes yet: the events are sent as an operator would): the screenshot
+# docs/img/monitor-redermor.png.
+red=missions/redermor
+if [ -f "$red/petrel.toml" ] && command -v chromedriver >/dev/null 2>&1; then
+    rv="red$$"
+    echo "== petrel monitor on $red (vehicle $rv)"
+    pids=()
+    RUST_LOG=error "$petrel" play "$red" --vehicle "$rv" --run-for 60 --no-journal & pids+=($!)
+    until "$petrel" status "$red" --vehicle "$rv" >/dev/null 2>&1; do sleep 0.1; done
+    "$petrel" monitor "$red" --vehicle "$rv" --listen 127.0.0.1:0 --run-for 60 \
+        > "target/monitor-$rv.out" &
+    pids+=($!)
+    until grep -q listening "target/monitor-$rv.out" 2>/dev/null; do sleep 0.1; done
+    red_url=$(sed -n 's/^petrel monitor: listening on //p' "target/monitor-$rv.out")
+    grep -E '^[0-9.]+ ' "$red/scripts/current.script" | head -n 12 | cut -d' ' -f2- |
+        while read -r event; do "$petrel" send "$red" --vehicle "$rv" "$event" >/dev/null; done
+    target/release/examples/monitor_shot "$red_url" docs/img/monitor-redermor.png 12 \
+        MISSION/MISSION_PHASES || true
+    kill "${pids[1]}" 2>/dev/null || true
+    wait "${pids[1]}" 2>/dev/null || true
+    kill "${pids[0]}" 2>/dev/null || true
+    wait "${pids[0]}" 2>/dev/null || true
+fi
+
 auv=missions/auv
 echo "== petrel check $auv (nets, can.toml and its DBC)"
 "$petrel" check "$auv"

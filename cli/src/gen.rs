@@ -253,11 +253,13 @@ pub fn gen(a: GenArgs) -> Outcome {
         }
     }
     eprintln!(
-        "wrote the prototype of {} in {} ({} functions, {} events it may send): `cargo run -- --vehicle {}`",
+        "wrote the prototype of {} in {} ({} function{}, {} event{} it may send): `cargo run -- --vehicle {}`",
         a.programs.join(", "),
         out.display(),
         functions.len(),
+        if functions.len() == 1 { "" } else { "s" },
         events.len(),
+        if events.len() == 1 { "" } else { "s" },
         c.name
     );
     Outcome::Clean

@@ -3,7 +3,7 @@
 //! page, waits until it is in step with the player and shows at least N steps in its event
 //! log, and saves the window as PNG.
 //!
-//! `monitor_shot URL OUT.png [STEPS]`
+//! `monitor_shot URL OUT.png [STEPS] [NET]` (NET: select that net, the view zoomed on it)
 
 use petrel_tests::web::Browser;
 use std::process::ExitCode;
@@ -33,6 +33,12 @@ fn main() -> ExitCode {
         "return document.body.dataset.synced === 'true' ? document.querySelectorAll('#log tbody tr').length : -1",
         |v| v.as_i64().is_some_and(|n| n >= steps as i64),
     );
+    if let Some(net) = args.get(3) {
+        let net = serde_json::to_string(net).unwrap_or_default();
+        b.eval(&format!(
+            "const li = document.querySelector('#netlist li[data-net=' + JSON.stringify({net}) + ']'); if (li) li.click(); return null"
+        ));
+    }
     b.screenshot(&std::path::PathBuf::from(out));
     println!("{out}: the monitor with {shown} steps in its log");
     ExitCode::SUCCESS

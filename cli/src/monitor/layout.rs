@@ -23,7 +23,9 @@ pub struct Drawing {
 /// Lays out the nets of `project` and their tree.
 pub fn draw(project: &Project) -> Result<Drawing, String> {
     let nets_dot = petrel_nets::dot::project_to_dot(project, None)?;
-    let tree_dot = petrel_nets::dot::project_tree_dot(project);
+    // The tree sits in a narrow side panel: left to right, it grows down, not across.
+    let tree_dot =
+        petrel_nets::dot::project_tree_dot(project).replacen("rankdir=TB", "rankdir=LR", 1);
     Ok(Drawing {
         nets: svg_body(&graphviz(&nets_dot)?),
         tree: svg_body(&graphviz(&tree_dot)?),

@@ -149,7 +149,10 @@ function zoom(f, at) {
 function buildNetList() {
   const list = $('netlist');
   for (const n of M.model.nets) {
-    const li = el('li', { 'data-net': n.name }, n.parent ? '\u2514 ' + n.name : n.name, el('span', { class: 'count' }));
+    // A child instance `A/B/C` shows as `C` under its parent, indented by its depth.
+    const parts = n.name.split('/');
+    const li = el('li', { 'data-net': n.name }, (parts.length > 1 ? '\u2514 ' : '') + parts[parts.length - 1], el('span', { class: 'count' }));
+    li.style.paddingLeft = (4 + 12 * (parts.length - 1)) + 'px';
     li.title = n.template !== n.name ? n.name + ' = ' + n.template : n.name;
     li.onclick = () => selectNet(n.name, true);
     list.append(li);
