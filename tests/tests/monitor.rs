@@ -500,3 +500,42 @@ fn bad_arguments_are_clear_usage_errors() {
         assert!(err.contains(says), "{args:?}: {err}");
     }
 }
+
+#[test]
+fn the_operator_sends_from_the_page_only_with_the_token() {
+    if !browser_available() {
+        return;
+    }
+    let vehicle = unique_vehicle("monform");
+    let player = Player::start(&uav(), &vehicle);
+    let dir = uav().display().to_string();
+    let monitor = Monitor::start(&[&dir, "--vehicle", &vehicle, "--operator"]);
+    let token = monitor.token.clone().expect("a token");
+    let b = Browser::start();
+    let submit = "document.getElementById('sendtext').value = 'start_mission'; document.getElementById('sendform').requestSubmit(); return null";
+    let result = "return document.getElementById('sendresult').className + ': ' + document.getElementById('sendresult').textContent";
+    // Without the token the form is there, and what it sends is refused, saying why.
+    b.open(&monitor.url("/"));
+    b.wait_ready();
+    b.eval(submit);
+    let r = b.wait_for(30.0, result, |v| {
+        v.as_str().is_some_and(|s| s.starts_with("bad"))
+    });
+    assert!(
+        r.as_str().unwrap_or_default().contains("operator token"),
+        "{r}"
+    );
+    assert_eq!(player.status().unwrap()["stats"]["received"], 0);
+    // With it, the event goes and the page shows the player's verdict and the new marking.
+    b.open(&monitor.url(&format!("/?token={token}")));
+    b.wait_ready();
+    b.eval(submit);
+    let r = b.wait_for(30.0, result, |v| {
+        v.as_str().is_some_and(|s| s.starts_with("ok"))
+    });
+    assert_eq!(r, "ok: start_mission: taken and on record");
+    assert_eq!(
+        wait_marked(&b, &["EVENTS.watching", "MISSION.rolling"]),
+        ["EVENTS.watching", "MISSION.rolling"]
+    );
+}
