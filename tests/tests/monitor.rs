@@ -539,3 +539,42 @@ fn the_operator_sends_from_the_page_only_with_the_token() {
         ["EVENTS.watching", "MISSION.rolling"]
     );
 }
+
+#[test]
+fn a_damaged_journal_replays_up_to_the_damage_with_an_alarm() {
+    let vehicle = unique_vehicle("mondamage");
+    let player = Player::start(&uav(), &vehicle);
+    for e in ["start_mission", "rotation_speed", "airborne"] {
+        send(&player, e);
+    }
+    let journal = player.journal.clone();
+    let _work = player.work.clone();
+    assert!(player.stop().success());
+    let segment = petrel_tests::journal_segments(&journal)
+        .into_iter()
+        .next()
+        .expect("a segment");
+    let mut bytes = std::fs::read(&segment).unwrap();
+    let middle = bytes.len() / 2;
+    bytes[middle] ^= 0xff;
+    std::fs::write(&segment, bytes).unwrap();
+    let journal_arg = journal.display().to_string();
+    let monitor = Monitor::start(&[&dir_of_uav(), "--journal", &journal_arg]);
+    let t = monitor.get("/api/replay").json();
+    assert_eq!(t["corrupt"], true, "{t}");
+    let alarms: Vec<String> = t["alarms"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|a| a["text"].as_str().map(String::from))
+        .collect();
+    assert!(alarms.iter().any(|a| a.contains("damaged")), "{alarms:?}");
+    // The frames before the damage are there, from the start.
+    let frames = t["frames"].as_array().unwrap();
+    assert!(!frames.is_empty());
+    assert_eq!(frames[0]["step"], 0);
+}
+
+fn dir_of_uav() -> String {
+    uav().display().to_string()
+}
