@@ -1492,6 +1492,7 @@ fn instances_expand_as_the_checker_does() {
         data_dir("language"),
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../missions/uav"),
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../missions/auv"),
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../missions/redermor"),
     ] {
         let (loaded, compiled, diags) = petrel_nets::project::load_and_check(&dir).unwrap();
         let compiled = compiled.unwrap_or_else(|| panic!("{}: {:?}", dir.display(), codes(&diags)));
