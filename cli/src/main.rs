@@ -2,7 +2,7 @@
 //!
 //! One module per family of commands: [`project`] (check, verify, fmt, dot, export, import),
 //! [`script`] (run), [`vehicle`] (play, send, status), [`recorder`] (replay, journal),
-//! [`bridge`], [`up`] (a whole vehicle from its vehicle.toml); [`common`] holds what they share, first of all the one way a project is loaded
+//! [`bridge`], [`up`] (a whole vehicle from its vehicle.toml), [`monitor`] (the web monitor), [`gen`] (program prototypes); [`common`] holds what they share, first of all the one way a project is loaded
 //! and checked ([`common::check_project`]). A new command is a new module and one line in
 //! [`Command`].
 //!
@@ -11,6 +11,8 @@
 
 mod bridge;
 mod common;
+mod gen;
+mod monitor;
 mod project;
 mod recorder;
 mod script;
@@ -70,6 +72,13 @@ enum Command {
     Send(vehicle::SendArgs),
     /// Print the live marking of every active net and the player's counters.
     Status(vehicle::StatusArgs),
+    /// A web monitor of a running mission (`--vehicle`), or the replay of a recorded one
+    /// (`--journal`): every net drawn, the marking in red, the event log, the programs.
+    Monitor(monitor::MonitorArgs),
+    /// Generate a program prototype (a Cargo project on the programs SDK) from the project's
+    /// declared interface: one typed handler per function, typed helpers for the events it
+    /// may send, a README and a test against `petrel play`. Regenerating keeps the handlers.
+    Gen(gen::GenArgs),
     /// Run a mission script in virtual time, with no process: events at given times and
     /// expectations; each step prints as a JSON line. A failed expectation exits 1. The format
     /// is in docs/scripts.md.
@@ -108,6 +117,8 @@ fn main() -> ExitCode {
         Command::Play(a) => vehicle::play(a),
         Command::Send(a) => vehicle::send(a),
         Command::Status(a) => vehicle::status(a),
+        Command::Monitor(a) => monitor::monitor(a),
+        Command::Gen(a) => gen::gen(a),
         Command::Replay(a) => recorder::replay(a),
         Command::Journal { command } => recorder::journal(command),
         Command::Bridge(a) => bridge::bridge(a),

@@ -409,6 +409,24 @@ pub fn status(a: StatusArgs) -> Outcome {
         return Outcome::Errors;
     };
     let mut doc: serde_json::Value = serde_json::from_str(&beat.status).unwrap_or_default();
+    // Each program's liveness, as this command sees the vehicle's nodes (not the player's
+    // word): alive, dead (crashed, not yet cleaned up) or absent.
+    let programs: serde_json::Map<String, serde_json::Value> = c
+        .programs
+        .iter()
+        .map(|p| {
+            let st = match petrel_ipc::program_status(&v, &p.name) {
+                Ok(petrel_ipc::ProgramStatus::Alive) => "alive",
+                Ok(petrel_ipc::ProgramStatus::Dead) => "dead",
+                Ok(petrel_ipc::ProgramStatus::Absent) => "absent",
+                Err(_) => "unknown",
+            };
+            (p.name.clone(), st.into())
+        })
+        .collect();
+    if let Some(obj) = doc.as_object_mut() {
+        obj.insert("programs".into(), programs.clone().into());
+    }
     let bridge_doc: Option<serde_json::Value> = bridge
         .as_ref()
         .and_then(|b| serde_json::from_str(&b.status).ok());
@@ -440,6 +458,13 @@ pub fn status(a: StatusArgs) -> Outcome {
         }
     }
     text.push_str(&format!("  counters: {}\n", doc["stats"]));
+    if !programs.is_empty() {
+        let list: Vec<String> = programs
+            .iter()
+            .map(|(p, st)| format!("{p} {}", st.as_str().unwrap_or("?")))
+            .collect();
+        text.push_str(&format!("  programs: {}\n", list.join(", ")));
+    }
     let recorder = &doc["recorder"];
     match recorder["state"].as_str() {
         Some("ok") => text.push_str("  flight recorder: ok\n"),

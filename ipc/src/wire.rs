@@ -45,7 +45,9 @@ use iceoryx2::prelude::ZeroCopySend;
 /// Version of the wire format. It is written in every header, and it is part of the header's
 /// iceoryx2 type name, so a process built with another wire version cannot even open the
 /// services. Version 2: the heartbeat carries typed acknowledgements and the recorder's state.
-pub const WIRE_VERSION: u16 = 2;
+/// Version 3: a marking delta carries its step's mission time, the event's parameters and the
+/// step's actions as text, so that a monitor shows the whole step.
+pub const WIRE_VERSION: u16 = 3;
 
 /// Most senders one heartbeat acknowledges (the most recently active first). The events
 /// service takes 32 senders at once; the rest is room for senders that just left.
@@ -136,6 +138,13 @@ pub struct MarkingMsg {
     /// True when `marked` and `activated` list the whole state rather than a change (sent at
     /// start, and whenever a monitor may have lost track).
     pub snapshot: bool,
+    /// Mission time of the step, microseconds.
+    pub time_us: u64,
+    /// The parameters of the event processed, in declaration order.
+    pub params: Vec<Value>,
+    /// Every action and notice of the step as text (`call GUI.climb(300.0)`, `start
+    /// dec_answer (expires at 12.5)`), as the journal records them.
+    pub actions: Vec<String>,
 }
 
 /// A sign of life, with what the sender promises and what it has done.
@@ -423,7 +432,7 @@ impl Message for SignalsMsg {
 /// depend on the module path and changes with [`WIRE_VERSION`].
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("petrel::MsgHeader/v2")]
+#[type_name("petrel::MsgHeader/v3")]
 pub struct MsgHeader {
     /// The sending port's id, unique among the vehicle's live ports.
     pub sender: u64,
@@ -619,6 +628,9 @@ mod tests {
             activated: vec![],
             deactivated: vec!["nav".into()],
             snapshot: false,
+            time_us: 12_500_000,
+            params: every_value(),
+            actions: vec!["call GUI.climb(300.0)".into()],
         });
         round_trip(Heartbeat {
             uptime_ms: 1,

@@ -947,9 +947,16 @@ impl<'p> PlayerLoop<'p> {
             .filter(|&n| self.engine.is_active(n))
             .map(|n| project.nets[n as usize].name.clone())
             .collect();
+        let (event, params) = match record.taken.take() {
+            Some((e, p)) => (Some(e), p),
+            None => (None, Vec::new()),
+        };
         let msg = MarkingMsg {
             step: self.step_no,
-            event: record.taken.take().map(|t| t.0),
+            event,
+            time_us: self.engine.now(),
+            params,
+            actions: record.actions.clone(),
             fired: record.fired_names(),
             marked: if snapshot {
                 after.clone()
