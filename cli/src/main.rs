@@ -13,6 +13,7 @@ mod bridge;
 mod common;
 mod project;
 mod recorder;
+mod reload;
 mod script;
 mod up;
 mod vehicle;
@@ -69,6 +70,11 @@ enum Command {
     Send(vehicle::SendArgs),
     /// Print the live marking of every active net and the player's counters.
     Status(vehicle::StatusArgs),
+    /// Reload a running player's project with a new version, mid-mission: the player maps
+    /// its state onto the new version by names (and the --mapping file), verifies the new
+    /// version from that state, and swaps between two steps; or refuses, with the reason, the
+    /// finding and its trace, and the mission goes on unchanged. Exit 0 accepted, 1 refused.
+    Reload(reload::ReloadArgs),
     /// Run a mission script in virtual time, with no process: events at given times and
     /// expectations; each step prints as a JSON line. A failed expectation exits 1.
     Run(script::RunArgs),
@@ -106,6 +112,7 @@ fn main() -> ExitCode {
         Command::Play(a) => vehicle::play(a),
         Command::Send(a) => vehicle::send(a),
         Command::Status(a) => vehicle::status(a),
+        Command::Reload(a) => reload::reload(a),
         Command::Replay(a) => recorder::replay(a),
         Command::Journal { command } => recorder::journal(command),
         Command::Bridge(a) => bridge::bridge(a),
