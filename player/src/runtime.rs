@@ -548,7 +548,12 @@ impl<'p> PlayerLoop<'p> {
                     version: crate::journal::FORMAT_VERSION,
                     project: project.name.clone(),
                     project_dir: opts.project_dir.clone(),
-                    digest: crate::journal::project_digest(project),
+                    // A mission's segments all name its first version (a resume after a
+                    // reload runs a later one: the reload entries say which).
+                    digest: match (opts.resume, crate::journal::first_header(dir)) {
+                        (true, Some(Entry::Header { digest, .. })) => digest,
+                        _ => crate::journal::project_digest(project),
+                    },
                     vehicle: opts.vehicle.clone(),
                     // Every segment of a mission names its start: replay checks they agree.
                     started_unix_ms: mission_start_ms,
