@@ -99,8 +99,8 @@ pub fn play(a: PlayArgs) -> Outcome {
         return match petrel_player::shadow::shadow(&c, &opts) {
             Ok(r) => {
                 eprintln!(
-                    "shadow stopped: {} vehicle steps followed, {} divergence alarm(s)",
-                    r.steps, r.alarms
+                    "shadow stopped: {} vehicle steps followed, {} reload(s) followed, {} divergence alarm(s)",
+                    r.steps, r.reloads, r.alarms
                 );
                 if r.alarms == 0 {
                     Outcome::Clean

@@ -1179,7 +1179,13 @@ impl<'p> PlayerLoop<'p> {
             }
         }
         answer.millis = p.received.elapsed().as_millis() as u64;
+        let swapped = answer.accepted && !answer.dry_run;
         self.answer_reload(answer);
+        if swapped {
+            // After the answer: a shadow reading the snapshot has the answer already, and
+            // knows which version the snapshot's names are of.
+            self.publish_delta();
+        }
     }
 
     /// Swaps to the candidate version: the state mapped again (a timer may have fallen due
@@ -1282,9 +1288,9 @@ impl<'p> PlayerLoop<'p> {
                 }
             }
         }
+        // The snapshot of the new state follows the answer (see `finish_reload`).
         self.previous = vec![0; self.engine.state().len()];
         self.snapshot_next = true;
-        self.publish_delta();
         self.report.reloads += 1;
         self.version = Some(candidate.source_hash);
         Ok(())

@@ -124,6 +124,29 @@ fn a_flight_reloaded_mid_transit_takes_the_new_reaction_net_and_uses_it() {
     let work = Workdir::new();
     let (player, programs) = in_transit(&work);
     let new = uav_with_birds("");
+    // A ground-station shadow, started with the first version, follows the reload.
+    let shadow_log = work.path().join("shadow.log");
+    // Stopped (SIGTERM) when dropped, pass or fail.
+    let shadow = Command::new(petrel_tests::petrel_bin())
+        .arg("play")
+        .arg(repo().join("missions/uav"))
+        .args(["--vehicle", &player.vehicle, "--shadow", "--run-for", "300"])
+        .env("RUST_LOG", "info")
+        .stderr(std::fs::File::create(&shadow_log).unwrap())
+        .spawn()
+        .expect("the shadow starts");
+    let shadow = Processes(vec![shadow]);
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    while !std::fs::read_to_string(&shadow_log)
+        .unwrap_or_default()
+        .contains("shadow synchronised")
+    {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the shadow did not synchronise"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
 
     // A dry run says what would happen and swaps nothing.
     let o = reload(&player, new.path(), &["--dry-run"]);
@@ -165,6 +188,13 @@ fn a_flight_reloaded_mid_transit_takes_the_new_reaction_net_and_uses_it() {
     assert!(marked(&s, "MISSION", "landed"), "{s}");
     assert_eq!(s["stats"]["calls_failed"], 0, "{s}");
     assert_eq!(s["stats"]["bad_messages"], 0, "{s}");
+    let code = shadow.stop()[0];
+    let log = std::fs::read_to_string(&shadow_log).unwrap_or_default();
+    assert_eq!(code, Some(0), "{log}");
+    assert!(
+        log.contains("1 reload(s) followed, 0 divergence alarm(s)"),
+        "{log}"
+    );
     drop(programs);
     assert!(player.stop().success());
 }
