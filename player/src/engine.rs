@@ -594,8 +594,6 @@ impl<'p> Engine<'p> {
         }
         let mut refused = Vec::new();
         for (name, params, target) in queued {
-            // Counted once already, when it first arrived.
-            self.stats.received -= 1;
             let p = self.sem.project;
             let target_id = match &target {
                 None => Ok(None),
@@ -619,7 +617,16 @@ impl<'p> Engine<'p> {
                         "the new version does not declare event `{name}`"
                     )))
                 }
-                (Ok(t), Some(e)) => self.submit_to(e, params, t),
+                (Ok(t), Some(e)) => {
+                    // Counted as received once already, when it first arrived; a refusal
+                    // here is of a received event, like one refused after a catastrophic end.
+                    self.stats.received -= 1;
+                    let r = self.submit_to(e, params, t);
+                    if r.is_err() {
+                        self.stats.received += 1;
+                    }
+                    r
+                }
             };
             if let Err(r) = result {
                 refused.push((name, r));

@@ -177,10 +177,21 @@ pub enum Entry {
         /// Why they could not be written.
         reason: String,
     },
+    /// The whole state of the engine between two steps (its queue empty): after a
+    /// [`Entry::Gap`], replay and `--resume` start over from it.
+    Checkpoint {
+        /// Mission time, microseconds.
+        time: u64,
+        /// The state.
+        state: Vec<u64>,
+        /// Running timers' deadlines (microseconds), by timer.
+        deadlines: Vec<Option<u64>>,
+    },
     /// The project was reloaded (`petrel reload`) between two steps: from here on the new
     /// version runs. Its files are kept beside the journal, in `project-<source_hash>/`
     /// (written before this entry); replay maps the state again and checks it against
-    /// `state`, and `--resume` after it resumes on the new version.
+    /// `state`, and `--resume` after it resumes on the new version. (Last of the variants:
+    /// bincode numbers them, and the entries of earlier versions keep their encoding.)
     Reload {
         /// Mission time, microseconds.
         time: u64,
@@ -195,16 +206,6 @@ pub enum Entry {
         /// The mapped state the new version starts from.
         state: Vec<u64>,
         /// The running timers' deadlines after the mapping (microseconds), by new timer.
-        deadlines: Vec<Option<u64>>,
-    },
-    /// The whole state of the engine between two steps (its queue empty): after a
-    /// [`Entry::Gap`], replay and `--resume` start over from it.
-    Checkpoint {
-        /// Mission time, microseconds.
-        time: u64,
-        /// The state.
-        state: Vec<u64>,
-        /// Running timers' deadlines (microseconds), by timer.
         deadlines: Vec<Option<u64>>,
     },
 }
