@@ -466,6 +466,10 @@ pub fn map_state(
     if !reasons.is_empty() {
         return Err(MapRefusal { reasons });
     }
+    summary.push(format!(
+        "mapped state: {}",
+        ln.describe_state(new, &s).join(" ")
+    ));
     Ok(Mapped {
         state: s,
         deadlines,
