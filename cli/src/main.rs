@@ -15,6 +15,7 @@ mod gen;
 mod monitor;
 mod project;
 mod recorder;
+mod reload;
 mod script;
 mod up;
 mod vehicle;
@@ -79,6 +80,11 @@ enum Command {
     /// declared interface: one typed handler per function, typed helpers for the events it
     /// may send, a README and a test against `petrel play`. Regenerating keeps the handlers.
     Gen(gen::GenArgs),
+    /// Reload a running player's project with a new version, mid-mission: the player maps
+    /// its state onto the new version by names (and the --mapping file), verifies the new
+    /// version from that state, and swaps between two steps; or refuses, with the reason, the
+    /// finding and its trace, and the mission goes on unchanged. Exit 0 accepted, 1 refused.
+    Reload(reload::ReloadArgs),
     /// Run a mission script in virtual time, with no process: events at given times and
     /// expectations; each step prints as a JSON line. A failed expectation exits 1. The format
     /// is in docs/scripts.md.
@@ -119,6 +125,7 @@ fn main() -> ExitCode {
         Command::Status(a) => vehicle::status(a),
         Command::Monitor(a) => monitor::monitor(a),
         Command::Gen(a) => gen::gen(a),
+        Command::Reload(a) => reload::reload(a),
         Command::Replay(a) => recorder::replay(a),
         Command::Journal { command } => recorder::journal(command),
         Command::Bridge(a) => bridge::bridge(a),

@@ -99,8 +99,8 @@ pub fn play(a: PlayArgs) -> Outcome {
         return match petrel_player::shadow::shadow(&c, &opts) {
             Ok(r) => {
                 eprintln!(
-                    "shadow stopped: {} vehicle steps followed, {} divergence alarm(s)",
-                    r.steps, r.alarms
+                    "shadow stopped: {} vehicle steps followed, {} reload(s) followed, {} divergence alarm(s)",
+                    r.steps, r.reloads, r.alarms
                 );
                 if r.alarms == 0 {
                     Outcome::Clean
@@ -438,12 +438,21 @@ pub fn status(a: StatusArgs) -> Outcome {
         return Outcome::Clean;
     }
     let mut text = format!(
-        "vehicle `{}`, project `{}`, mission time {:.3} s{}\n",
+        "vehicle `{}`, project `{}`{}, mission time {:.3} s{}{}\n",
         v.name(),
         doc["project"].as_str().unwrap_or("?"),
+        match doc["version"].as_str() {
+            Some(h) => format!(" (reloaded: version {h})"),
+            None => String::new(),
+        },
         doc["time"].as_f64().unwrap_or(0.0),
         if doc["over"].as_bool() == Some(true) {
             ", OVER (catastrophic event)"
+        } else {
+            ""
+        },
+        if doc["reloading"].as_bool() == Some(true) {
+            ", a reload is being verified"
         } else {
             ""
         }

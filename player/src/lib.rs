@@ -9,6 +9,8 @@
 //!   it took from each sender, refused and recorded (the acknowledgements of its heartbeat).
 //! - [`journal`], [`replay`]: the flight recorder and its replay (`--resume` too).
 //! - [`shadow`]: the ground-station copy that follows a vehicle's steps.
+//! - [`reload`]: a new version of the project read, checked and kept beside the journal
+//!   (`petrel reload`; the mapping and verification are `petrel_nets::reload`'s).
 //!
 //! The command line is the `petrel-cli` crate (binary `petrel`).
 
@@ -17,6 +19,7 @@ pub mod engine;
 pub mod expect;
 pub mod journal;
 pub mod record;
+pub mod reload;
 pub mod replay;
 pub mod runtime;
 pub mod script;

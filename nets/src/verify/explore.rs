@@ -273,6 +273,7 @@ pub(super) fn explore(
     free: &[FreePlace],
     opts: &mut VerifyOptions,
     started: Instant,
+    start: Option<&[u64]>,
 ) -> Result<Graph, VerifyError> {
     let l = &sem.layout;
     let mut scratch = Scratch::default();
@@ -344,8 +345,21 @@ pub(super) fn explore(
         }
     };
 
-    // The initial states: one per outcome of the guards the start cannot decide.
-    let mut prefixes: Vec<Vec<bool>> = vec![Vec::new()];
+    // The initial states: the given one (a reload's), or one per outcome of the guards the
+    // start cannot decide.
+    if let Some(from) = start {
+        let mut t = from.to_vec();
+        t.resize(env.words, 0);
+        env.saturate(&mut t);
+        index.insert(t.clone(), 0);
+        g.states.push(t);
+        g.via.push(Via::Start);
+    }
+    let mut prefixes: Vec<Vec<bool>> = if start.is_some() {
+        Vec::new()
+    } else {
+        vec![Vec::new()]
+    };
     let mut runs = 0usize;
     while let Some(prefix) = prefixes.pop() {
         runs += 1;

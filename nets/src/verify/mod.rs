@@ -310,7 +310,33 @@ impl Report {
 }
 
 /// Verifies a compiled project.
-pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Report, VerifyError> {
+pub fn verify(project: &CompiledProject, opts: VerifyOptions) -> Result<Report, VerifyError> {
+    verify_inner(project, opts, None)
+}
+
+/// Verifies `project` from `state` (a stable state of its [`crate::semantics::Layout`])
+/// instead of its initial state: what a reload checks before it swaps (docs/semantics.md).
+/// Programs' declared answers and internal events are free from there (the calls and
+/// emissions outstanding in `state` are not known). Traces start at `state`. Not with
+/// [`VerifyOptions::only_net`], which is refused as an unknown net.
+pub fn verify_from(
+    project: &CompiledProject,
+    state: &[u64],
+    mut opts: VerifyOptions,
+) -> Result<Report, VerifyError> {
+    if let Some(n) = opts.only_net.take() {
+        return Err(VerifyError::UnknownNet(format!(
+            "{n} (a verification from a state covers the whole project)"
+        )));
+    }
+    verify_inner(project, opts, Some(state))
+}
+
+fn verify_inner(
+    project: &CompiledProject,
+    mut opts: VerifyOptions,
+    start: Option<&[u64]>,
+) -> Result<Report, VerifyError> {
     let restricted;
     let (p, alone) = match &opts.only_net {
         None => (project, None),
@@ -330,7 +356,7 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
         None => Vec::new(),
     };
     let env = env::Env::new(p, l.words);
-    let mut g = explore::explore(p, &sem, &env, &free, &mut opts, started)?;
+    let mut g = explore::explore(p, &sem, &env, &free, &mut opts, started, start)?;
     g.alone = alone.is_some();
     let describe = |s: &[u64]| {
         let mut out = l.describe_state(p, s);
