@@ -1471,11 +1471,14 @@ impl<'p> Checker<'p> {
                 return None;
             }
             NetRef::SelfNet
-        } else if let Some(k) = net.children().position(|c| c.net.text == n.text) {
-            // A child's instance of this net, if the child exists.
-            if !self.decl_ids.contains_key(n.as_str()) {
-                return None;
-            }
+        } else if net.children().any(|c| c.net.text == n.text) {
+            // A child's instance of this net, if the child exists. The template lists only the
+            // children whose net is declared (the others are reported where they are named),
+            // so the index is the one among those, as the instances are made.
+            let k = t
+                .children
+                .iter()
+                .position(|c| self.decls[c.decl].name.text == n.text)?;
             NetRef::Child(k)
         } else if let Some(&r) = self.root_ids.get(n.as_str()) {
             NetRef::Root(r)
