@@ -1239,6 +1239,7 @@ impl<'p> PlayerLoop<'p> {
         let time = self.engine.now();
         let new = crate::reload::leak(candidate.project);
         let queued = self.engine.take_queue();
+        let carried = queued.clone();
         let mut engine = Engine::new(new);
         let refused = engine
             .adopt(
@@ -1259,6 +1260,7 @@ impl<'p> PlayerLoop<'p> {
             mapping: candidate.mapping_text,
             state: mapped.state,
             deadlines: mapped.deadlines,
+            queued: carried,
         });
         for (event, why) in refused {
             warn!(event, reason = %why, "a queued event refused at the reload");
