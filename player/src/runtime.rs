@@ -739,11 +739,13 @@ impl<'p> PlayerLoop<'p> {
     /// Processes everything queued (by the start, a timer, an event), journals and publishes
     /// each step, and raises `call_failed` for the calls that could not be delivered.
     fn process_queue(&mut self) {
+        // The recorder's changes are raised (queued) even while a reload holds the steps, so
+        // that the loop does not come back here for them before it waits.
+        self.raise_recorder_changes();
         // A reload under way holds the steps: the new version starts from the state it maps.
         if self.pending.as_ref().is_some_and(|p| !p.request.dry_run) {
             return;
         }
-        self.raise_recorder_changes();
         loop {
             let mut sink = RuntimeSink {
                 record: &mut self.record,
