@@ -18,7 +18,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/../fuzz"
 
-targets=(net_parse net_check manifest can_toml pnml wire journal dbc candump script)
+targets=(net_parse net_check manifest can_toml pnml wire journal dbc candump script reload_mapping)
 target_dir=${CARGO_TARGET_DIR:-target}
 triple=$(rustc -vV | sed -n 's/^host: //p')
 bin_dir="$target_dir/$triple/release"

@@ -543,6 +543,22 @@ impl<'p> Engine<'p> {
         &self.net_args
     }
 
+    /// The queue as [`Engine::take_queue`] would give it, without emptying it.
+    pub fn queued_names(&self) -> Vec<(String, Vec<Value>, Option<String>)> {
+        let p = self.sem.project;
+        self.queues
+            .iter()
+            .flatten()
+            .map(|q| {
+                (
+                    p.events[q.event as usize].name.clone(),
+                    q.params.clone(),
+                    q.target.map(|n| p.nets[n as usize].name.clone()),
+                )
+            })
+            .collect()
+    }
+
     /// Empties the queue, for a reload: each event by name, with its parameters and the name
     /// of the net it is addressed to, highest category first, oldest first within one. The
     /// counters still count them as received: [`Engine::adopt`] settles them.

@@ -207,6 +207,10 @@ pub enum Entry {
         state: Vec<u64>,
         /// The running timers' deadlines after the mapping (microseconds), by new timer.
         deadlines: Vec<Option<u64>>,
+        /// The events queued at the reload, carried over to the new version in this order:
+        /// name, parameters, the net it is addressed to (`--resume` from this entry queues
+        /// them again; their submissions are before it).
+        queued: Vec<(String, Vec<Value>, Option<String>)>,
     },
 }
 

@@ -98,9 +98,16 @@ pub fn keep(journal: &Path, hash: &str, files: &[(String, String)]) -> std::io::
 /// that its files still hash to it.
 pub fn load_kept(journal: &Path, hash: &str) -> Result<CompiledProject, String> {
     let dir = kept_dir(journal, hash);
-    load_candidate(&dir, hash, "")
-        .map(|c| c.project)
-        .map_err(|r| format!("the version kept in {}: {}", dir.display(), r.join("; ")))
+    let c = load_candidate(&dir, "", "")
+        .map_err(|r| format!("the version kept in {}: {}", dir.display(), r.join("; ")))?;
+    if c.source_hash != hash {
+        return Err(format!(
+            "the version kept in {} hashes to {}, not {hash}: its files changed since the reload",
+            dir.display(),
+            c.source_hash
+        ));
+    }
+    Ok(c.project)
 }
 
 /// A project for the rest of the process's life: the engine and the step record borrow the

@@ -159,8 +159,10 @@ pub fn replay_in<'p>(
         if let Entry::Reload {
             time,
             source_hash,
+            mapping,
             state,
             deadlines,
+            queued,
             ..
         } = &entries[k]
         {
@@ -172,7 +174,25 @@ pub fn replay_in<'p>(
                 Ok(p) => {
                     project = crate::reload::leak(p);
                     engine = Engine::new(project);
-                    if !engine.restore(*time, state, deadlines) {
+                    let renamed = petrel_nets::reload::Mapping::parse(mapping)
+                        .map(|m| m.nets)
+                        .unwrap_or_default();
+                    // The events queued at the reload were received before it.
+                    let stats = crate::engine::Stats {
+                        received: queued.len() as u64,
+                        ..Default::default()
+                    };
+                    let args = vec![Vec::new(); project.nets.len()];
+                    let adopted = engine.adopt(
+                        *time,
+                        state,
+                        deadlines,
+                        args,
+                        stats,
+                        queued.clone(),
+                        &renamed,
+                    );
+                    if adopted.is_none() {
                         report.divergence = Some(Divergence {
                             kind: DivergenceKind::Replay,
                             entry: k,
@@ -254,9 +274,25 @@ pub fn replay_in<'p>(
                 mapping,
                 state,
                 deadlines,
+                queued,
                 ..
             } => {
                 engine.advance_to(*time);
+                let carried = engine.queued_names();
+                if &carried != queued {
+                    report.divergence = Some(diverge(
+                        &engine,
+                        format!(
+                            "the queue at the reload differs: [{}] in the replay, [{}] in the journal",
+                            carried.iter().map(|q| q.0.as_str()).collect::<Vec<_>>().join(", "),
+                            queued.iter().map(|q| q.0.as_str()).collect::<Vec<_>>().join(", ")
+                        ),
+                        "(reload)",
+                        *time,
+                        state,
+                    ));
+                    break;
+                }
                 match reload_engine(project, &mut engine, kept, source_hash, mapping, *time) {
                     Ok(next) => {
                         project = next;

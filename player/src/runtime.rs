@@ -739,11 +739,13 @@ impl<'p> PlayerLoop<'p> {
     /// Processes everything queued (by the start, a timer, an event), journals and publishes
     /// each step, and raises `call_failed` for the calls that could not be delivered.
     fn process_queue(&mut self) {
+        // The recorder's changes are raised (queued) even while a reload holds the steps, so
+        // that the loop does not come back here for them before it waits.
+        self.raise_recorder_changes();
         // A reload under way holds the steps: the new version starts from the state it maps.
         if self.pending.as_ref().is_some_and(|p| !p.request.dry_run) {
             return;
         }
-        self.raise_recorder_changes();
         loop {
             let mut sink = RuntimeSink {
                 record: &mut self.record,
@@ -1173,9 +1175,12 @@ impl<'p> PlayerLoop<'p> {
             ..ReloadAnswer::default()
         };
         if !p.request.dry_run {
-            if let Err(reasons) = self.swap(p.candidate, &p.request.dir) {
-                answer.accepted = false;
-                answer.reasons = reasons;
+            match self.swap(p.candidate, &p.request.dir) {
+                Ok(handed) => answer.summary.push(handed),
+                Err(reasons) => {
+                    answer.accepted = false;
+                    answer.reasons = reasons;
+                }
             }
         }
         answer.millis = p.received.elapsed().as_millis() as u64;
@@ -1192,7 +1197,11 @@ impl<'p> PlayerLoop<'p> {
     /// during the verification: its event is queued, and goes to the new version), its files
     /// kept beside the journal and the reload journaled, then the engine, the record, the
     /// calls and the liveness watch of the new version.
-    fn swap(&mut self, candidate: crate::reload::Candidate, dir: &str) -> Result<(), Vec<String>> {
+    fn swap(
+        &mut self,
+        candidate: crate::reload::Candidate,
+        dir: &str,
+    ) -> Result<String, Vec<String>> {
         let mapped = self.map_onto(&candidate).map_err(|r| r.reasons)?;
         if let Some(journal) = &self.opts.journal {
             crate::reload::keep(journal, &candidate.source_hash, &candidate.files).map_err(
@@ -1239,6 +1248,8 @@ impl<'p> PlayerLoop<'p> {
         let time = self.engine.now();
         let new = crate::reload::leak(candidate.project);
         let queued = self.engine.take_queue();
+        let carried = queued.clone();
+        let carried_len = carried.len();
         let mut engine = Engine::new(new);
         let refused = engine
             .adopt(
@@ -1259,7 +1270,13 @@ impl<'p> PlayerLoop<'p> {
             mapping: candidate.mapping_text,
             state: mapped.state,
             deadlines: mapped.deadlines,
+            queued: carried,
         });
+        let handed = format!(
+            "queue: {} event(s) handed over to the new version, {} refused",
+            carried_len,
+            refused.len()
+        );
         for (event, why) in refused {
             warn!(event, reason = %why, "a queued event refused at the reload");
         }
@@ -1293,7 +1310,7 @@ impl<'p> PlayerLoop<'p> {
         self.snapshot_next = true;
         self.report.reloads += 1;
         self.version = Some(candidate.source_hash);
-        Ok(())
+        Ok(handed)
     }
 
     /// Publishes what the last step changed (the first message of a run is a full snapshot).

@@ -353,6 +353,7 @@ fn a_reload_entry_round_trips_and_leaves_the_earlier_entries_encoded_as_before()
         mapping: "[vanished]\nplaces = [\"A.q\"]\n".into(),
         state: vec![5, 0],
         deadlines: vec![Some(9), None],
+        queued: vec![("low".into(), vec![Value::Int(1)], Some("A".into()))],
     };
     let bytes = enc(&reload);
     assert_eq!(bytes[0], 8);

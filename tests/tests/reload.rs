@@ -398,6 +398,10 @@ fn events_sent_while_a_reload_is_verified_are_all_accounted() {
         let dir = if k % 2 == 0 { new.path() } else { old.path() };
         let o = reload(&player, dir, &[]);
         assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+        // How many events were in the queue at the swap (timing decides; shown, not asserted).
+        for line in text(&o).lines().filter(|l| l.contains("handed over")) {
+            eprintln!("reload {k}: {}", line.trim());
+        }
         accepted += 1;
     }
     let o = sender.wait_with_output().expect("petrel send ends");
