@@ -6,7 +6,7 @@ use petrel_nets::model::*;
 use petrel_nets::pnml::{export_pnml, import_pnml, parse_pnml, PtNode};
 use petrel_nets::source::{FileId, LineCol, SourceMap, Span};
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 fn mcc_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/mcc")
@@ -1952,4 +1952,36 @@ fn a_child_that_is_its_own_ancestor_is_made_once_without_children() {
     let xml = export_pnml(&p);
     let back = import_pnml(FileId(0), &xml, &mut Diagnostics::new());
     assert_eq!(back, Some(p));
+}
+
+/// Every mission of the repository survives export and import as it was written: Redermor's
+/// program answers and internal events were once lost, and the imported project failed its
+/// check.
+#[test]
+fn every_mission_of_the_repository_survives_export_and_import() {
+    let missions = Path::new(env!("CARGO_MANIFEST_DIR")).join("../missions");
+    let mut seen = 0;
+    for entry in std::fs::read_dir(&missions).unwrap() {
+        let dir = entry.unwrap().path();
+        if !dir.join("petrel.toml").exists() {
+            continue;
+        }
+        let loaded = petrel_nets::project::load(&dir).expect("the mission reads");
+        let xml = export_pnml(&loaded.project);
+        let mut map = SourceMap::new();
+        let file = map.add("mission.pnml", xml.clone());
+        let mut diags = Diagnostics::new();
+        let back = import_pnml(file, &xml, &mut diags).expect("imports");
+        assert!(
+            diags.is_empty(),
+            "{}: {}",
+            dir.display(),
+            diags.render_human(&map)
+        );
+        assert_eq!(back.manifest, loaded.project.manifest, "{}", dir.display());
+        assert_eq!(back.files, loaded.project.files, "{}", dir.display());
+        assert_eq!(export_pnml(&back), xml, "{}", dir.display());
+        seen += 1;
+    }
+    assert!(seen >= 4, "missions found: {seen}");
 }
