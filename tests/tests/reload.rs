@@ -424,3 +424,80 @@ fn events_sent_while_a_reload_is_verified_are_all_accounted() {
     assert_eq!(n("processed"), 3000, "{s}");
     assert!(player.stop().success());
 }
+
+/// A ground station that cannot read the version the vehicle reloaded (its files are not there:
+/// here a mount namespace hides them from the shadow alone) raises its alarm, follows no more
+/// and exits non-zero, while the vehicle flies on with the new version. Needs root for the
+/// mount namespace; says so and passes elsewhere.
+#[test]
+fn a_shadow_that_cannot_read_the_reloaded_version_raises_its_alarm() {
+    let can_unshare = Command::new("unshare")
+        .args(["-m", "true"])
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success());
+    if !can_unshare {
+        eprintln!(
+            "skipped: `unshare -m` needs root (a mount namespace hides files from the shadow)"
+        );
+        return;
+    }
+    let work = Workdir::new();
+    let (player, programs) = in_transit(&work);
+    let new = uav_with_birds("");
+    let shadow_log = work.path().join("shadow.log");
+    // The shadow's own mount namespace has an empty tmpfs where the new version is.
+    let shadow = Command::new("unshare")
+        .args(["-m", "--", "sh", "-c"])
+        .arg("mount -t tmpfs -o size=64k petrel-hidden \"$1\" && shift && exec \"$@\"")
+        .arg("sh")
+        .arg(new.path())
+        .arg(petrel_tests::petrel_bin())
+        .arg("play")
+        .arg(repo().join("missions/uav"))
+        .args(["--vehicle", &player.vehicle, "--shadow", "--run-for", "300"])
+        .env("RUST_LOG", "info")
+        .stderr(std::fs::File::create(&shadow_log).unwrap())
+        .spawn()
+        .expect("the shadow starts");
+    let shadow = Processes(vec![shadow]);
+    let wait_log = |needle: &str| {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+        loop {
+            let log = std::fs::read_to_string(&shadow_log).unwrap_or_default();
+            if log.contains(needle) {
+                return log;
+            }
+            assert!(
+                std::time::Instant::now() < deadline,
+                "the shadow never said `{needle}`:\n{log}"
+            );
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+    };
+    wait_log("shadow synchronised");
+
+    let o = reload(&player, new.path(), &[]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let log = wait_log("the shadow cannot follow");
+    assert!(log.contains("ALARM the vehicle reloaded version "), "{log}");
+    // The vehicle is not held back by its ground station: it flies the new version.
+    let o = send_to(&player, new.path(), "bird_strike");
+    assert!(o.status.success(), "{}", text(&o));
+    let s = player.wait_for(10.0, |s| marked(s, "BIRDS", "struck"));
+    assert!(marked(&s, "BIRDS", "struck"), "{s}");
+
+    let code = shadow.stop()[0];
+    let log = std::fs::read_to_string(&shadow_log).unwrap_or_default();
+    assert_ne!(
+        code,
+        Some(0),
+        "an alarm is a failure of the double check:\n{log}"
+    );
+    assert!(
+        log.contains("0 reload(s) followed, 1 divergence alarm(s)"),
+        "{log}"
+    );
+    drop(programs);
+    assert!(player.stop().success());
+}
