@@ -339,6 +339,16 @@ fn lex(file: FileId, text: &str, diags: &mut Diagnostics) -> Vec<Token> {
     toks
 }
 
+/// The comments before a closing `}`: a blank line above them is kept as a leading
+/// [`BLANK_LINE`](crate::model::BLANK_LINE) (the canonical layout has none of its own there).
+fn closing_comments(t: Trivia) -> Vec<String> {
+    let mut comments = t.comments;
+    if t.blank_before && !comments.is_empty() {
+        comments.insert(0, crate::model::BLANK_LINE.to_string());
+    }
+    comments
+}
+
 /// How deeply lists may nest in an argument. The language's only list type is `[float]`, so
 /// one level is all a valid file holds; the bound keeps the recursive descent (and every
 /// recursive walk of the expressions it builds) from overflowing the stack on crafted input
@@ -430,6 +440,9 @@ impl Parser<'_> {
         let blank_before = self.peek().blank_before;
         let mut comments = std::mem::take(&mut self.pending);
         while let Tok::Comment(c) = &self.peek().tok {
+            if self.peek().blank_before && !comments.is_empty() {
+                comments.push(crate::model::BLANK_LINE.to_string());
+            }
             comments.push(c.clone());
             self.bump();
         }
@@ -598,7 +611,7 @@ impl Parser<'_> {
                     name,
                     params,
                     items,
-                    end_comments: trivia.comments,
+                    end_comments: closing_comments(trivia),
                 });
             }
             if self.at(&Tok::Eof) {
@@ -779,7 +792,7 @@ impl Parser<'_> {
                 let trivia = self.leading();
                 if self.at(&Tok::RBrace) {
                     self.bump();
-                    end_comments = trivia.comments;
+                    end_comments = closing_comments(trivia);
                     break;
                 }
                 if self.at(&Tok::Eof) {

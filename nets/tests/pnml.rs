@@ -1985,3 +1985,16 @@ fn every_mission_of_the_repository_survives_export_and_import() {
     }
     assert!(seen >= 4, "missions found: {seen}");
 }
+
+/// Blank lines between comments (kept by `petrel fmt`) survive a PNML round trip too.
+#[test]
+fn blank_lines_between_comments_survive_export_and_import() {
+    let manifest = "[project]\nname = \"t\"\nfiles = [\"a.pn\"]\nstart = [\"A\"]\n";
+    let text = "// Header.\n\n// About A.\nnet A {\n    // One.\n\n    // Two.\n    place p = 1\n\n    // End.\n}\n\n// After, one.\n\n// After, two.\n";
+    let (project, _, d, _) = petrel_nets::project::from_sources(manifest, &[("a.pn", text)]);
+    assert!(d.is_empty(), "{d:?}");
+    let xml = export_pnml(&project);
+    let back = import_pnml(FileId(0), &xml, &mut Diagnostics::new()).expect("imports");
+    assert_eq!(back, project);
+    assert_eq!(petrel_nets::fmt::format_file(&back.files[0]), text);
+}
