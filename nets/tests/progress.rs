@@ -416,6 +416,105 @@ fn a_function_cannot_answer_with_an_internal_event() {
     assert!(d.iter().any(|x| x.code == "E0419"), "{d:?}");
 }
 
+// --- A pending event nobody takes is dropped, in the verifier as in the player. ---
+
+const DELEGATION: &str = r#"
+[project]
+name = "d"
+files = ["a.pn"]
+start = ["CTRL", "WORKER"]
+
+[events]
+go = { category = "nominal" }
+finished = { category = "nominal" }
+job = { category = "nominal", internal = true }
+job_done = { category = "nominal", internal = true }
+
+[verify]
+final = [["CTRL.over"]]
+"#;
+
+/// CTRL hands a job to WORKER and waits for it to be done; WORKER takes jobs only once it
+/// has finished what it was busy with. (`REPLY` is what the job's transition does.)
+const WORKING: &str = "net CTRL {
+    place ready = 1
+    place waiting
+    place over
+    transition hand_over on go: ready -> waiting {
+        emit job to WORKER
+    }
+    transition done on job_done: waiting -> over
+}
+net WORKER {
+    place busy = 1
+    place idle
+    transition finish on finished: busy -> idle
+    transition work on job: idle -> idle {
+        REPLY
+    }
+}";
+
+#[test]
+fn an_emitted_event_no_transition_takes_is_dropped_and_the_mission_that_waited_on_it_is_stuck() {
+    // `go` while WORKER is busy: the player takes `job` from its queue, finds no candidate and
+    // drops it as unused (docs/semantics.md, step 5); CTRL then waits for `job_done` forever.
+    // The verifier used to let `job` wait until WORKER was idle, and found nothing.
+    let nets = WORKING.replace("REPLY", "emit job_done");
+    let r = verify(&inline(DELEGATION, &nets), VerifyOptions::default()).unwrap();
+    let f = r.no_progress.as_ref().expect("E0605");
+    assert_eq!(f.stays_in, ["CTRL{waiting}", "WORKER{idle}"]);
+    assert_eq!(
+        f.stays_in_trace,
+        ["go", "job to WORKER (unused)", "finished"]
+    );
+    let ctrl = r
+        .stuck_nets
+        .iter()
+        .find(|s| s.net == "CTRL")
+        .expect("CTRL stuck");
+    assert_eq!(ctrl.trace, ["go", "job to WORKER (unused)"]);
+    // Where it ends: a dead marking that is no declared end, reached once `job` is gone.
+    let dead: Vec<&Vec<String>> = r
+        .dead_markings
+        .iter()
+        .filter(|d| !d.intended)
+        .map(|d| &d.marking)
+        .collect();
+    assert_eq!(
+        dead,
+        [&vec![
+            "CTRL{waiting}".to_string(),
+            "WORKER{idle}".to_string()
+        ]]
+    );
+    assert!(r.deadlock && !r.is_clean());
+    // Delivered later, the job is still taken: the verifier does not model the queue's order
+    // (an over-approximation), it only no longer omits the drop.
+    let end = r.dead_markings.iter().find(|d| d.intended).expect("over");
+    assert_eq!(end.trace, ["go", "finished", "job to WORKER", "job_done"]);
+}
+
+#[test]
+fn an_emitted_event_dropped_where_nothing_waits_on_it_is_harmless() {
+    // The same delegation, but nobody waits for the job: dropping it changes nothing that
+    // matters, and the project stays clean.
+    let nets = WORKING
+        .replace("REPLY", "")
+        .replace("ready -> waiting", "ready -> over");
+    let manifest = DELEGATION.replace(
+        "job_done = { category = \"nominal\", internal = true }\n",
+        "",
+    );
+    let nets = nets.replace("    transition done on job_done: waiting -> over\n", "");
+    let r = verify(&inline(&manifest, &nets), VerifyOptions::default()).unwrap();
+    assert!(r.is_clean(), "{r:#?}");
+    assert!(r.no_progress.is_none() && r.stuck_nets.is_empty());
+    // The drop is explored: the stable states are the start, `go` with the job pending
+    // (WORKER busy or idle), `finished` alone, and CTRL over with the job gone (WORKER busy or
+    // idle); "over, busy, job gone" is the drop, which the verifier used to leave out.
+    assert_eq!(r.states, 6);
+}
+
 #[test]
 fn one_net_alone_is_given_only_the_places_other_nets_change() {
     let ugv = Path::new(env!("CARGO_MANIFEST_DIR")).join("../missions/ugv");

@@ -312,7 +312,8 @@ pub(super) fn explore(
         max_tokens_per_marking: 0,
         alone: false,
     };
-    let mut label_ids: HashMap<(u32, Vec<bool>, Option<u32>), u32> = HashMap::new();
+    // Keyed by delivery, guard outcomes, counter, and whether the delivery went unused.
+    let mut label_ids: HashMap<(u32, Vec<bool>, Option<u32>, bool), u32> = HashMap::new();
     let mut fired_ids: HashMap<Vec<u32>, u32> = HashMap::new();
     let mut index: HashMap<State, u32> = HashMap::new();
     let mut unsafe_seen: HashMap<(u32, u32), ()> = HashMap::new();
@@ -419,6 +420,55 @@ pub(super) fn explore(
                     &mut candidates,
                 );
                 if candidates.is_empty() {
+                    // No transition takes it here. A free event then changes nothing (the
+                    // player counts it unused), but a pending answer or emission is consumed
+                    // all the same: the player takes it from its queue, finds no candidate
+                    // and drops it (docs/semantics.md, "Processing one event", step 5). The
+                    // verifier must not let it wait for a consumer that may come later.
+                    for counter in counters.into_iter().flatten() {
+                        let t = run_step(
+                            sem,
+                            env,
+                            &mut rec,
+                            &mut scratch,
+                            &s,
+                            Some(d),
+                            &[],
+                            Some(counter),
+                        );
+                        if t == s {
+                            // A counter at "many" stays there: nothing happened.
+                            continue;
+                        }
+                        // The player still has this event to process: not a dead marking.
+                        any_enabled = true;
+                        let key = (di as u32, vec![], Some(counter), true);
+                        let lid = match label_ids.get(&key) {
+                            Some(&l) => l,
+                            None => {
+                                g.labels.push(Label {
+                                    text: format!("{} (unused)", d.label),
+                                    event: d.event,
+                                    delivery: di as u32,
+                                    choices: Vec::new(),
+                                    counter: Some(counter),
+                                });
+                                let l = (g.labels.len() - 1) as u32;
+                                label_ids.insert(key, l);
+                                l
+                            }
+                        };
+                        let fid = match fired_ids.get(&Vec::new()) {
+                            Some(&f) => f,
+                            None => {
+                                g.fired_sets.push(Vec::new());
+                                let f = (g.fired_sets.len() - 1) as u32;
+                                fired_ids.insert(Vec::new(), f);
+                                f
+                            }
+                        };
+                        successors.push((t, Via::Step(i, lid), Some((lid, fid))));
+                    }
                     continue;
                 }
                 any_enabled = true;
@@ -461,7 +511,7 @@ pub(super) fn explore(
                         let choices: Vec<bool> = (0..rec.oracle.used)
                             .map(|k| prefix.get(k).copied().unwrap_or(false))
                             .collect();
-                        let key = (di as u32, choices.clone(), counter);
+                        let key = (di as u32, choices.clone(), counter, false);
                         let lid = match label_ids.get(&key) {
                             Some(&l) => l,
                             None => {
@@ -529,7 +579,7 @@ pub(super) fn explore(
             env.apply(&mut t, &rec.requests);
             record(&mut g, &rec, &|g| g.trace(i));
             // An edge like the others, labelled with the environment's move (no event).
-            let key = (u32::MAX - k as u32, vec![set], None);
+            let key = (u32::MAX - k as u32, vec![set], None, false);
             let lid = *label_ids.entry(key).or_insert_with(|| {
                 g.labels.push(Label {
                     text: format!(
