@@ -1,0 +1,336 @@
+//! A vehicle on two computers joined by `petrel gateway` (docs/gateway.md). Each "computer" is
+//! its own iceoryx2 root (`PETREL_RUNTIME_DIR`: its own directory and shared-memory prefix), so
+//! the two halves see nothing of each other but through zenoh on loopback.
+//!
+//! The project (tests/data/relay) is the same as on one computer: the player calls ECHO and
+//! waits for its `pong`; nothing in it or in the program knows there are two computers.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use petrel_tests::{
+    example_bin, journal_json, petrel_bin, repo, unique_vehicle, Processes, Workdir,
+};
+
+/// One simulated computer: its own iceoryx2 root.
+struct Computer {
+    name: &'static str,
+    root: PathBuf,
+    work: PathBuf,
+    /// The root, removed pass or fail; short, in /tmp: iceoryx2's Unix sockets live in it.
+    _root: tempfile::TempDir,
+}
+
+impl Computer {
+    fn new(work: &Workdir, name: &'static str) -> Computer {
+        let root = tempfile::Builder::new()
+            .prefix("pg")
+            .tempdir_in("/tmp")
+            .expect("a runtime root");
+        Computer {
+            name,
+            root: root.path().to_path_buf(),
+            work: work.path().to_path_buf(),
+            _root: root,
+        }
+    }
+
+    fn command(&self, program: &Path) -> Command {
+        let mut c = Command::new(program);
+        c.env("PETREL_RUNTIME_DIR", &self.root);
+        c
+    }
+
+    fn spawn(&self, program: &Path, args: &[&str], log: &str) -> Child {
+        self.command(program)
+            .args(args)
+            .stdout(std::fs::File::create(self.work.join(format!("{log}.out"))).expect("log"))
+            .stderr(std::fs::File::create(self.work.join(format!("{log}.log"))).expect("log"))
+            .spawn()
+            .expect("the process starts")
+    }
+
+    fn gateway(&self, project: &Path, vehicle: &str, log: &str) -> Child {
+        self.spawn(
+            &petrel_bin(),
+            &[
+                "gateway",
+                &project.display().to_string(),
+                "--vehicle",
+                vehicle,
+                "--computer",
+                self.name,
+            ],
+            log,
+        )
+    }
+
+    /// `petrel status --json` on this computer.
+    fn status(&self, project: &Path, vehicle: &str) -> Option<serde_json::Value> {
+        let o = self
+            .command(&petrel_bin())
+            .arg("status")
+            .arg(project)
+            .args(["--vehicle", vehicle, "--json"])
+            .stderr(Stdio::null())
+            .output()
+            .ok()?;
+        o.status
+            .success()
+            .then(|| serde_json::from_slice(&o.stdout).ok())
+            .flatten()
+    }
+
+    /// Waits (up to a minute: the machine is shared) until `pred` holds on this computer's
+    /// status; returns it, or panics with the last one and the logs.
+    fn wait_for(
+        &self,
+        project: &Path,
+        vehicle: &str,
+        what: &str,
+        pred: impl Fn(&serde_json::Value) -> bool,
+    ) -> serde_json::Value {
+        let deadline = Instant::now() + Duration::from_secs(60);
+        let mut last = serde_json::Value::Null;
+        while Instant::now() < deadline {
+            if let Some(s) = self.status(project, vehicle) {
+                if pred(&s) {
+                    return s;
+                }
+                last = s;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        panic!(
+            "on computer {}: never {what}; last status {last}\nlogs: {}",
+            self.name,
+            logs(&self.work)
+        );
+    }
+
+    fn send(&self, project: &Path, vehicle: &str, event: &str) {
+        let o = self
+            .command(&petrel_bin())
+            .arg("send")
+            .arg(project)
+            .arg(event)
+            .args(["--vehicle", vehicle])
+            .output()
+            .expect("petrel send runs");
+        assert!(
+            o.status.success(),
+            "petrel send {event}: {}{}",
+            String::from_utf8_lossy(&o.stdout),
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
+}
+
+fn logs(dir: &Path) -> String {
+    let mut text = String::new();
+    for e in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+        let p = e.path();
+        if p.extension().is_some_and(|x| x == "log" || x == "out") {
+            text.push_str(&format!(
+                "\n--- {}\n{}",
+                p.display(),
+                std::fs::read_to_string(&p).unwrap_or_default()
+            ));
+        }
+    }
+    text
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .expect("a free port")
+}
+
+/// tests/data/relay with a vehicle file: the player on A, ECHO on B.
+fn project(work: &Workdir) -> PathBuf {
+    let dir = work.path().join("relay");
+    std::fs::create_dir_all(&dir).expect("project dir");
+    for f in ["petrel.toml", "relay.pn"] {
+        std::fs::copy(repo().join("tests/data/relay").join(f), dir.join(f)).expect("copy");
+    }
+    let vehicle = format!(
+        r#"[computers.A]
+gateway = "tcp/127.0.0.1:{}"
+[computers.B]
+gateway = "tcp/127.0.0.1:{}"
+
+[link]
+detection = "500ms"
+lost_event = "link_lost"
+restored_event = "link_restored"
+
+[[process]]
+name = "player"
+kind = "player"
+computer = "A"
+
+[[process]]
+name = "echo"
+kind = "program"
+programs = ["ECHO"]
+computer = "B"
+executable = "{{target}}/examples/echo"
+args = ["{{vehicle}}", "ECHO"]
+"#,
+        free_port(),
+        free_port()
+    );
+    std::fs::write(dir.join("vehicle.toml"), vehicle).expect("vehicle.toml");
+    dir
+}
+
+fn place(s: &serde_json::Value, net: &str, place: &str) -> bool {
+    s["marking"][net]
+        .as_array()
+        .is_some_and(|a| a.iter().any(|p| p == place))
+}
+
+fn counts<'a>(s: &'a serde_json::Value, computer: &str, kind: &str) -> &'a serde_json::Value {
+    &s["gateways"][computer]["counters"]["kinds"][kind]
+}
+
+/// Every link message of a kind a gateway heard is accounted for.
+fn accounted(c: &serde_json::Value) -> bool {
+    let n = |k: &str| c[k].as_u64().unwrap_or(0);
+    n("from_link") == n("delivered") + n("refused") + n("not_mine") + n("unheard")
+}
+
+#[test]
+fn a_program_on_another_computer_answers_and_a_lost_computer_is_an_event() {
+    let work = Workdir::new();
+    let dir = project(&work);
+    let vehicle = unique_vehicle("relay");
+    let (a, b) = (Computer::new(&work, "A"), Computer::new(&work, "B"));
+    let journal = work.path().join("journal");
+    let player = a.spawn(
+        &petrel_bin(),
+        &[
+            "play",
+            &dir.display().to_string(),
+            "--vehicle",
+            &vehicle,
+            "--journal",
+            &journal.display().to_string(),
+        ],
+        "player",
+    );
+    let mut procs = Processes(vec![player]);
+    procs.0.push(a.gateway(&dir, &vehicle, "gw-a"));
+    procs.0.push(b.gateway(&dir, &vehicle, "gw-b"));
+    procs
+        .0
+        .push(b.spawn(&example_bin("echo"), &[&vehicle, "ECHO"], "echo"));
+
+    // ECHO lives on B, yet the player's computer sees it alive (the gateway's stand-in).
+    a.wait_for(&dir, &vehicle, "ECHO alive on A", |s| {
+        s["programs"]["ECHO"] == "alive"
+    });
+    // B has no player, yet its `petrel status` shows the player's (the heartbeat crossed).
+    let on_b = b.wait_for(&dir, &vehicle, "the player's status on B", |s| {
+        place(s, "RELAY", "ready")
+    });
+    assert_eq!(on_b["project"], "relay", "{on_b}");
+
+    a.send(&dir, &vehicle, "start_mission");
+    let s = a.wait_for(&dir, &vehicle, "the pong back", |s| {
+        place(s, "RELAY", "ready") && s["stats"]["processed"] == 2
+    });
+    assert_eq!(s["stats"]["calls_sent"], 1, "{s}");
+    assert_eq!(counts(&s, "A", "call")["to_link"], 1, "{s}");
+    assert_eq!(counts(&s, "A", "event")["delivered"], 1, "{s}");
+
+    // SIGKILL B's gateway mid-mission: A raises link_lost(B) within the bound and ECHO becomes
+    // program_lost for the nets.
+    let gw_b = procs.0.remove(2);
+    let mut gw_b = gw_b;
+    gw_b.kill().expect("SIGKILL");
+    gw_b.wait().expect("reaped");
+    let s = a.wait_for(&dir, &vehicle, "B lost", |s| {
+        place(s, "LINK", "down") && place(s, "PROGS", "gone")
+    });
+    assert_eq!(s["gateways"]["A"]["peers"]["B"]["state"], "lost", "{s}");
+
+    // B's gateway back: link_restored(B), ECHO alive again, and it answers again.
+    procs.0.push(b.gateway(&dir, &vehicle, "gw-b2"));
+    a.wait_for(&dir, &vehicle, "B back", |s| {
+        place(s, "LINK", "up") && s["programs"]["ECHO"] == "alive"
+    });
+    a.send(&dir, &vehicle, "start_mission");
+    let s = a.wait_for(&dir, &vehicle, "the second pong", |s| {
+        place(s, "RELAY", "ready") && counts(s, "A", "event")["delivered"] == 2
+    });
+    for kind in ["event", "call", "beacon", "heartbeat", "marking"] {
+        assert!(accounted(counts(&s, "A", kind)), "{kind}: {s}");
+    }
+    assert_eq!(s["gateways"]["A"]["peers"]["B"]["missing"], 0, "{s}");
+    assert_eq!(s["gateways"]["A"]["peers"]["B"]["restarts"], 1, "{s}");
+    let on_b = b.wait_for(&dir, &vehicle, "B's counters", |s| {
+        counts(s, "B", "call")["delivered"] == 1
+    });
+    for kind in ["event", "call", "beacon", "heartbeat", "marking"] {
+        assert!(accounted(counts(&on_b, "B", kind)), "{kind}: {on_b}");
+    }
+    // Every event the program emitted after the restart reached the player: the second
+    // gateway put one event on the link, and A delivered two in all.
+    assert_eq!(counts(&on_b, "B", "event")["to_link"], 1, "{on_b}");
+
+    let codes = procs.stop();
+    assert!(
+        codes.iter().all(|c| *c == Some(0)),
+        "{codes:?}: {}",
+        logs(work.path())
+    );
+    // The journal: the pongs came from program/ECHO (the stand-in sends as the program), and
+    // the link's loss and return are on record.
+    let (entries, _) = journal_json(&journal);
+    let submitted = |name: &str| {
+        entries
+            .iter()
+            .filter(|e| e["kind"] == "submit" && e["event"] == name)
+            .collect::<Vec<_>>()
+    };
+    let pongs = submitted("pong");
+    assert_eq!(pongs.len(), 2, "{entries:?}");
+    assert!(pongs.iter().all(|e| e["origin"]
+        .as_str()
+        .unwrap_or("")
+        .starts_with("program/ECHO#")));
+    assert_eq!(submitted("link_lost").len(), 1, "{entries:?}");
+    assert_eq!(submitted("link_lost")[0]["params"][0], "\"B\"");
+    assert_eq!(submitted("link_restored").len(), 1, "{entries:?}");
+}
+
+#[test]
+fn a_link_event_must_be_a_communication_event_of_the_project() {
+    let work = Workdir::new();
+    let dir = project(&work);
+    let text = std::fs::read_to_string(dir.join("vehicle.toml")).expect("vehicle.toml");
+    std::fs::write(
+        dir.join("vehicle.toml"),
+        text.replace("lost_event = \"link_lost\"", "lost_event = \"pong\""),
+    )
+    .expect("vehicle.toml");
+    let o = petrel_tests::petrel(&["check", &dir.display().to_string()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("E0812") && err.contains("communication"),
+        "{err}"
+    );
+    // The gateway refuses to start on it, saying why.
+    let o = petrel_tests::petrel(&["gateway", &dir.display().to_string(), "--computer", "A"]);
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
