@@ -194,6 +194,70 @@ impl Counters {
     }
 }
 
+/// The player's acknowledgements, translated back for senders of other computers: the player
+/// acknowledges the gateway's port that sent it an event (by that port's sequence numbers);
+/// the sender on the other computer waits for its own id and numbers.
+#[derive(Debug, Clone, Default)]
+pub struct AckMap {
+    /// By the id of the port that sent the events to the player: (its sequence number, the
+    /// original sender's id, its sequence number, its origin), in sending order.
+    sent: BTreeMap<u64, Vec<(u64, u64, u64, String)>>,
+}
+
+/// Entries kept per port at most: past it, the oldest half goes (their senders were long
+/// acknowledged).
+const ACK_MAP_MAX: usize = 8192;
+
+impl AckMap {
+    /// The port `port` sent, as its message `port_seq`, the message `seq` of `sender`.
+    pub fn record(&mut self, port: u64, port_seq: u64, sender: u64, seq: u64, origin: &str) {
+        let list = self.sent.entry(port).or_default();
+        if list.len() >= ACK_MAP_MAX {
+            list.drain(..ACK_MAP_MAX / 2);
+        }
+        list.push((port_seq, sender, seq, origin.to_owned()));
+    }
+
+    /// The acknowledgements of the original senders behind the ports among `acks`.
+    pub fn translate(&self, acks: &[petrel_ipc::Ack]) -> Vec<petrel_ipc::Ack> {
+        let mut out: Vec<petrel_ipc::Ack> = Vec::new();
+        for ack in acks {
+            let Some(list) = self.sent.get(&ack.sender) else {
+                continue;
+            };
+            let mut by_sender: BTreeMap<u64, petrel_ipc::Ack> = BTreeMap::new();
+            for (port_seq, sender, seq, origin) in list {
+                let a = by_sender.entry(*sender).or_insert_with(|| petrel_ipc::Ack {
+                    sender: *sender,
+                    origin: origin.clone(),
+                    pending: ack.pending,
+                    unrecorded: ack.unrecorded,
+                    ..petrel_ipc::Ack::default()
+                });
+                if *port_seq <= ack.last_seq {
+                    a.last_seq = a.last_seq.max(*seq);
+                    a.received += 1;
+                }
+                if *port_seq <= ack.settled_seq {
+                    a.settled_seq = a.settled_seq.max(*seq);
+                }
+                for r in ack.refusals.iter().filter(|r| r.seq == *port_seq) {
+                    a.refused += 1;
+                    a.refusals.push(petrel_ipc::AckRefusal {
+                        seq: *seq,
+                        reason: r.reason.clone(),
+                    });
+                }
+            }
+            for (_, mut a) in by_sender {
+                a.taken = a.received.saturating_sub(a.refused);
+                out.push(a);
+            }
+        }
+        out
+    }
+}
+
 /// What to do with a link message.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Route {
@@ -247,8 +311,15 @@ impl Core {
         &self.peers
     }
 
-    /// A message of this gateway for the link, numbered.
-    pub fn outgoing(&mut self, origin: &str, kind: LinkKind, body: Vec<u8>) -> LinkMsg {
+    /// A message of this gateway for the link, numbered; `sender` and `seq` are the ipc
+    /// header's of the message it carries (0 for the gateway's own).
+    pub fn outgoing(
+        &mut self,
+        origin: &str,
+        (sender, seq): (u64, u64),
+        kind: LinkKind,
+        body: Vec<u8>,
+    ) -> LinkMsg {
         let link_seq = self.next_seq;
         self.next_seq += 1;
         LinkMsg {
@@ -256,6 +327,8 @@ impl Core {
             incarnation: self.incarnation,
             link_seq,
             origin: origin.to_owned(),
+            sender,
+            seq,
             kind,
             body,
         }
@@ -413,6 +486,8 @@ mod tests {
             incarnation: 9,
             link_seq: seq,
             origin: "program/PLN".into(),
+            sender: 0,
+            seq: 0,
             kind,
             body: vec![],
         }
@@ -514,10 +589,41 @@ mod tests {
     }
 
     #[test]
+    fn acknowledgements_are_translated_to_the_original_senders() {
+        let mut map = AckMap::default();
+        // Port 7 sent B's sender 100's messages 1 and 2 as its 1 and 2, then sender 200's 5
+        // as its 3.
+        map.record(7, 1, 100, 1, "program/PLN");
+        map.record(7, 2, 100, 2, "program/PLN");
+        map.record(7, 3, 200, 5, "tool/send1");
+        let ack = petrel_ipc::Ack {
+            sender: 7,
+            last_seq: 3,
+            settled_seq: 2,
+            refusals: vec![petrel_ipc::AckRefusal {
+                seq: 3,
+                reason: "unknown event".into(),
+            }],
+            ..Default::default()
+        };
+        let other = petrel_ipc::Ack {
+            sender: 8,
+            ..Default::default()
+        };
+        let t = map.translate(&[ack, other]);
+        assert_eq!(t.len(), 2);
+        assert_eq!((t[0].sender, t[0].last_seq, t[0].settled_seq), (100, 2, 2));
+        assert!(t[0].settles(2));
+        assert_eq!((t[1].sender, t[1].last_seq, t[1].settled_seq), (200, 5, 0));
+        assert_eq!(t[1].refusals[0].seq, 5);
+        assert_eq!((t[1].refused, t[1].taken), (1, 0));
+    }
+
+    #[test]
     fn outgoing_messages_are_numbered() {
         let mut b = Core::new(plan("B"), 5);
-        let m1 = b.outgoing("program/PLN", LinkKind::Event, vec![1]);
-        let m2 = b.outgoing("program/PLN", LinkKind::Event, vec![2]);
+        let m1 = b.outgoing("program/PLN", (1, 1), LinkKind::Event, vec![1]);
+        let m2 = b.outgoing("program/PLN", (1, 2), LinkKind::Event, vec![2]);
         assert_eq!((m1.link_seq, m2.link_seq, m2.from.as_str()), (1, 2, "B"));
     }
 }

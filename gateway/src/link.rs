@@ -59,6 +59,11 @@ pub struct LinkMsg {
     /// The iceoryx2 origin of the message on its first computer (`player`, `program/PLN`,
     /// `tool/send123`), so the receiving side can send it under the same role.
     pub origin: String,
+    /// The ipc sender id of the message on its first computer (0 for the gateway's own).
+    pub sender: u64,
+    /// Its ipc sequence number there, so that the player's acknowledgement can be translated
+    /// back to the sender.
+    pub seq: u64,
     /// What it is.
     pub kind: LinkKind,
     /// The ipc body, exactly as the ipc crate encodes it.
@@ -115,6 +120,8 @@ mod tests {
             incarnation: 7,
             link_seq: 3,
             origin: "program/PLN".into(),
+            sender: 11,
+            seq: 2,
             kind: LinkKind::Call {
                 program: "GUI".into(),
             },

@@ -25,7 +25,7 @@ use petrel_ipc::{
 };
 use zenoh::Wait;
 
-use crate::core::{Core, PeerChange, Plan, Route};
+use crate::core::{AckMap, Core, PeerChange, Plan, Route};
 use crate::link::{key_all, key_of, LinkKind, LinkMsg};
 
 /// The events the player's computer raises when a peer computer is lost or comes back, each
@@ -108,6 +108,29 @@ pub fn zenoh_config(s: &Settings) -> Result<zenoh::Config, GatewayError> {
     zenoh::Config::from_json5(&doc.to_string()).map_err(|e| err("the zenoh configuration", e))
 }
 
+/// Removes the resources of the vehicle's dead nodes on this computer, saying what it did.
+fn clean_dead(vehicle: &Vehicle) {
+    match petrel_ipc::cleanup_dead_nodes(vehicle, Duration::from_millis(500)) {
+        Ok(r) => {
+            if !r.cleaned.is_empty() {
+                tracing::info!(
+                    "cleaned up {} dead node(s) of the vehicle: {}",
+                    r.cleaned.len(),
+                    r.cleaned
+                        .iter()
+                        .map(|n| n.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                );
+            }
+            for (n, e) in &r.failed {
+                tracing::warn!("cannot clean up dead node `{}`: {e:?}", n.name);
+            }
+        }
+        Err(e) => tracing::warn!("cannot clean up the vehicle's dead nodes: {e}"),
+    }
+}
+
 /// The encoded body of an ipc message.
 fn body_of<M: Message>(msg: &M) -> Result<Vec<u8>, String> {
     let len = wire::encoded_len(msg).map_err(|e| e.to_string())?;
@@ -160,20 +183,9 @@ pub fn run(settings: Settings) -> Result<serde_json::Value, GatewayError> {
         Participant::join(&vehicle, role).map_err(|e| err("cannot join the vehicle", e))?;
     // A gateway killed before this one left its stand-ins' nodes dead: a dead `player` would
     // keep this computer's programs waiting (they wait for a dead player to be cleaned up), a
-    // dead program would look crashed. Clean them as a restarted player does.
-    match petrel_ipc::cleanup_dead_nodes(&vehicle, Duration::from_millis(500)) {
-        Ok(r) if !r.cleaned.is_empty() => tracing::info!(
-            "cleaned up {} dead node(s) of the vehicle: {}",
-            r.cleaned.len(),
-            r.cleaned
-                .iter()
-                .map(|n| n.name.as_str())
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
-        Ok(_) => {}
-        Err(e) => tracing::warn!("cannot clean up the vehicle's dead nodes: {e}"),
-    }
+    // dead program would look crashed. Clean them as a restarted player does (and again at
+    // each beacon that finds one).
+    clean_dead(&vehicle);
     let mut ids = OwnIds::default();
     let status = participant
         .heartbeat_publisher_sized(64 * 1024)
@@ -260,6 +272,7 @@ pub fn run(settings: Settings) -> Result<serde_json::Value, GatewayError> {
         own,
         ids,
         mirrors: BTreeMap::new(),
+        acks: AckMap::default(),
         link_events,
         publisher,
         start: Instant::now(),
@@ -327,6 +340,7 @@ struct Gateway {
     own: Own,
     ids: OwnIds,
     mirrors: BTreeMap<String, Mirror>,
+    acks: AckMap,
     link_events: Option<LinkEvents>,
     publisher: zenoh::pubsub::Publisher<'static>,
     start: Instant,
@@ -338,9 +352,9 @@ impl Gateway {
         self.start.elapsed().as_micros() as u64
     }
 
-    fn put(&mut self, origin: &str, kind: LinkKind, body: Vec<u8>) {
+    fn put(&mut self, origin: &str, header: (u64, u64), kind: LinkKind, body: Vec<u8>) {
         let name = kind.name();
-        let msg = self.core.outgoing(origin, kind, body);
+        let msg = self.core.outgoing(origin, header, kind, body);
         let bytes = match msg.encode() {
             Ok(b) => b,
             Err(e) => {
@@ -363,40 +377,56 @@ impl Gateway {
     fn beacon(&mut self) {
         let exported = self.core.plan().exported_nodes();
         let alive: Vec<String> = match petrel_ipc::list_nodes(&self.vehicle) {
-            Ok(nodes) => exported
-                .into_iter()
-                .filter(|e| {
-                    nodes
-                        .iter()
-                        .any(|n| &n.name == e && n.status == petrel_ipc::NodeStatus::Alive)
-                })
-                .collect(),
+            Ok(nodes) => {
+                // A dead node with a stand-in's name (a killed gateway's, or a crashed
+                // process's) would keep programs waiting: clean it up now.
+                let stale = nodes.iter().any(|n| {
+                    n.status == petrel_ipc::NodeStatus::Dead
+                        && (n.name == "player" || n.name.starts_with("program/"))
+                });
+                if stale {
+                    clean_dead(&self.vehicle);
+                }
+                exported
+                    .into_iter()
+                    .filter(|e| {
+                        nodes
+                            .iter()
+                            .any(|n| &n.name == e && n.status == petrel_ipc::NodeStatus::Alive)
+                    })
+                    .collect()
+            }
             Err(e) => {
                 tracing::warn!("cannot list the vehicle's nodes: {e}");
                 Vec::new()
             }
         };
-        self.put("gateway", LinkKind::Beacon { alive }, Vec::new());
+        self.put("gateway", (0, 0), LinkKind::Beacon { alive }, Vec::new());
     }
 
     fn take_local(&mut self) {
-        let mut out: Vec<(String, LinkKind, Vec<u8>)> = Vec::new();
+        type Out = Vec<(String, (u64, u64), LinkKind, Vec<u8>)>;
+        let mut out: Out = Vec::new();
         let mut failed: Vec<(&'static str, String)> = Vec::new();
         fn take<M: Message>(
             r: &petrel_ipc::Receiver<M>,
             kind: &LinkKind,
             core: &mut Core,
             ids: &OwnIds,
-            out: &mut Vec<(String, LinkKind, Vec<u8>)>,
+            out: &mut Out,
             failed: &mut Vec<(&'static str, String)>,
+            edit: &dyn Fn(&mut M),
         ) {
             let drained = r.drain(|r: Result<Received<M>, petrel_ipc::RecvError>| match r {
-                Ok(rcv) => {
+                Ok(mut rcv) => {
                     let origin = rcv.origin.as_str().to_owned();
                     let own = ids.0.contains(&rcv.sender);
                     if core.forward_local(kind, &origin, own) {
+                        edit(&mut rcv.msg);
                         match body_of(&rcv.msg) {
-                            Ok(body) => out.push((origin, kind.clone(), body)),
+                            Ok(body) => {
+                                out.push((origin, (rcv.sender, rcv.seq), kind.clone(), body))
+                            }
                             Err(e) => failed.push((kind.name(), e)),
                         }
                     }
@@ -415,9 +445,21 @@ impl Gateway {
                 &self.ids,
                 &mut out,
                 &mut failed,
+                &|_| {},
             );
         }
         if let Some(r) = &self.own.beats_in {
+            let acks = &self.acks;
+            // The other computers' senders wait for their own ids: theirs first, since a
+            // heartbeat carries at most 64 acknowledgements.
+            let translate = |beat: &mut Heartbeat| {
+                let mut translated = acks.translate(&beat.acks);
+                if !translated.is_empty() {
+                    translated.append(&mut beat.acks);
+                    beat.acks = translated;
+                    beat.bound();
+                }
+            };
             take(
                 r,
                 &LinkKind::Heartbeat,
@@ -425,6 +467,7 @@ impl Gateway {
                 &self.ids,
                 &mut out,
                 &mut failed,
+                &translate,
             );
         }
         if let Some(r) = &self.own.marking_in {
@@ -435,6 +478,7 @@ impl Gateway {
                 &self.ids,
                 &mut out,
                 &mut failed,
+                &|_| {},
             );
         }
         for (node, m) in &self.mirrors {
@@ -442,14 +486,22 @@ impl Gateway {
                 let kind = LinkKind::Call {
                     program: program.to_owned(),
                 };
-                take(r, &kind, &mut self.core, &self.ids, &mut out, &mut failed);
+                take(
+                    r,
+                    &kind,
+                    &mut self.core,
+                    &self.ids,
+                    &mut out,
+                    &mut failed,
+                    &|_| {},
+                );
             }
         }
         for (kind, why) in failed {
             self.core.counters.refuse_to_link(kind, why);
         }
-        for (origin, kind, body) in out {
-            self.put(&origin, kind, body);
+        for (origin, header, kind, body) in out {
+            self.put(&origin, header, kind, body);
         }
     }
 
@@ -487,7 +539,7 @@ impl Gateway {
         let mirror = self.mirrors.get_mut(&msg.origin);
         let sent = match &msg.kind {
             LinkKind::Event => {
-                let sender = match mirror {
+                let sender: Option<&EventSender> = match mirror {
                     Some(m) => {
                         if m.events.is_none() {
                             let s = m.participant.event_sender().map_err(|e| e.to_string())?;
@@ -498,7 +550,20 @@ impl Gateway {
                     }
                     None => Some(&self.own.events_out),
                 };
-                sender.map(|s| s.send_encoded(&msg.body))
+                let sent = sender.map(|s| (s.sender_id(), s.send_encoded(&msg.body)));
+                // The player acknowledges the port that sent it: remember whose message it
+                // was, for the heartbeat that goes back (see `AckMap`).
+                if let Some((port, Ok(s))) = &sent {
+                    self.acks
+                        .record(*port, s.seq, msg.sender, msg.seq, &msg.origin);
+                }
+                if let Some((port, Err(e))) = &sent {
+                    if let Some(seq) = e.seq() {
+                        self.acks
+                            .record(*port, seq, msg.sender, msg.seq, &msg.origin);
+                    }
+                }
+                sent.map(|(_, r)| r)
             }
             LinkKind::Call { program } => {
                 let (participant, calls) = match mirror {

@@ -109,7 +109,7 @@ impl Computer {
         );
     }
 
-    fn send(&self, project: &Path, vehicle: &str, event: &str) {
+    fn send(&self, project: &Path, vehicle: &str, event: &str) -> String {
         let o = self
             .command(&petrel_bin())
             .arg("send")
@@ -118,12 +118,13 @@ impl Computer {
             .args(["--vehicle", vehicle])
             .output()
             .expect("petrel send runs");
+        let out = String::from_utf8_lossy(&o.stdout).into_owned();
         assert!(
             o.status.success(),
-            "petrel send {event}: {}{}",
-            String::from_utf8_lossy(&o.stdout),
+            "petrel send {event}: {out}{}",
             String::from_utf8_lossy(&o.stderr)
         );
+        out
     }
 }
 
@@ -163,7 +164,7 @@ gateway = "tcp/127.0.0.1:{}"
 gateway = "tcp/127.0.0.1:{}"
 
 [link]
-detection = "500ms"
+detection = "1s"
 lost_event = "link_lost"
 restored_event = "link_restored"
 
@@ -263,9 +264,13 @@ fn a_program_on_another_computer_answers_and_a_lost_computer_is_an_event() {
     a.wait_for(&dir, &vehicle, "B back", |s| {
         place(s, "LINK", "up") && s["programs"]["ECHO"] == "alive"
     });
-    a.send(&dir, &vehicle, "start_mission");
+    // This time from B, as a ground station would: the player's verdict comes back to
+    // `petrel send` there, by its own sender id (the gateways translate the acknowledgement).
+    let verdict = b.send(&dir, &vehicle, "start_mission");
+    assert!(verdict.contains("1 taken and on record"), "{verdict}");
     let s = a.wait_for(&dir, &vehicle, "the second pong", |s| {
-        place(s, "RELAY", "ready") && counts(s, "A", "event")["delivered"] == 2
+        // pong, start_mission from B, pong
+        place(s, "RELAY", "ready") && counts(s, "A", "event")["delivered"] == 3
     });
     for kind in ["event", "call", "beacon", "heartbeat", "marking"] {
         assert!(accounted(counts(&s, "A", kind)), "{kind}: {s}");
@@ -278,9 +283,9 @@ fn a_program_on_another_computer_answers_and_a_lost_computer_is_an_event() {
     for kind in ["event", "call", "beacon", "heartbeat", "marking"] {
         assert!(accounted(counts(&on_b, "B", kind)), "{kind}: {on_b}");
     }
-    // Every event the program emitted after the restart reached the player: the second
-    // gateway put one event on the link, and A delivered two in all.
-    assert_eq!(counts(&on_b, "B", "event")["to_link"], 1, "{on_b}");
+    // The second gateway put two events on the link (the operator's and ECHO's), and A
+    // delivered three in all.
+    assert_eq!(counts(&on_b, "B", "event")["to_link"], 2, "{on_b}");
 
     let codes = procs.stop();
     assert!(
