@@ -339,3 +339,166 @@ fn a_link_event_must_be_a_communication_event_of_the_project() {
         String::from_utf8_lossy(&o.stderr)
     );
 }
+
+/// tests/data/relay with ECHO and the player on A, a ground station G, and the gateways
+/// authenticating each other with `password` (the credentials file of the copy).
+fn ground_project(work: &Workdir, name: &str, ports: (u16, u16), password: &str) -> PathBuf {
+    let dir = work.path().join(name);
+    std::fs::create_dir_all(&dir).expect("project dir");
+    for f in ["petrel.toml", "relay.pn"] {
+        std::fs::copy(repo().join("tests/data/relay").join(f), dir.join(f)).expect("copy");
+    }
+    let vehicle = format!(
+        r#"[computers.A]
+gateway = "tcp/127.0.0.1:{}"
+[computers.G]
+gateway = "tcp/127.0.0.1:{}"
+
+[link]
+user = "petrel"
+credentials = "link.txt"
+
+[[process]]
+name = "player"
+kind = "player"
+computer = "A"
+
+[[process]]
+name = "echo"
+kind = "program"
+programs = ["ECHO"]
+computer = "A"
+executable = "{{target}}/examples/echo"
+args = ["{{vehicle}}", "ECHO"]
+"#,
+        ports.0, ports.1
+    );
+    std::fs::write(dir.join("vehicle.toml"), vehicle).expect("vehicle.toml");
+    std::fs::write(dir.join("link.txt"), format!("petrel:{password}\n")).expect("link.txt");
+    dir
+}
+
+#[test]
+fn only_an_authenticated_ground_station_sends_events_and_its_shadow_follows() {
+    let work = Workdir::new();
+    let ports = (free_port(), free_port());
+    let dir = ground_project(&work, "vehicle", ports, "s3cret");
+    let impostor = ground_project(&work, "impostor", ports, "guessed");
+    let vehicle = unique_vehicle("ground");
+    let (a, g) = (Computer::new(&work, "A"), Computer::new(&work, "G"));
+    let journal = work.path().join("journal");
+    let mut procs = Processes(vec![a.spawn(
+        &petrel_bin(),
+        &[
+            "play",
+            &dir.display().to_string(),
+            "--vehicle",
+            &vehicle,
+            "--journal",
+            &journal.display().to_string(),
+        ],
+        "player",
+    )]);
+    procs.0.push(a.gateway(&dir, &vehicle, "gw-a"));
+    procs
+        .0
+        .push(a.spawn(&example_bin("echo"), &[&vehicle, "ECHO"], "echo"));
+
+    // A ground station with the wrong password: the vehicle's gateway refuses its session (its
+    // log says so), so it never hears the player, and what it is sent goes nowhere.
+    let mut bad = Processes(vec![g.gateway(&impostor, &vehicle, "gw-impostor")]);
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while !std::fs::read_to_string(work.path().join("gw-a.log"))
+        .unwrap_or_default()
+        .contains("OpenSyn")
+    {
+        assert!(
+            Instant::now() < deadline,
+            "no refused handshake: {}",
+            logs(work.path())
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let o = g
+        .command(&petrel_bin())
+        .arg("send")
+        .arg(&dir)
+        .args(["start_mission", "--vehicle", &vehicle, "--timeout", "1"])
+        .output()
+        .expect("petrel send runs");
+    assert!(
+        !o.status.success(),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    let bad_gateway = bad.0.remove(0);
+    let _ = Command::new("kill")
+        .args(["-TERM", &bad_gateway.id().to_string()])
+        .status();
+    let out = bad_gateway.wait_with_output().expect("the impostor stops");
+    let counters: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(work.path().join("gw-impostor.out")).unwrap_or_default(),
+    )
+    .unwrap_or_default();
+    assert_eq!(out.status.code(), Some(0));
+    assert_eq!(counters["peers"]["A"]["state"], "unknown", "{counters}");
+    let s = a.wait_for(&dir, &vehicle, "the player's status", |s| {
+        s["stats"].is_object()
+    });
+    assert_eq!(s["stats"]["received"], 0, "nothing reached the player: {s}");
+
+    // The ground station with the vehicle's credentials: its shadow follows the player, and
+    // the operator's event there reaches the player and comes back acknowledged.
+    procs.0.push(g.gateway(&dir, &vehicle, "gw-g"));
+    g.wait_for(&dir, &vehicle, "the player's status on G", |s| {
+        place(s, "RELAY", "ready")
+    });
+    let shadow_log = work.path().join("shadow.log");
+    let shadow = g
+        .command(&petrel_bin())
+        .arg("play")
+        .arg(&dir)
+        .args(["--vehicle", &vehicle, "--shadow"])
+        .stderr(std::fs::File::create(&shadow_log).expect("log"))
+        .spawn()
+        .expect("the shadow starts");
+    let shadow = Processes(vec![shadow]);
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while !std::fs::read_to_string(&shadow_log)
+        .unwrap_or_default()
+        .contains("shadow synchronised")
+    {
+        assert!(
+            Instant::now() < deadline,
+            "the shadow did not synchronise: {}",
+            logs(work.path())
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let verdict = g.send(&dir, &vehicle, "start_mission");
+    assert!(verdict.contains("1 taken and on record"), "{verdict}");
+    a.wait_for(&dir, &vehicle, "the pong", |s| {
+        place(s, "RELAY", "ready") && s["stats"]["processed"] == 2
+    });
+    // The shadow saw both steps (the operator's event and ECHO's answer), and no divergence.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let s = g.status(&dir, &vehicle).unwrap_or_default();
+        if s["stats"]["processed"] == 2 || Instant::now() > deadline {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert_eq!(shadow.stop(), vec![Some(0)]);
+    let log = std::fs::read_to_string(&shadow_log).unwrap_or_default();
+    assert!(
+        log.contains("2 vehicle steps followed") && log.contains("0 divergence alarm(s)"),
+        "{log}"
+    );
+    let codes = procs.stop();
+    assert!(
+        codes.iter().all(|c| *c == Some(0)),
+        "{codes:?}: {}",
+        logs(work.path())
+    );
+}
