@@ -502,3 +502,124 @@ fn only_an_authenticated_ground_station_sends_events_and_its_shadow_follows() {
         logs(work.path())
     );
 }
+
+/// missions/ugv copied with free ports for its three computers' gateways.
+fn ugv_project(work: &Workdir) -> PathBuf {
+    let dir = work.path().join("ugv");
+    std::fs::create_dir_all(&dir).expect("project dir");
+    for f in ["petrel.toml", "robot.pn", "sync.pn", "vehicle.toml"] {
+        let text = std::fs::read_to_string(repo().join("missions/ugv").join(f)).expect("read");
+        let text = ["7447", "7448", "7449"].iter().fold(text, |t, p| {
+            t.replace(
+                &format!("127.0.0.1:{p}"),
+                &format!("127.0.0.1:{}", free_port()),
+            )
+        });
+        std::fs::write(dir.join(f), text).expect("write");
+    }
+    dir
+}
+
+/// The paper's UGV pair live (section 3.3): the supervision on one computer, each robot's
+/// movement program on its own; both robots reach the bottleneck together, and the journal
+/// shows them in it one at a time.
+#[test]
+fn the_ugv_pair_on_three_computers_passes_the_bottleneck_one_at_a_time() {
+    let work = Workdir::new();
+    let dir = ugv_project(&work);
+    let vehicle = unique_vehicle("ugv");
+    let s = Computer::new(&work, "supervision");
+    let (r1, r2) = (
+        Computer::new(&work, "robot1"),
+        Computer::new(&work, "robot2"),
+    );
+    let journal = work.path().join("journal");
+    let ugv = example_bin("ugv");
+    let mut procs = Processes(vec![s.spawn(
+        &petrel_bin(),
+        &[
+            "play",
+            &dir.display().to_string(),
+            "--vehicle",
+            &vehicle,
+            "--journal",
+            &journal.display().to_string(),
+        ],
+        "player",
+    )]);
+    procs.0.push(s.gateway(&dir, &vehicle, "gw-s"));
+    procs
+        .0
+        .push(s.spawn(&ugv, &["planner", &vehicle], "planner"));
+    procs.0.push(r1.gateway(&dir, &vehicle, "gw-r1"));
+    procs
+        .0
+        .push(r1.spawn(&ugv, &["moves", &vehicle, "r1", "MOVES_R1"], "moves-r1"));
+    procs.0.push(r2.gateway(&dir, &vehicle, "gw-r2"));
+    procs
+        .0
+        .push(r2.spawn(&ugv, &["moves", &vehicle, "r2", "MOVES_R2"], "moves-r2"));
+    s.wait_for(&dir, &vehicle, "both robots' programs alive", |st| {
+        ["PLANNER", "MOVES_R1", "MOVES_R2"]
+            .iter()
+            .all(|p| st["programs"][p] == "alive")
+    });
+    s.send(&dir, &vehicle, "start_mission");
+    let st = s.wait_for(&dir, &vehicle, "both robots done", |st| {
+        place(st, "R1", "done") && place(st, "R2", "done")
+    });
+    assert_eq!(st["stats"]["calls_failed"], 0, "{st}");
+    // Each robot's gateway delivered its own robot's calls and left the other's (it hears
+    // every computer); the robots' events are the supervision's alone.
+    let on_r1 = r1.wait_for(&dir, &vehicle, "robot1's counters", |x| {
+        counts(x, "robot1", "call")["delivered"]
+            .as_u64()
+            .unwrap_or(0)
+            > 0
+    });
+    let calls = counts(&on_r1, "robot1", "call");
+    let events = counts(&on_r1, "robot1", "event");
+    assert!(
+        calls["not_mine"].as_u64().unwrap_or(0) > 0 && accounted(calls),
+        "{on_r1}"
+    );
+    assert!(events["delivered"] == 0 && accounted(events), "{on_r1}");
+    let codes = procs.stop();
+    assert!(
+        codes.iter().all(|c| *c == Some(0)),
+        "{codes:?}: {}",
+        logs(work.path())
+    );
+
+    // The trace: each robot entered the bottleneck once, never while the other was in it
+    // (from `enter`, which takes it, to `out`, which gives it back).
+    let (entries, _) = journal_json(&journal);
+    let mut inside = [false, false];
+    let mut entered = [0, 0];
+    let mut both_waited = false;
+    for e in entries.iter().filter(|e| e["kind"] == "step") {
+        for t in e["fired"].as_array().into_iter().flatten() {
+            let t = t.as_str().unwrap_or("");
+            for (i, r) in ["R1", "R2"].iter().enumerate() {
+                if t == format!("{r}/PASS.enter") {
+                    assert!(!inside[1 - i], "both in the bottleneck at {e}");
+                    inside[i] = true;
+                    entered[i] += 1;
+                }
+                if t == format!("{r}/PASS.out") {
+                    inside[i] = false;
+                }
+                // The robot asked for the bottleneck again after the other left: it had to
+                // wait for it.
+                if t == format!("{r}/PASS.again") {
+                    both_waited = true;
+                }
+            }
+        }
+    }
+    assert_eq!(entered, [1, 1], "{entries:?}");
+    assert!(
+        both_waited,
+        "the robots never met at the bottleneck: {entries:?}"
+    );
+}
