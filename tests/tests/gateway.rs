@@ -18,6 +18,8 @@ struct Computer {
     name: &'static str,
     root: PathBuf,
     work: PathBuf,
+    /// The network namespace its processes run in, if any.
+    netns: Option<String>,
     /// The root, removed pass or fail; short, in /tmp: iceoryx2's Unix sockets live in it.
     _root: tempfile::TempDir,
 }
@@ -32,12 +34,20 @@ impl Computer {
             name,
             root: root.path().to_path_buf(),
             work: work.path().to_path_buf(),
+            netns: None,
             _root: root,
         }
     }
 
     fn command(&self, program: &Path) -> Command {
-        let mut c = Command::new(program);
+        let mut c = match &self.netns {
+            Some(ns) => {
+                let mut c = Command::new("ip");
+                c.args(["netns", "exec", ns]).arg(program);
+                c
+            }
+            None => Command::new(program),
+        };
         c.env("PETREL_RUNTIME_DIR", &self.root);
         c
     }
@@ -621,5 +631,180 @@ fn the_ugv_pair_on_three_computers_passes_the_bottleneck_one_at_a_time() {
     assert!(
         both_waited,
         "the robots never met at the bottleneck: {entries:?}"
+    );
+}
+
+/// Two network namespaces joined by a veth pair (a cable between two computers), removed when
+/// dropped; `None` where they cannot be made (not root, no `ip`).
+struct Cable {
+    ns: [String; 2],
+    ends: [String; 2],
+    addrs: [String; 2],
+}
+
+impl Cable {
+    fn new() -> Option<Cable> {
+        let id = std::process::id() % 100_000;
+        let ns = [format!("pg{id}a"), format!("pg{id}b")];
+        let ends = [format!("pgv{id}a"), format!("pgv{id}b")];
+        let net = format!("10.{}.{}", 200 + id % 50, id % 250);
+        let addrs = [format!("{net}.1"), format!("{net}.2")];
+        let cable = Cable { ns, ends, addrs };
+        let ip = |args: &[&str]| {
+            Command::new("ip")
+                .args(args)
+                .stderr(Stdio::null())
+                .status()
+                .is_ok_and(|s| s.success())
+        };
+        let made = ip(&["netns", "add", &cable.ns[0]])
+            && ip(&["netns", "add", &cable.ns[1]])
+            && ip(&[
+                "link",
+                "add",
+                &cable.ends[0],
+                "type",
+                "veth",
+                "peer",
+                "name",
+                &cable.ends[1],
+            ])
+            && (0..2).all(|i| {
+                ip(&["link", "set", &cable.ends[i], "netns", &cable.ns[i]])
+                    && ip(&[
+                        "-n",
+                        &cable.ns[i],
+                        "addr",
+                        "add",
+                        &format!("{}/24", cable.addrs[i]),
+                        "dev",
+                        &cable.ends[i],
+                    ])
+                    && ip(&["-n", &cable.ns[i], "link", "set", &cable.ends[i], "up"])
+                    && ip(&["-n", &cable.ns[i], "link", "set", "lo", "up"])
+            });
+        if !made {
+            eprintln!("cannot make network namespaces and a veth pair (this test needs root and `ip`): skipped");
+            return None;
+        }
+        Some(cable)
+    }
+
+    /// Unplugs (or plugs back) the cable at the first computer's end.
+    fn set(&self, up: bool) {
+        let ok = Command::new("ip")
+            .args([
+                "-n",
+                &self.ns[0],
+                "link",
+                "set",
+                &self.ends[0],
+                if up { "up" } else { "down" },
+            ])
+            .status()
+            .is_ok_and(|s| s.success());
+        assert!(ok, "ip link set {}", self.ends[0]);
+    }
+}
+
+impl Drop for Cable {
+    fn drop(&mut self) {
+        // Deleting a namespace deletes its end of the pair, and so the pair.
+        for ns in &self.ns {
+            let _ = Command::new("ip").args(["netns", "del", ns]).status();
+        }
+    }
+}
+
+/// The cable between the two computers cut mid-mission and plugged back: the loss and the
+/// return are events, the program is lost and back, and nothing put on the link was lost.
+#[test]
+fn a_cut_cable_is_a_lost_computer_and_nothing_is_lost_when_it_comes_back() {
+    let Some(cable) = Cable::new() else {
+        return;
+    };
+    let work = Workdir::new();
+    let dir = project(&work);
+    let text = std::fs::read_to_string(dir.join("vehicle.toml")).expect("vehicle.toml");
+    let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
+    let mut n = 0;
+    for l in lines.iter_mut() {
+        if l.starts_with("gateway = ") {
+            *l = format!("gateway = \"tcp/{}:7447\"", cable.addrs[n]);
+            n += 1;
+        }
+    }
+    std::fs::write(dir.join("vehicle.toml"), lines.join("\n")).expect("vehicle.toml");
+    let vehicle = unique_vehicle("cable");
+    let (mut a, mut b) = (Computer::new(&work, "A"), Computer::new(&work, "B"));
+    a.netns = Some(cable.ns[0].clone());
+    b.netns = Some(cable.ns[1].clone());
+    let journal = work.path().join("journal");
+    let mut procs = Processes(vec![a.spawn(
+        &petrel_bin(),
+        &[
+            "play",
+            &dir.display().to_string(),
+            "--vehicle",
+            &vehicle,
+            "--journal",
+            &journal.display().to_string(),
+        ],
+        "player",
+    )]);
+    procs.0.push(a.gateway(&dir, &vehicle, "gw-a"));
+    procs.0.push(b.gateway(&dir, &vehicle, "gw-b"));
+    procs
+        .0
+        .push(b.spawn(&example_bin("echo"), &[&vehicle, "ECHO"], "echo"));
+    a.wait_for(&dir, &vehicle, "ECHO alive on A", |s| {
+        s["programs"]["ECHO"] == "alive"
+    });
+    a.send(&dir, &vehicle, "start_mission");
+    a.wait_for(&dir, &vehicle, "the pong back", |s| {
+        place(s, "RELAY", "ready") && s["stats"]["processed"] == 2
+    });
+
+    cable.set(false);
+    let s = a.wait_for(&dir, &vehicle, "B lost", |s| {
+        place(s, "LINK", "down") && place(s, "PROGS", "gone")
+    });
+    assert_eq!(s["gateways"]["A"]["peers"]["B"]["state"], "lost", "{s}");
+    cable.set(true);
+    a.wait_for(&dir, &vehicle, "B back", |s| {
+        place(s, "LINK", "up") && s["programs"]["ECHO"] == "alive"
+    });
+    a.send(&dir, &vehicle, "start_mission");
+    let s = a.wait_for(&dir, &vehicle, "the second pong", |s| {
+        place(s, "RELAY", "ready") && counts(s, "A", "event")["delivered"] == 2
+    });
+    // The same gateways on both ends all along: every message B put on the link while the
+    // cable was out arrived once it was back (TCP and zenoh kept them), none missing.
+    let peer = &s["gateways"]["A"]["peers"]["B"];
+    assert_eq!(
+        (peer["missing"].as_u64(), peer["restarts"].as_u64()),
+        (Some(0), Some(0)),
+        "{s}"
+    );
+    assert_eq!(peer["losses"], 1, "{s}");
+    for kind in ["event", "call", "beacon", "heartbeat", "marking"] {
+        assert!(accounted(counts(&s, "A", kind)), "{kind}: {s}");
+    }
+    let codes = procs.stop();
+    assert!(
+        codes.iter().all(|c| *c == Some(0)),
+        "{codes:?}: {}",
+        logs(work.path())
+    );
+    let (entries, _) = journal_json(&journal);
+    let count = |name: &str| {
+        entries
+            .iter()
+            .filter(|e| e["kind"] == "submit" && e["event"] == name)
+            .count()
+    };
+    assert_eq!(
+        (count("link_lost"), count("link_restored"), count("pong")),
+        (1, 1, 2)
     );
 }
