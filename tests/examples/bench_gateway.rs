@@ -137,11 +137,12 @@ fn main() {
         tp_remote / tp_near
     );
     println!();
-    println!("memory after the runs (VmRSS, VmHWM), KiB:");
-    println!("| process | RSS | peak |");
-    println!("|---|---:|---:|");
-    for (name, (rss, hwm)) in mem {
-        println!("| {name} | {rss} | {hwm} |");
+    println!("memory after the runs, KiB (/proc/PID/status: resident, its peak, and of it: heap and");
+    println!("stacks, the executable's mapped pages, shared memory):");
+    println!("| process | VmRSS | VmHWM | RssAnon | RssFile | RssShmem |");
+    println!("|---|---:|---:|---:|---:|---:|");
+    for (name, m) in mem {
+        println!("| {name} | {} | {} | {} | {} | {} |", m[0], m[1], m[2], m[3], m[4]);
     }
 
     drop(remote);
@@ -260,7 +261,7 @@ fn throughput(p: &mut Program, n: usize) -> f64 {
     n as f64 / start.elapsed().as_secs_f64()
 }
 
-fn memory(pid: u32) -> (u64, u64) {
+fn memory(pid: u32) -> [u64; 5] {
     let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
     let field = |name: &str| {
         status
@@ -270,7 +271,13 @@ fn memory(pid: u32) -> (u64, u64) {
             .and_then(|v| v.parse().ok())
             .unwrap_or(0)
     };
-    (field("VmRSS:"), field("VmHWM:"))
+    [
+        field("VmRSS:"),
+        field("VmHWM:"),
+        field("RssAnon:"),
+        field("RssFile:"),
+        field("RssShmem:"),
+    ]
 }
 
 fn zenoh_config(listen: Option<&str>, connect: Option<&str>) -> zenoh::Config {
