@@ -11,6 +11,7 @@
 
 mod bridge;
 mod common;
+mod gateway;
 mod gen;
 mod monitor;
 mod project;
@@ -57,6 +58,11 @@ enum Command {
     /// (by policy), and stop everything on Ctrl-C, at the mission's end, at --until or at
     /// --timeout. Exits 1 if any process failed.
     Up(up::UpArgs),
+    /// Join this computer's part of the vehicle to its other computers over zenoh: calls to
+    /// programs elsewhere, events to a player elsewhere, the player's heartbeat and marking to
+    /// ground stations; lost and returning computers become communication events
+    /// (docs/gateway.md). Stops on SIGINT or SIGTERM, printing its counters.
+    Gateway(gateway::GatewayArgs),
     /// Internal to `petrel up`, not for people: starts PROGRAM with ARGS in place of this
     /// process, every signal unblocked (`petrel up` keeps its stop signals blocked, and a
     /// blocked mask would pass to the program through exec).
@@ -130,6 +136,7 @@ fn main() -> ExitCode {
         Command::Journal { command } => recorder::journal(command),
         Command::Bridge(a) => bridge::bridge(a),
         Command::Up(a) => up::up(a),
+        Command::Gateway(a) => gateway::gateway(a),
         Command::Exec(a) => up::exec(a),
     };
     match outcome {

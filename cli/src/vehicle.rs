@@ -380,6 +380,8 @@ pub fn status(a: StatusArgs) -> Outcome {
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(2);
     let mut latest = None;
     let mut bridge: Option<petrel_ipc::Heartbeat> = None;
+    // Gateways (docs/gateway.md) beat as `tool/gw-COMPUTER`, at the player's pace.
+    let mut gateways: std::collections::BTreeMap<String, serde_json::Value> = Default::default();
     let mut bridge_deadline = None;
     loop {
         let _ = beats.drain(|r| {
@@ -387,7 +389,13 @@ pub fn status(a: StatusArgs) -> Outcome {
                 match rcv.origin.as_str() {
                     "player" => latest = Some(rcv.msg),
                     "can_bridge" => bridge = Some(rcv.msg),
-                    _ => {}
+                    o => {
+                        if let Some(computer) = o.strip_prefix("tool/gw-") {
+                            if let Ok(doc) = serde_json::from_str(&rcv.msg.status) {
+                                gateways.insert(computer.to_owned(), doc);
+                            }
+                        }
+                    }
                 }
             }
         });
@@ -433,6 +441,12 @@ pub fn status(a: StatusArgs) -> Outcome {
     if json {
         if let (Some(b), Some(obj)) = (&bridge_doc, doc.as_object_mut()) {
             obj.insert("can_bridge".into(), b.clone());
+        }
+        if let (false, Some(obj)) = (gateways.is_empty(), doc.as_object_mut()) {
+            obj.insert(
+                "gateways".into(),
+                serde_json::to_value(&gateways).unwrap_or_default(),
+            );
         }
         out(&format!("{doc}\n"));
         return Outcome::Clean;
@@ -500,6 +514,35 @@ pub fn status(a: StatusArgs) -> Outcome {
             b["commands"],
             b["commands_failed"],
         ));
+    }
+    for (computer, g) in &gateways {
+        let peers: Vec<String> = g["peers"]
+            .as_object()
+            .map(|m| {
+                m.iter()
+                    .map(|(name, p)| {
+                        format!(
+                            "{name} {} ({} lost, {} missing)",
+                            p["state"].as_str().unwrap_or("?"),
+                            p["losses"],
+                            p["missing"]
+                        )
+                    })
+                    .collect()
+            })
+            .unwrap_or_default();
+        text.push_str(&format!(
+            "  gateway of `{computer}`: peers {}\n",
+            peers.join(", ")
+        ));
+        if let Some(kinds) = g["counters"]["kinds"].as_object() {
+            for (kind, c) in kinds {
+                text.push_str(&format!(
+                    "    {kind}: to the link {} ({} refused, {} its own), from the link {}: {} delivered, {} refused, {} for others, {} unheard\n",
+                    c["to_link"], c["to_link_refused"], c["own"], c["from_link"], c["delivered"], c["refused"], c["not_mine"], c["unheard"]
+                ));
+            }
+        }
     }
     out(&text);
     Outcome::Clean

@@ -132,7 +132,7 @@ pub struct SendSpec {
     pub computer: Option<String>,
 }
 
-/// One `[computers.NAME]` table (recorded; the multi-computer transport is still to come).
+/// One `[computers.NAME]` table.
 #[derive(Clone, Debug)]
 pub struct Computer {
     /// Its name.
@@ -141,6 +141,24 @@ pub struct Computer {
     pub address: Option<String>,
     /// Free text.
     pub description: Option<String>,
+    /// The zenoh endpoint its gateway listens on (`tcp/10.0.0.2:7447`), for `petrel gateway`.
+    pub gateway: Option<String>,
+}
+
+/// The `[link]` table: how the computers' gateways watch and authenticate each other.
+#[derive(Clone, Debug, Default)]
+pub struct LinkSpec {
+    /// A computer silent for this long is lost (default 1 s).
+    pub detection: Option<Duration>,
+    /// The event (category communication, one `text` parameter) raised on the player's
+    /// computer when a computer is lost.
+    pub lost_event: Option<String>,
+    /// The event raised when it comes back.
+    pub restored_event: Option<String>,
+    /// The zenoh user of the gateways, when they authenticate each other.
+    pub user: Option<String>,
+    /// The file of `user:password` lines (relative to the project) the gateways accept.
+    pub credentials: Option<String>,
 }
 
 /// A checked vehicle file.
@@ -156,6 +174,8 @@ pub struct VehicleFile {
     pub processes: Vec<ProcessSpec>,
     /// The operator's timed events, in time order.
     pub sends: Vec<SendSpec>,
+    /// The `[link]` table.
+    pub link: LinkSpec,
 }
 
 /// The run directory when the file does not say.
@@ -187,6 +207,17 @@ struct RawFile {
     processes: Vec<RawProcess>,
     #[serde(default, rename = "send")]
     sends: Vec<RawSend>,
+    link: Option<RawLink>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLink {
+    detection: Option<Spanned<String>>,
+    lost_event: Option<Spanned<String>>,
+    restored_event: Option<Spanned<String>>,
+    user: Option<Spanned<String>>,
+    credentials: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize, Default)]
@@ -202,6 +233,7 @@ struct RawVehicle {
 struct RawComputer {
     address: Option<String>,
     description: Option<String>,
+    gateway: Option<String>,
 }
 
 #[derive(Deserialize)]
@@ -311,6 +343,94 @@ struct Checker<'a> {
 }
 
 impl Checker<'_> {
+    /// The `[link]` table: its events must be the project's, of the communication category,
+    /// with one `text` parameter (the computer's name).
+    fn link(&mut self, l: &RawLink, computers: &[Computer]) -> LinkSpec {
+        if computers.is_empty() {
+            let span = l
+                .detection
+                .as_ref()
+                .or(l.lost_event.as_ref())
+                .map(|d| self.span(d))
+                .unwrap_or(Span::new(self.file, 0, 0));
+            self.error(
+                "E0812",
+                span,
+                "a [link] table but no [computers]".into(),
+                "nothing to link",
+                "declare the computers ([computers.NAME] with `gateway = \"tcp/ADDRESS:PORT\"`), or remove [link]",
+            );
+        }
+        let detection = l
+            .detection
+            .as_ref()
+            .and_then(|d| self.duration(d, "[link] detection"));
+        let mut event = |e: &Option<Spanned<String>>, what: &str| -> Option<String> {
+            let e = e.as_ref()?;
+            let name = e.get_ref();
+            if let Some(project) = self.project {
+                let found = project.events.iter().find(|ev| &ev.name == name);
+                let ok = found.is_some_and(|ev| {
+                    ev.category == petrel_nets::model::Category::Communication
+                        && ev.params.len() == 1
+                        && ev.params[0].1 == petrel_nets::model::Type::Text
+                });
+                if !ok {
+                    let why = match found {
+                        None => format!("`{name}` is not an event of the project"),
+                        Some(_) => format!(
+                            "`{name}` is not of category communication with one `text` parameter"
+                        ),
+                    };
+                    self.error(
+                        "E0812",
+                        self.span(e),
+                        format!("[link] {what}: {why}"),
+                        "not a link event",
+                        &format!("declare it in petrel.toml: {name} = {{ category = \"communication\", params = [\"computer: text\"] }}"),
+                    );
+                    return None;
+                }
+            }
+            Some(name.clone())
+        };
+        let lost_event = event(&l.lost_event, "lost_event");
+        let restored_event = event(&l.restored_event, "restored_event");
+        if l.user.is_some() != l.credentials.is_some() {
+            let span = l
+                .user
+                .as_ref()
+                .or(l.credentials.as_ref())
+                .map(|d| self.span(d))
+                .unwrap_or(Span::new(self.file, 0, 0));
+            self.error(
+                "E0812",
+                span,
+                "[link] `user` and `credentials` go together".into(),
+                "only one of them",
+                "give both: `user`, the gateways' zenoh user, and `credentials`, the file of `user:password` lines they accept",
+            );
+        }
+        if let Some(cred) = &l.credentials {
+            if let Err(e) = petrel_nets::paths::check_relative(cred.get_ref()) {
+                self.error(
+                    "E0812",
+                    self.span(cred),
+                    format!("[link] credentials: {e}"),
+                    "not a path inside the project",
+                    "give a path relative to the project directory",
+                );
+            }
+        }
+        LinkSpec {
+            detection,
+            lost_event,
+            restored_event,
+            user: l.user.as_ref().map(|u| u.get_ref().clone()),
+            credentials: l.credentials.as_ref().map(|u| u.get_ref().clone()),
+        }
+    }
+
     fn span<T>(&self, s: &Spanned<T>) -> Span {
         Span::new(self.file, s.span().start, s.span().end)
     }
@@ -517,6 +637,7 @@ pub fn check_file(
             name: key.get_ref().clone(),
             address: comp.address,
             description: comp.description,
+            gateway: comp.gateway,
         });
     }
 
@@ -995,6 +1116,10 @@ pub fn check_file(
         }
     }
     sends.sort_by_key(|s| s.at);
+    let link = match &raw.link {
+        Some(l) => c.link(l, &computers),
+        None => LinkSpec::default(),
+    };
     if c.errors > 0 {
         return None;
     }
@@ -1004,6 +1129,7 @@ pub fn check_file(
         computers,
         processes,
         sends,
+        link,
     })
 }
 
@@ -1283,5 +1409,30 @@ after = ["a"]
         );
         assert!(v.is_none());
         assert_eq!(codes(&d), vec!["E0805"]);
+    }
+
+    #[test]
+    fn the_link_table_is_checked() {
+        let (v, d, _) = check("[link]\ndetection = \"1s\"\n");
+        assert!(v.is_none());
+        assert_eq!(codes(&d), vec!["E0812"], "no computers to link");
+        let base = "[computers.a]\ngateway = \"tcp/127.0.0.1:7447\"\n[computers.b]\n";
+        let (v, d, _) = check(&format!("{base}[link]\nuser = \"petrel\"\n"));
+        assert!(v.is_none());
+        assert_eq!(codes(&d), vec!["E0812"], "a user without credentials");
+        let (v, d, _) = check(&format!(
+            "{base}[link]\nuser = \"petrel\"\ncredentials = \"/etc/shadow\"\n"
+        ));
+        assert!(v.is_none());
+        assert_eq!(codes(&d), vec!["E0812"], "credentials outside the project");
+        let (v, d, _) = check(&format!(
+            "{base}[link]\ndetection = \"250ms\"\nuser = \"petrel\"\ncredentials = \"link.txt\"\n"
+        ));
+        let v = v.unwrap_or_else(|| panic!("{d:?}"));
+        assert_eq!(v.link.detection, Some(Duration::from_millis(250)));
+        assert_eq!(
+            v.computers[0].gateway.as_deref(),
+            Some("tcp/127.0.0.1:7447")
+        );
     }
 }

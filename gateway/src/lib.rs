@@ -1,0 +1,28 @@
+//! `petrel gateway`: a vehicle spread over several computers. Each computer runs its own
+//! iceoryx2 services (shared memory does not leave a host); one gateway per computer joins
+//! them to the others over zenoh, so that a program on another computer is called and heard
+//! exactly as a local one.
+//!
+//! ```text
+//!  computer A (player)                          computer B (programs)
+//!  player --calls/PLN--> [stand-in program/PLN] ==zenoh==> gateway B --calls/PLN--> PLN
+//!  player <--events----- gateway A <==zenoh== [gateway B: events receiver] <--events-- PLN
+//!  player --heartbeat, marking--> gateway A ==zenoh==> [stand-in player] --> PLN, shadows
+//! ```
+//!
+//! - [`link`]: the one message type on the link and its keys (`petrel/<vehicle>/link/<computer>`).
+//! - [`core`]: the decisions, sans I/O: routing, peers lost and restored within the detection
+//!   bound, which stand-ins to keep, counters accounting for every message.
+//! - [`runtime`]: the process: one thread, a reactor over the iceoryx2 ports and the zenoh
+//!   subscriber's wake-ups.
+//!
+//! docs/gateway.md describes the vehicle file's part and what a computer's loss does.
+
+#![warn(missing_docs)]
+
+pub mod core;
+pub mod link;
+pub mod runtime;
+
+pub use crate::core::{Core, Counts, PeerChange, PeerState, Plan};
+pub use crate::runtime::{run, Credentials, GatewayError, LinkEvents, Settings};

@@ -1,0 +1,138 @@
+//! What crosses the link: one zenoh key per computer and vehicle, one message type.
+//!
+//! Every message a gateway puts on the link goes on `petrel/<vehicle>/link/<computer>` (its
+//! own computer), numbered by a per-process sequence, so that a receiver sees each peer's
+//! messages in order, tells a gap (a message lost) from a restart (a new incarnation), and
+//! recognises its own messages coming back (zenoh delivers a session's puts to its own matching
+//! subscribers): nothing crosses twice.
+
+use bincode::{Decode, Encode};
+
+/// Longest body carried (the ipc crate's own bound on a message body).
+pub const MAX_LINK_BODY: usize = petrel_ipc::wire::MAX_BODY_LEN;
+
+/// What a link message carries.
+#[derive(Debug, Clone, PartialEq, Eq, Encode, Decode)]
+pub enum LinkKind {
+    /// An event for the player (body: an ipc `EventMsg`).
+    Event,
+    /// A call to program `program` (body: an ipc `CallMsg`).
+    Call {
+        /// The program called.
+        program: String,
+    },
+    /// The player's heartbeat (body: an ipc `Heartbeat`).
+    Heartbeat,
+    /// The player's marking delta (body: an ipc `MarkingMsg`).
+    Marking,
+    /// The sending gateway is alive; `alive` lists the vehicle's nodes alive on its computer
+    /// (`player`, `program/NAME`) that the other computers mirror. No body.
+    Beacon {
+        /// Node names alive on the sender's computer.
+        alive: Vec<String>,
+    },
+}
+
+impl LinkKind {
+    /// The kind as counters name it.
+    pub fn name(&self) -> &'static str {
+        match self {
+            LinkKind::Event => "event",
+            LinkKind::Call { .. } => "call",
+            LinkKind::Heartbeat => "heartbeat",
+            LinkKind::Marking => "marking",
+            LinkKind::Beacon { .. } => "beacon",
+        }
+    }
+}
+
+/// One message on the link.
+#[derive(Debug, Clone, PartialEq, Eq, Encode, Decode)]
+pub struct LinkMsg {
+    /// The computer whose gateway put it on the link.
+    pub from: String,
+    /// A random number drawn when that gateway started: a new one means a new process, whose
+    /// sequence starts again at 1.
+    pub incarnation: u64,
+    /// 1 for the gateway's first message, one more for each message it put on the link.
+    pub link_seq: u64,
+    /// The iceoryx2 origin of the message on its first computer (`player`, `program/PLN`,
+    /// `tool/send123`), so the receiving side can send it under the same role.
+    pub origin: String,
+    /// The ipc sender id of the message on its first computer (0 for the gateway's own).
+    pub sender: u64,
+    /// Its ipc sequence number there, so that the player's acknowledgement can be translated
+    /// back to the sender.
+    pub seq: u64,
+    /// What it is.
+    pub kind: LinkKind,
+    /// The ipc body, exactly as the ipc crate encodes it.
+    pub body: Vec<u8>,
+}
+
+type LinkConfig = bincode::config::Configuration<
+    bincode::config::LittleEndian,
+    bincode::config::Varint,
+    bincode::config::Limit<{ MAX_LINK_BODY + 4096 }>,
+>;
+
+const CONFIG: LinkConfig = bincode::config::standard()
+    .with_little_endian()
+    .with_variable_int_encoding()
+    .with_limit::<{ MAX_LINK_BODY + 4096 }>();
+
+impl LinkMsg {
+    /// The bytes put on the link.
+    pub fn encode(&self) -> Result<Vec<u8>, String> {
+        bincode::encode_to_vec(self, CONFIG).map_err(|e| e.to_string())
+    }
+
+    /// A message read from the link; an error says why it does not decode (a foreign or
+    /// damaged sender: counted as refused, never a panic).
+    pub fn decode(bytes: &[u8]) -> Result<LinkMsg, String> {
+        let (msg, used): (LinkMsg, usize) =
+            bincode::decode_from_slice(bytes, CONFIG).map_err(|e| e.to_string())?;
+        if used != bytes.len() {
+            return Err(format!("{} bytes after the message", bytes.len() - used));
+        }
+        Ok(msg)
+    }
+}
+
+/// The key a computer's gateway puts everything on.
+pub fn key_of(vehicle: &str, computer: &str) -> String {
+    format!("petrel/{vehicle}/link/{computer}")
+}
+
+/// The key expression a gateway listens to: every computer of the vehicle.
+pub fn key_all(vehicle: &str) -> String {
+    format!("petrel/{vehicle}/link/*")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trip_and_damage() {
+        let m = LinkMsg {
+            from: "ground".into(),
+            incarnation: 7,
+            link_seq: 3,
+            origin: "program/PLN".into(),
+            sender: 11,
+            seq: 2,
+            kind: LinkKind::Call {
+                program: "GUI".into(),
+            },
+            body: vec![1, 2, 3],
+        };
+        let bytes = m.encode().unwrap();
+        assert_eq!(LinkMsg::decode(&bytes).unwrap(), m);
+        assert!(LinkMsg::decode(&bytes[..bytes.len() - 1]).is_err());
+        let mut longer = bytes.clone();
+        longer.push(0);
+        assert!(LinkMsg::decode(&longer).unwrap_err().contains("after"));
+        assert!(LinkMsg::decode(&[0xff; 16]).is_err());
+    }
+}

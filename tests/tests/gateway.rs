@@ -1,0 +1,810 @@
+//! A vehicle on two computers joined by `petrel gateway` (docs/gateway.md). Each "computer" is
+//! its own iceoryx2 root (`PETREL_RUNTIME_DIR`: its own directory and shared-memory prefix), so
+//! the two halves see nothing of each other but through zenoh on loopback.
+//!
+//! The project (tests/data/relay) is the same as on one computer: the player calls ECHO and
+//! waits for its `pong`; nothing in it or in the program knows there are two computers.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use petrel_tests::{
+    example_bin, journal_json, petrel_bin, repo, unique_vehicle, Processes, Workdir,
+};
+
+/// One simulated computer: its own iceoryx2 root.
+struct Computer {
+    name: &'static str,
+    root: PathBuf,
+    work: PathBuf,
+    /// The network namespace its processes run in, if any.
+    netns: Option<String>,
+    /// The root, removed pass or fail; short, in /tmp: iceoryx2's Unix sockets live in it.
+    _root: tempfile::TempDir,
+}
+
+impl Computer {
+    fn new(work: &Workdir, name: &'static str) -> Computer {
+        let root = tempfile::Builder::new()
+            .prefix("pg")
+            .tempdir_in("/tmp")
+            .expect("a runtime root");
+        Computer {
+            name,
+            root: root.path().to_path_buf(),
+            work: work.path().to_path_buf(),
+            netns: None,
+            _root: root,
+        }
+    }
+
+    fn command(&self, program: &Path) -> Command {
+        let mut c = match &self.netns {
+            Some(ns) => {
+                let mut c = Command::new("ip");
+                c.args(["netns", "exec", ns]).arg(program);
+                c
+            }
+            None => Command::new(program),
+        };
+        c.env("PETREL_RUNTIME_DIR", &self.root);
+        c
+    }
+
+    fn spawn(&self, program: &Path, args: &[&str], log: &str) -> Child {
+        self.command(program)
+            .args(args)
+            .stdout(std::fs::File::create(self.work.join(format!("{log}.out"))).expect("log"))
+            .stderr(std::fs::File::create(self.work.join(format!("{log}.log"))).expect("log"))
+            .spawn()
+            .expect("the process starts")
+    }
+
+    fn gateway(&self, project: &Path, vehicle: &str, log: &str) -> Child {
+        self.spawn(
+            &petrel_bin(),
+            &[
+                "gateway",
+                &project.display().to_string(),
+                "--vehicle",
+                vehicle,
+                "--computer",
+                self.name,
+            ],
+            log,
+        )
+    }
+
+    /// `petrel status --json` on this computer.
+    fn status(&self, project: &Path, vehicle: &str) -> Option<serde_json::Value> {
+        let o = self
+            .command(&petrel_bin())
+            .arg("status")
+            .arg(project)
+            .args(["--vehicle", vehicle, "--json"])
+            .stderr(Stdio::null())
+            .output()
+            .ok()?;
+        o.status
+            .success()
+            .then(|| serde_json::from_slice(&o.stdout).ok())
+            .flatten()
+    }
+
+    /// Waits (up to a minute: the machine is shared) until `pred` holds on this computer's
+    /// status; returns it, or panics with the last one and the logs.
+    fn wait_for(
+        &self,
+        project: &Path,
+        vehicle: &str,
+        what: &str,
+        pred: impl Fn(&serde_json::Value) -> bool,
+    ) -> serde_json::Value {
+        let deadline = Instant::now() + Duration::from_secs(60);
+        let mut last = serde_json::Value::Null;
+        while Instant::now() < deadline {
+            if let Some(s) = self.status(project, vehicle) {
+                if pred(&s) {
+                    return s;
+                }
+                last = s;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        panic!(
+            "on computer {}: never {what}; last status {last}\nlogs: {}",
+            self.name,
+            logs(&self.work)
+        );
+    }
+
+    fn send(&self, project: &Path, vehicle: &str, event: &str) -> String {
+        let o = self
+            .command(&petrel_bin())
+            .arg("send")
+            .arg(project)
+            .arg(event)
+            .args(["--vehicle", vehicle])
+            .output()
+            .expect("petrel send runs");
+        let out = String::from_utf8_lossy(&o.stdout).into_owned();
+        assert!(
+            o.status.success(),
+            "petrel send {event}: {out}{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        out
+    }
+}
+
+fn logs(dir: &Path) -> String {
+    let mut text = String::new();
+    for e in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+        let p = e.path();
+        if p.extension().is_some_and(|x| x == "log" || x == "out") {
+            text.push_str(&format!(
+                "\n--- {}\n{}",
+                p.display(),
+                std::fs::read_to_string(&p).unwrap_or_default()
+            ));
+        }
+    }
+    text
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .expect("a free port")
+}
+
+/// tests/data/relay with a vehicle file: the player on A, ECHO on B.
+fn project(work: &Workdir) -> PathBuf {
+    let dir = work.path().join("relay");
+    std::fs::create_dir_all(&dir).expect("project dir");
+    for f in ["petrel.toml", "relay.pn"] {
+        std::fs::copy(repo().join("tests/data/relay").join(f), dir.join(f)).expect("copy");
+    }
+    let vehicle = format!(
+        r#"[computers.A]
+gateway = "tcp/127.0.0.1:{}"
+[computers.B]
+gateway = "tcp/127.0.0.1:{}"
+
+[link]
+detection = "1s"
+lost_event = "link_lost"
+restored_event = "link_restored"
+
+[[process]]
+name = "player"
+kind = "player"
+computer = "A"
+
+[[process]]
+name = "echo"
+kind = "program"
+programs = ["ECHO"]
+computer = "B"
+executable = "{{target}}/examples/echo"
+args = ["{{vehicle}}", "ECHO"]
+"#,
+        free_port(),
+        free_port()
+    );
+    std::fs::write(dir.join("vehicle.toml"), vehicle).expect("vehicle.toml");
+    dir
+}
+
+fn place(s: &serde_json::Value, net: &str, place: &str) -> bool {
+    s["marking"][net]
+        .as_array()
+        .is_some_and(|a| a.iter().any(|p| p == place))
+}
+
+fn counts<'a>(s: &'a serde_json::Value, computer: &str, kind: &str) -> &'a serde_json::Value {
+    &s["gateways"][computer]["counters"]["kinds"][kind]
+}
+
+/// Every link message of a kind a gateway heard is accounted for.
+fn accounted(c: &serde_json::Value) -> bool {
+    let n = |k: &str| c[k].as_u64().unwrap_or(0);
+    n("from_link") == n("delivered") + n("refused") + n("not_mine") + n("unheard")
+}
+
+#[test]
+fn a_program_on_another_computer_answers_and_a_lost_computer_is_an_event() {
+    let work = Workdir::new();
+    let dir = project(&work);
+    let vehicle = unique_vehicle("relay");
+    let (a, b) = (Computer::new(&work, "A"), Computer::new(&work, "B"));
+    let journal = work.path().join("journal");
+    let player = a.spawn(
+        &petrel_bin(),
+        &[
+            "play",
+            &dir.display().to_string(),
+            "--vehicle",
+            &vehicle,
+            "--journal",
+            &journal.display().to_string(),
+        ],
+        "player",
+    );
+    let mut procs = Processes(vec![player]);
+    procs.0.push(a.gateway(&dir, &vehicle, "gw-a"));
+    procs.0.push(b.gateway(&dir, &vehicle, "gw-b"));
+    procs
+        .0
+        .push(b.spawn(&example_bin("echo"), &[&vehicle, "ECHO"], "echo"));
+
+    // ECHO lives on B, yet the player's computer sees it alive (the gateway's stand-in).
+    a.wait_for(&dir, &vehicle, "ECHO alive on A", |s| {
+        s["programs"]["ECHO"] == "alive"
+    });
+    // B has no player, yet its `petrel status` shows the player's (the heartbeat crossed).
+    let on_b = b.wait_for(&dir, &vehicle, "the player's status on B", |s| {
+        place(s, "RELAY", "ready")
+    });
+    assert_eq!(on_b["project"], "relay", "{on_b}");
+
+    a.send(&dir, &vehicle, "start_mission");
+    let s = a.wait_for(&dir, &vehicle, "the pong back", |s| {
+        place(s, "RELAY", "ready") && s["stats"]["processed"] == 2
+    });
+    assert_eq!(s["stats"]["calls_sent"], 1, "{s}");
+    assert_eq!(counts(&s, "A", "call")["to_link"], 1, "{s}");
+    assert_eq!(counts(&s, "A", "event")["delivered"], 1, "{s}");
+
+    // SIGKILL B's gateway mid-mission: A raises link_lost(B) within the bound and ECHO becomes
+    // program_lost for the nets.
+    let gw_b = procs.0.remove(2);
+    let mut gw_b = gw_b;
+    gw_b.kill().expect("SIGKILL");
+    gw_b.wait().expect("reaped");
+    let s = a.wait_for(&dir, &vehicle, "B lost", |s| {
+        place(s, "LINK", "down") && place(s, "PROGS", "gone")
+    });
+    assert_eq!(s["gateways"]["A"]["peers"]["B"]["state"], "lost", "{s}");
+
+    // B's gateway back: link_restored(B), ECHO alive again, and it answers again.
+    procs.0.push(b.gateway(&dir, &vehicle, "gw-b2"));
+    a.wait_for(&dir, &vehicle, "B back", |s| {
+        place(s, "LINK", "up") && s["programs"]["ECHO"] == "alive"
+    });
+    // This time from B, as a ground station would: the player's verdict comes back to
+    // `petrel send` there, by its own sender id (the gateways translate the acknowledgement).
+    let verdict = b.send(&dir, &vehicle, "start_mission");
+    assert!(verdict.contains("1 taken and on record"), "{verdict}");
+    let s = a.wait_for(&dir, &vehicle, "the second pong", |s| {
+        // pong, start_mission from B, pong
+        place(s, "RELAY", "ready") && counts(s, "A", "event")["delivered"] == 3
+    });
+    for kind in ["event", "call", "beacon", "heartbeat", "marking"] {
+        assert!(accounted(counts(&s, "A", kind)), "{kind}: {s}");
+    }
+    assert_eq!(s["gateways"]["A"]["peers"]["B"]["missing"], 0, "{s}");
+    assert_eq!(s["gateways"]["A"]["peers"]["B"]["restarts"], 1, "{s}");
+    let on_b = b.wait_for(&dir, &vehicle, "B's counters", |s| {
+        counts(s, "B", "call")["delivered"] == 1
+    });
+    for kind in ["event", "call", "beacon", "heartbeat", "marking"] {
+        assert!(accounted(counts(&on_b, "B", kind)), "{kind}: {on_b}");
+    }
+    // The second gateway put two events on the link (the operator's and ECHO's), and A
+    // delivered three in all.
+    assert_eq!(counts(&on_b, "B", "event")["to_link"], 2, "{on_b}");
+
+    let codes = procs.stop();
+    assert!(
+        codes.iter().all(|c| *c == Some(0)),
+        "{codes:?}: {}",
+        logs(work.path())
+    );
+    // The journal: the pongs came from program/ECHO (the stand-in sends as the program), and
+    // the link's loss and return are on record.
+    let (entries, _) = journal_json(&journal);
+    let submitted = |name: &str| {
+        entries
+            .iter()
+            .filter(|e| e["kind"] == "submit" && e["event"] == name)
+            .collect::<Vec<_>>()
+    };
+    let pongs = submitted("pong");
+    assert_eq!(pongs.len(), 2, "{entries:?}");
+    assert!(pongs.iter().all(|e| e["origin"]
+        .as_str()
+        .unwrap_or("")
+        .starts_with("program/ECHO#")));
+    assert_eq!(submitted("link_lost").len(), 1, "{entries:?}");
+    assert_eq!(submitted("link_lost")[0]["params"][0], "\"B\"");
+    assert_eq!(submitted("link_restored").len(), 1, "{entries:?}");
+}
+
+#[test]
+fn a_link_event_must_be_a_communication_event_of_the_project() {
+    let work = Workdir::new();
+    let dir = project(&work);
+    let text = std::fs::read_to_string(dir.join("vehicle.toml")).expect("vehicle.toml");
+    std::fs::write(
+        dir.join("vehicle.toml"),
+        text.replace("lost_event = \"link_lost\"", "lost_event = \"pong\""),
+    )
+    .expect("vehicle.toml");
+    let o = petrel_tests::petrel(&["check", &dir.display().to_string()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("E0812") && err.contains("communication"),
+        "{err}"
+    );
+    // The gateway refuses to start on it, saying why.
+    let o = petrel_tests::petrel(&["gateway", &dir.display().to_string(), "--computer", "A"]);
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+/// tests/data/relay with ECHO and the player on A, a ground station G, and the gateways
+/// authenticating each other with `password` (the credentials file of the copy).
+fn ground_project(work: &Workdir, name: &str, ports: (u16, u16), password: &str) -> PathBuf {
+    let dir = work.path().join(name);
+    std::fs::create_dir_all(&dir).expect("project dir");
+    for f in ["petrel.toml", "relay.pn"] {
+        std::fs::copy(repo().join("tests/data/relay").join(f), dir.join(f)).expect("copy");
+    }
+    let vehicle = format!(
+        r#"[computers.A]
+gateway = "tcp/127.0.0.1:{}"
+[computers.G]
+gateway = "tcp/127.0.0.1:{}"
+
+[link]
+user = "petrel"
+credentials = "link.txt"
+
+[[process]]
+name = "player"
+kind = "player"
+computer = "A"
+
+[[process]]
+name = "echo"
+kind = "program"
+programs = ["ECHO"]
+computer = "A"
+executable = "{{target}}/examples/echo"
+args = ["{{vehicle}}", "ECHO"]
+"#,
+        ports.0, ports.1
+    );
+    std::fs::write(dir.join("vehicle.toml"), vehicle).expect("vehicle.toml");
+    std::fs::write(dir.join("link.txt"), format!("petrel:{password}\n")).expect("link.txt");
+    dir
+}
+
+#[test]
+fn only_an_authenticated_ground_station_sends_events_and_its_shadow_follows() {
+    let work = Workdir::new();
+    let ports = (free_port(), free_port());
+    let dir = ground_project(&work, "vehicle", ports, "s3cret");
+    let impostor = ground_project(&work, "impostor", ports, "guessed");
+    let vehicle = unique_vehicle("ground");
+    let (a, g) = (Computer::new(&work, "A"), Computer::new(&work, "G"));
+    let journal = work.path().join("journal");
+    let mut procs = Processes(vec![a.spawn(
+        &petrel_bin(),
+        &[
+            "play",
+            &dir.display().to_string(),
+            "--vehicle",
+            &vehicle,
+            "--journal",
+            &journal.display().to_string(),
+        ],
+        "player",
+    )]);
+    procs.0.push(a.gateway(&dir, &vehicle, "gw-a"));
+    procs
+        .0
+        .push(a.spawn(&example_bin("echo"), &[&vehicle, "ECHO"], "echo"));
+
+    // A ground station with the wrong password: the vehicle's gateway refuses its session (its
+    // log says so), so it never hears the player, and what it is sent goes nowhere.
+    let mut bad = Processes(vec![g.gateway(&impostor, &vehicle, "gw-impostor")]);
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while !std::fs::read_to_string(work.path().join("gw-a.log"))
+        .unwrap_or_default()
+        .contains("OpenSyn")
+    {
+        assert!(
+            Instant::now() < deadline,
+            "no refused handshake: {}",
+            logs(work.path())
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let o = g
+        .command(&petrel_bin())
+        .arg("send")
+        .arg(&dir)
+        .args(["start_mission", "--vehicle", &vehicle, "--timeout", "1"])
+        .output()
+        .expect("petrel send runs");
+    assert!(
+        !o.status.success(),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    let bad_gateway = bad.0.remove(0);
+    let _ = Command::new("kill")
+        .args(["-TERM", &bad_gateway.id().to_string()])
+        .status();
+    let out = bad_gateway.wait_with_output().expect("the impostor stops");
+    let counters: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(work.path().join("gw-impostor.out")).unwrap_or_default(),
+    )
+    .unwrap_or_default();
+    assert_eq!(out.status.code(), Some(0));
+    assert_eq!(counters["peers"]["A"]["state"], "unknown", "{counters}");
+    let s = a.wait_for(&dir, &vehicle, "the player's status", |s| {
+        s["stats"].is_object()
+    });
+    assert_eq!(s["stats"]["received"], 0, "nothing reached the player: {s}");
+
+    // The ground station with the vehicle's credentials: its shadow follows the player, and
+    // the operator's event there reaches the player and comes back acknowledged.
+    procs.0.push(g.gateway(&dir, &vehicle, "gw-g"));
+    g.wait_for(&dir, &vehicle, "the player's status on G", |s| {
+        place(s, "RELAY", "ready")
+    });
+    let shadow_log = work.path().join("shadow.log");
+    let shadow = g
+        .command(&petrel_bin())
+        .arg("play")
+        .arg(&dir)
+        .args(["--vehicle", &vehicle, "--shadow"])
+        .stderr(std::fs::File::create(&shadow_log).expect("log"))
+        .spawn()
+        .expect("the shadow starts");
+    let shadow = Processes(vec![shadow]);
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while !std::fs::read_to_string(&shadow_log)
+        .unwrap_or_default()
+        .contains("shadow synchronised")
+    {
+        assert!(
+            Instant::now() < deadline,
+            "the shadow did not synchronise: {}",
+            logs(work.path())
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let verdict = g.send(&dir, &vehicle, "start_mission");
+    assert!(verdict.contains("1 taken and on record"), "{verdict}");
+    a.wait_for(&dir, &vehicle, "the pong", |s| {
+        place(s, "RELAY", "ready") && s["stats"]["processed"] == 2
+    });
+    // The shadow saw both steps (the operator's event and ECHO's answer), and no divergence.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let s = g.status(&dir, &vehicle).unwrap_or_default();
+        if s["stats"]["processed"] == 2 || Instant::now() > deadline {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert_eq!(shadow.stop(), vec![Some(0)]);
+    let log = std::fs::read_to_string(&shadow_log).unwrap_or_default();
+    assert!(
+        log.contains("2 vehicle steps followed") && log.contains("0 divergence alarm(s)"),
+        "{log}"
+    );
+    let codes = procs.stop();
+    assert!(
+        codes.iter().all(|c| *c == Some(0)),
+        "{codes:?}: {}",
+        logs(work.path())
+    );
+}
+
+/// missions/ugv copied with free ports for its three computers' gateways.
+fn ugv_project(work: &Workdir) -> PathBuf {
+    let dir = work.path().join("ugv");
+    std::fs::create_dir_all(&dir).expect("project dir");
+    for f in ["petrel.toml", "robot.pn", "sync.pn", "vehicle.toml"] {
+        let text = std::fs::read_to_string(repo().join("missions/ugv").join(f)).expect("read");
+        let text = ["7447", "7448", "7449"].iter().fold(text, |t, p| {
+            t.replace(
+                &format!("127.0.0.1:{p}"),
+                &format!("127.0.0.1:{}", free_port()),
+            )
+        });
+        std::fs::write(dir.join(f), text).expect("write");
+    }
+    dir
+}
+
+/// The paper's UGV pair live (section 3.3): the supervision on one computer, each robot's
+/// movement program on its own; both robots reach the bottleneck together, and the journal
+/// shows them in it one at a time.
+#[test]
+fn the_ugv_pair_on_three_computers_passes_the_bottleneck_one_at_a_time() {
+    let work = Workdir::new();
+    let dir = ugv_project(&work);
+    let vehicle = unique_vehicle("ugv");
+    let s = Computer::new(&work, "supervision");
+    let (r1, r2) = (
+        Computer::new(&work, "robot1"),
+        Computer::new(&work, "robot2"),
+    );
+    let journal = work.path().join("journal");
+    let ugv = example_bin("ugv");
+    let mut procs = Processes(vec![s.spawn(
+        &petrel_bin(),
+        &[
+            "play",
+            &dir.display().to_string(),
+            "--vehicle",
+            &vehicle,
+            "--journal",
+            &journal.display().to_string(),
+        ],
+        "player",
+    )]);
+    procs.0.push(s.gateway(&dir, &vehicle, "gw-s"));
+    procs
+        .0
+        .push(s.spawn(&ugv, &["planner", &vehicle], "planner"));
+    procs.0.push(r1.gateway(&dir, &vehicle, "gw-r1"));
+    procs
+        .0
+        .push(r1.spawn(&ugv, &["moves", &vehicle, "r1", "MOVES_R1"], "moves-r1"));
+    procs.0.push(r2.gateway(&dir, &vehicle, "gw-r2"));
+    procs
+        .0
+        .push(r2.spawn(&ugv, &["moves", &vehicle, "r2", "MOVES_R2"], "moves-r2"));
+    s.wait_for(&dir, &vehicle, "both robots' programs alive", |st| {
+        ["PLANNER", "MOVES_R1", "MOVES_R2"]
+            .iter()
+            .all(|p| st["programs"][p] == "alive")
+    });
+    s.send(&dir, &vehicle, "start_mission");
+    let st = s.wait_for(&dir, &vehicle, "both robots done", |st| {
+        place(st, "R1", "done") && place(st, "R2", "done")
+    });
+    assert_eq!(st["stats"]["calls_failed"], 0, "{st}");
+    // Each robot's gateway delivered its own robot's calls and left the other's (it hears
+    // every computer); the robots' events are the supervision's alone.
+    let on_r1 = r1.wait_for(&dir, &vehicle, "robot1's counters", |x| {
+        counts(x, "robot1", "call")["delivered"]
+            .as_u64()
+            .unwrap_or(0)
+            > 0
+    });
+    let calls = counts(&on_r1, "robot1", "call");
+    let events = counts(&on_r1, "robot1", "event");
+    assert!(
+        calls["not_mine"].as_u64().unwrap_or(0) > 0 && accounted(calls),
+        "{on_r1}"
+    );
+    assert!(events["delivered"] == 0 && accounted(events), "{on_r1}");
+    let codes = procs.stop();
+    assert!(
+        codes.iter().all(|c| *c == Some(0)),
+        "{codes:?}: {}",
+        logs(work.path())
+    );
+
+    // The trace: each robot entered the bottleneck once, never while the other was in it
+    // (from `enter`, which takes it, to `out`, which gives it back).
+    let (entries, _) = journal_json(&journal);
+    let mut inside = [false, false];
+    let mut entered = [0, 0];
+    let mut both_waited = false;
+    for e in entries.iter().filter(|e| e["kind"] == "step") {
+        for t in e["fired"].as_array().into_iter().flatten() {
+            let t = t.as_str().unwrap_or("");
+            for (i, r) in ["R1", "R2"].iter().enumerate() {
+                if t == format!("{r}/PASS.enter") {
+                    assert!(!inside[1 - i], "both in the bottleneck at {e}");
+                    inside[i] = true;
+                    entered[i] += 1;
+                }
+                if t == format!("{r}/PASS.out") {
+                    inside[i] = false;
+                }
+                // The robot asked for the bottleneck again after the other left: it had to
+                // wait for it.
+                if t == format!("{r}/PASS.again") {
+                    both_waited = true;
+                }
+            }
+        }
+    }
+    assert_eq!(entered, [1, 1], "{entries:?}");
+    assert!(
+        both_waited,
+        "the robots never met at the bottleneck: {entries:?}"
+    );
+}
+
+/// Two network namespaces joined by a veth pair (a cable between two computers), removed when
+/// dropped; `None` where they cannot be made (not root, no `ip`).
+struct Cable {
+    ns: [String; 2],
+    ends: [String; 2],
+    addrs: [String; 2],
+}
+
+impl Cable {
+    fn new() -> Option<Cable> {
+        let id = std::process::id() % 100_000;
+        let ns = [format!("pg{id}a"), format!("pg{id}b")];
+        let ends = [format!("pgv{id}a"), format!("pgv{id}b")];
+        let net = format!("10.{}.{}", 200 + id % 50, id % 250);
+        let addrs = [format!("{net}.1"), format!("{net}.2")];
+        let cable = Cable { ns, ends, addrs };
+        let ip = |args: &[&str]| {
+            Command::new("ip")
+                .args(args)
+                .stderr(Stdio::null())
+                .status()
+                .is_ok_and(|s| s.success())
+        };
+        let made = ip(&["netns", "add", &cable.ns[0]])
+            && ip(&["netns", "add", &cable.ns[1]])
+            && ip(&[
+                "link",
+                "add",
+                &cable.ends[0],
+                "type",
+                "veth",
+                "peer",
+                "name",
+                &cable.ends[1],
+            ])
+            && (0..2).all(|i| {
+                ip(&["link", "set", &cable.ends[i], "netns", &cable.ns[i]])
+                    && ip(&[
+                        "-n",
+                        &cable.ns[i],
+                        "addr",
+                        "add",
+                        &format!("{}/24", cable.addrs[i]),
+                        "dev",
+                        &cable.ends[i],
+                    ])
+                    && ip(&["-n", &cable.ns[i], "link", "set", &cable.ends[i], "up"])
+                    && ip(&["-n", &cable.ns[i], "link", "set", "lo", "up"])
+            });
+        if !made {
+            eprintln!("cannot make network namespaces and a veth pair (this test needs root and `ip`): skipped");
+            return None;
+        }
+        Some(cable)
+    }
+
+    /// Unplugs (or plugs back) the cable at the first computer's end.
+    fn set(&self, up: bool) {
+        let ok = Command::new("ip")
+            .args([
+                "-n",
+                &self.ns[0],
+                "link",
+                "set",
+                &self.ends[0],
+                if up { "up" } else { "down" },
+            ])
+            .status()
+            .is_ok_and(|s| s.success());
+        assert!(ok, "ip link set {}", self.ends[0]);
+    }
+}
+
+impl Drop for Cable {
+    fn drop(&mut self) {
+        // Deleting a namespace deletes its end of the pair, and so the pair.
+        for ns in &self.ns {
+            let _ = Command::new("ip").args(["netns", "del", ns]).status();
+        }
+    }
+}
+
+/// The cable between the two computers cut mid-mission and plugged back: the loss and the
+/// return are events, the program is lost and back, and nothing put on the link was lost.
+#[test]
+fn a_cut_cable_is_a_lost_computer_and_nothing_is_lost_when_it_comes_back() {
+    let Some(cable) = Cable::new() else {
+        return;
+    };
+    let work = Workdir::new();
+    let dir = project(&work);
+    let text = std::fs::read_to_string(dir.join("vehicle.toml")).expect("vehicle.toml");
+    let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
+    let mut n = 0;
+    for l in lines.iter_mut() {
+        if l.starts_with("gateway = ") {
+            *l = format!("gateway = \"tcp/{}:7447\"", cable.addrs[n]);
+            n += 1;
+        }
+    }
+    std::fs::write(dir.join("vehicle.toml"), lines.join("\n")).expect("vehicle.toml");
+    let vehicle = unique_vehicle("cable");
+    let (mut a, mut b) = (Computer::new(&work, "A"), Computer::new(&work, "B"));
+    a.netns = Some(cable.ns[0].clone());
+    b.netns = Some(cable.ns[1].clone());
+    let journal = work.path().join("journal");
+    let mut procs = Processes(vec![a.spawn(
+        &petrel_bin(),
+        &[
+            "play",
+            &dir.display().to_string(),
+            "--vehicle",
+            &vehicle,
+            "--journal",
+            &journal.display().to_string(),
+        ],
+        "player",
+    )]);
+    procs.0.push(a.gateway(&dir, &vehicle, "gw-a"));
+    procs.0.push(b.gateway(&dir, &vehicle, "gw-b"));
+    procs
+        .0
+        .push(b.spawn(&example_bin("echo"), &[&vehicle, "ECHO"], "echo"));
+    a.wait_for(&dir, &vehicle, "ECHO alive on A", |s| {
+        s["programs"]["ECHO"] == "alive"
+    });
+    a.send(&dir, &vehicle, "start_mission");
+    a.wait_for(&dir, &vehicle, "the pong back", |s| {
+        place(s, "RELAY", "ready") && s["stats"]["processed"] == 2
+    });
+
+    cable.set(false);
+    let s = a.wait_for(&dir, &vehicle, "B lost", |s| {
+        place(s, "LINK", "down") && place(s, "PROGS", "gone")
+    });
+    assert_eq!(s["gateways"]["A"]["peers"]["B"]["state"], "lost", "{s}");
+    cable.set(true);
+    a.wait_for(&dir, &vehicle, "B back", |s| {
+        place(s, "LINK", "up") && s["programs"]["ECHO"] == "alive"
+    });
+    a.send(&dir, &vehicle, "start_mission");
+    let s = a.wait_for(&dir, &vehicle, "the second pong", |s| {
+        place(s, "RELAY", "ready") && counts(s, "A", "event")["delivered"] == 2
+    });
+    // The same gateways on both ends all along: every message B put on the link while the
+    // cable was out arrived once it was back (TCP and zenoh kept them), none missing.
+    let peer = &s["gateways"]["A"]["peers"]["B"];
+    assert_eq!(
+        (peer["missing"].as_u64(), peer["restarts"].as_u64()),
+        (Some(0), Some(0)),
+        "{s}"
+    );
+    assert_eq!(peer["losses"], 1, "{s}");
+    for kind in ["event", "call", "beacon", "heartbeat", "marking"] {
+        assert!(accounted(counts(&s, "A", kind)), "{kind}: {s}");
+    }
+    let codes = procs.stop();
+    assert!(
+        codes.iter().all(|c| *c == Some(0)),
+        "{codes:?}: {}",
+        logs(work.path())
+    );
+    let (entries, _) = journal_json(&journal);
+    let count = |name: &str| {
+        entries
+            .iter()
+            .filter(|e| e["kind"] == "submit" && e["event"] == name)
+            .count()
+    };
+    assert_eq!(
+        (count("link_lost"), count("link_restored"), count("pong")),
+        (1, 1, 2)
+    );
+}
