@@ -19,6 +19,7 @@ mod analysis;
 mod env;
 mod explore;
 mod minimize;
+mod reduction;
 mod render;
 
 pub use render::{
@@ -45,6 +46,11 @@ pub struct VerifyOptions {
     /// Skip what issue 13 added over the graph: progress, stuck nets, starvation and the
     /// minimization of traces (to measure what they cost; `petrel verify` always runs them).
     pub skip_liveness: bool,
+    /// Explore every interleaving (`--no-reduction`): no partial-order reduction. The
+    /// reduction keeps dead markings, unsafe places, loops of immediate transitions,
+    /// invariants, conflicts, progress and stuck nets exact (docs/verification.md);
+    /// starvation and loops need every state, and are checked only when it left none out.
+    pub no_reduction: bool,
 }
 
 /// Why a verification could not finish.
@@ -266,6 +272,12 @@ pub struct Report {
     pub unused_events: Vec<String>,
     /// The environment's counters (declared answers, internal events), for people.
     pub protocols: Vec<String>,
+    /// States the partial-order reduction expanded with one component's deliveries only.
+    pub reduced_states: u64,
+    /// The reduction left states out: starvation and loops need every state and were not
+    /// checked (`--no-reduction` checks them); traces are witnesses, not necessarily the
+    /// shortest (those to dead markings are).
+    pub partial: bool,
     /// Seconds spent.
     pub seconds: f64,
     /// Each net's template (its declaration in the net files), for locating findings.
@@ -457,6 +469,10 @@ fn verify_inner(
             f
         })
         .collect();
+    report.reduced_states = g.reduced;
+    report.partial = g.reduced > 0;
+    // What needs every state (loops, what stays reachable) is not asked of a partial graph.
+    let whole = !report.partial;
     let ends = analysis::ends(p, l, &g);
     if !opts.skip_liveness {
         let rev = analysis::Reverse::new(&g);
@@ -492,11 +508,13 @@ fn verify_inner(
             })
             .collect();
     }
-    let components = analysis::components(&g);
-    if !opts.skip_liveness {
-        report.starvation = analysis::starvation(p, l, &g, &components);
+    if whole {
+        let components = analysis::components(&g);
+        if !opts.skip_liveness {
+            report.starvation = analysis::starvation(p, l, &g, &components);
+        }
+        report.event_loops = analysis::event_loops(p, &g, &components);
     }
-    report.event_loops = analysis::event_loops(p, &g, &components);
     report.unsafe_places = g.unsafe_places.clone();
     report.livelocks = g.livelocks.clone();
     report.conflicts = g.conflicts.clone();
