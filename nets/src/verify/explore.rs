@@ -9,6 +9,7 @@
 use super::env::{
     deliveries, Delivery, Env, Gate, MayHold, Oracle, Requests, Truth, MAX_GUARD_RUNS,
 };
+use super::store::StateStore;
 use super::{ConflictFinding, LivelockFinding, Trace, UnsafeFinding, VerifyError, VerifyOptions};
 use crate::compiled::{Arg, CompiledProject, EventId, FunctionId, Guard, NetId, ProgramId};
 use crate::model::Category;
@@ -69,7 +70,7 @@ pub(super) struct Edge {
 
 /// Everything the exploration found.
 pub(super) struct Graph {
-    pub states: Vec<State>,
+    pub states: StateStore,
     pub via: Vec<Via>,
     pub edges: Vec<Edge>,
     pub labels: Vec<Label>,
@@ -555,7 +556,7 @@ pub(super) fn explore(
         livelock_seen: HashSet::new(),
     };
     let mut g = Graph {
-        states: Vec::new(),
+        states: StateStore::new(env.words),
         via: Vec::new(),
         edges: Vec::new(),
         labels: Vec::new(),
@@ -571,7 +572,6 @@ pub(super) fn explore(
         alone: false,
         reduced: 0,
     };
-    let mut index: HashMap<State, u32> = HashMap::new();
     // Breadth-first depth of each state, and whether it was (or must be) expanded in full:
     // the cycle proviso of the reduction.
     let mut depth: Vec<u32> = Vec::new();
@@ -584,8 +584,7 @@ pub(super) fn explore(
         let mut t = from.to_vec();
         t.resize(env.words, 0);
         env.saturate(&mut t);
-        index.insert(t.clone(), 0);
-        g.states.push(t);
+        g.states.push(&t);
         g.via.push(Via::Start);
     }
     let mut prefixes: Vec<Vec<bool>> = if start.is_some() {
@@ -613,9 +612,8 @@ pub(super) fn explore(
         );
         ctx.record(&mut g, &|_| Vec::new());
         Oracle::next_prefixes(&prefix, ctx.rec.oracle.used, &mut prefixes);
-        if !index.contains_key(&initial) {
-            index.insert(initial.clone(), g.states.len() as u32);
-            g.states.push(initial);
+        if g.states.find(&initial).is_none() {
+            g.states.push(&initial);
             g.via.push(Via::Start);
         }
     }
@@ -663,7 +661,7 @@ pub(super) fn explore(
                 );
             }
         }
-        let s = g.states[i as usize].clone();
+        let s = g.states[i as usize].to_vec();
         for (n, seen) in g.ever_active.iter_mut().enumerate() {
             *seen |= l.is_active(&s, n as NetId);
         }
@@ -728,16 +726,16 @@ pub(super) fn explore(
                     // in a state expanded in full (or that will be), so every loop of the
                     // reduced graph holds a state expanded in full and no component is
                     // ignored forever.
-                    let ok = tried.iter().all(|(t, _, _)| match index.get(t) {
+                    let ok = tried.iter().all(|(t, _, _)| match g.states.find(t) {
                         None => true,
-                        Some(&j) => {
+                        Some(j) => {
                             depth[j as usize] > depth[i as usize]
                                 || (j != i && (j > i || full[j as usize]))
                         }
                     });
                     if ok {
                         for (t, _, _) in &tried {
-                            if let Some(&j) = index.get(t) {
+                            if let Some(j) = g.states.find(t) {
                                 if j > i && depth[j as usize] <= depth[i as usize] {
                                     must_full[j as usize] = true;
                                 }
@@ -805,8 +803,8 @@ pub(super) fn explore(
             successors.push((t, Via::Env(i, lid), Some((lid, fid))));
         }
         for (t, how, step) in successors {
-            let j = match index.get(&t) {
-                Some(&j) => j,
+            let j = match g.states.find(&t) {
+                Some(j) => j,
                 None => {
                     let j = g.states.len() as u32;
                     if let Some(limit) = opts.max_states {
@@ -814,8 +812,7 @@ pub(super) fn explore(
                             return Err(VerifyError::TooManyStates { limit });
                         }
                     }
-                    index.insert(t.clone(), j);
-                    g.states.push(t);
+                    g.states.push(&t);
                     g.via.push(how);
                     depth.push(depth[i as usize] + 1);
                     full.push(false);

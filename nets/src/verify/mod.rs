@@ -21,6 +21,7 @@ mod explore;
 mod minimize;
 mod reduction;
 mod render;
+mod store;
 
 pub use render::{
     diagnostics, diagnostics_all, render_human, render_human_all, render_summary, to_json,
@@ -401,20 +402,8 @@ fn verify_inner(
             m.trace(i, keep)
         }
     };
-    // Which graph state a replayed state is (built only when a finding needs it).
-    let index: std::cell::OnceCell<HashMap<&[u64], u32>> = std::cell::OnceCell::new();
-    let index_of = |s: &[u64]| -> Option<u32> {
-        index
-            .get_or_init(|| {
-                g.states
-                    .iter()
-                    .enumerate()
-                    .map(|(k, st)| (st.as_slice(), k as u32))
-                    .collect()
-            })
-            .get(s)
-            .copied()
-    };
+    // Which graph state a replayed state is.
+    let index_of = |s: &[u64]| -> Option<u32> { g.states.find(s) };
     // The nets a finding at `target` is about: the active ones not at an end of theirs. An
     // event matters when, without it, those nets would not be where they are.
     let concerned = |target: &[u64]| -> Vec<NetId> {
@@ -443,7 +432,7 @@ fn verify_inner(
         .map(|(mut f, i)| {
             // Hundreds of ends after a catastrophic event need no minimal trace each.
             if !f.after_catastrophic {
-                let target = g.states[i as usize].clone();
+                let target = g.states[i as usize].to_vec();
                 let nets = concerned(&target);
                 let intended = f.intended;
                 // Still a dead marking of the same kind, the nets it is about where they are.
@@ -481,7 +470,7 @@ fn verify_inner(
                 // Any state from which no end is reachable will do for the first trace; for the
                 // state the mission stays in, the nets not at an end must be where they are.
                 f.trace = at(first, &|s| index_of(s).is_some_and(|k| !reach[k as usize]));
-                let target = g.states[stays as usize].clone();
+                let target = g.states[stays as usize].to_vec();
                 let nets = concerned(&target);
                 f.stays_in_trace = at(stays, &|s| {
                     index_of(s).is_some_and(|k| !reach[k as usize])
@@ -559,14 +548,7 @@ fn verify_inner(
         .collect();
     if opts.keep_states {
         // The project's own words only: the environment's counters are the verifier's.
-        report.reachable = g
-            .states
-            .into_iter()
-            .map(|mut s| {
-                s.truncate(l.words);
-                s
-            })
-            .collect();
+        report.reachable = g.states.iter().map(|s| s[..l.words].to_vec()).collect();
         report.reachable.sort();
         report.reachable.dedup();
     }
