@@ -107,6 +107,10 @@ pub struct VerifyArgs {
     /// with counts).
     #[arg(long)]
     all: bool,
+    /// Explore every interleaving of independent nets (no partial-order reduction): slower,
+    /// but progress, stuck nets, starvation and loops are checked whatever the project.
+    #[arg(long)]
+    no_reduction: bool,
 }
 
 /// Verifies a project (or one of its nets), or explores a PNML file as a P/T net.
@@ -125,6 +129,7 @@ pub fn verify(a: VerifyArgs) -> Outcome {
     let opts = verify::VerifyOptions {
         max_states: a.max_states,
         only_net: a.net,
+        no_reduction: a.no_reduction,
         progress: interactive.then(|| {
             Box::new(|states: u64, rate: f64| {
                 eprint!("\r{states} states, {rate:.0} states/s   ");

@@ -465,6 +465,27 @@ fn verify_exits_1_for_errors_only_and_json_locates_each_finding() {
 }
 
 #[test]
+fn verify_reduces_independent_nets_unless_told_not_to() {
+    // lock_order: the two locking nets and the independent acknowledge loop beside them.
+    let dir = progress_data("lock_order");
+    let reduced = petrel(&["verify", &dir]);
+    let full = petrel(&["verify", &dir, "--no-reduction"]);
+    for o in [&reduced, &full] {
+        assert_eq!(o.status.code(), Some(1), "{}", stdout(o));
+        assert!(
+            stdout(o).ends_with("result: 2 error(s), 0 warning(s)\n"),
+            "{}",
+            stdout(o)
+        );
+    }
+    let (reduced, full) = (stdout(&reduced), stdout(&full));
+    assert!(reduced.contains("partial-order reduction: "), "{reduced}");
+    assert!(reduced.contains("loops that need outside events: not checked"));
+    assert!(!full.contains("partial-order reduction"), "{full}");
+    assert!(full.contains("loops that need outside events (expected): "));
+}
+
+#[test]
 fn run_plays_the_mission_scripts_in_virtual_time_as_json_lines() {
     // Every script of every mission: a new one is covered as soon as it is written.
     let mut scripts = Vec::new();

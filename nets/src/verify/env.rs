@@ -503,6 +503,11 @@ impl Env {
         }
     }
 
+    /// Exactly one call or emission outstanding on counter `c` (not none, not many).
+    pub fn is_once(&self, s: &[u64], c: u32) -> bool {
+        self.get(s, c) == 1
+    }
+
     /// One answered: 1 to 0; many stays many.
     pub fn down(&self, s: &mut [u64], c: u32) {
         if self.get(s, c) == 1 {

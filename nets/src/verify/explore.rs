@@ -9,11 +9,13 @@
 use super::env::{
     deliveries, Delivery, Env, Gate, MayHold, Oracle, Requests, Truth, MAX_GUARD_RUNS,
 };
+use super::store::StateStore;
 use super::{ConflictFinding, LivelockFinding, Trace, UnsafeFinding, VerifyError, VerifyOptions};
 use crate::compiled::{Arg, CompiledProject, EventId, FunctionId, Guard, NetId, ProgramId};
+use crate::model::Category;
 use crate::semantics::{Effects, Layout, Scratch, Semantics, State};
 use petrel_value::Value;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::time::Instant;
 
 /// How a stable state was first reached: the parent pointer of the shortest trace.
@@ -68,7 +70,7 @@ pub(super) struct Edge {
 
 /// Everything the exploration found.
 pub(super) struct Graph {
-    pub states: Vec<State>,
+    pub states: StateStore,
     pub via: Vec<Via>,
     pub edges: Vec<Edge>,
     pub labels: Vec<Label>,
@@ -85,6 +87,9 @@ pub(super) struct Graph {
     /// One net verified alone (`--net`): its end is to be inactive (it finished, or
     /// deactivated itself).
     pub alone: bool,
+    /// States expanded with one component's deliveries only (partial-order reduction): when
+    /// there are any, the graph holds only some of the reachable states.
+    pub reduced: u64,
 }
 
 impl Graph {
@@ -265,7 +270,257 @@ pub(super) fn run_step(
 /// A state reached from the one being expanded, how, and the edge's label and fired set.
 type Successor = (State, Via, Option<(u32, u32)>);
 
-/// Explores every stable state of `p`.
+/// A delivery the environment can make in a state: which one, the counters it may consume
+/// (`None`: a free event), and whether no transition takes it (a pending event, dropped).
+struct Move {
+    delivery: usize,
+    counters: Vec<Option<u32>>,
+    dropped: bool,
+}
+
+/// What the exploration keeps besides the graph: the firing code, the environment, and what
+/// was already reported or labelled.
+struct Ctx<'a> {
+    p: &'a CompiledProject,
+    sem: &'a Semantics<'a>,
+    env: &'a Env,
+    deliveries: Vec<Delivery>,
+    guards: Vec<Option<Guard>>,
+    rec: Recorder,
+    scratch: Scratch,
+    candidates: Vec<u32>,
+    /// Keyed by delivery, guard outcomes, counter, and whether the delivery went unused.
+    label_ids: HashMap<(u32, Vec<bool>, Option<u32>, bool), u32>,
+    fired_ids: HashMap<Vec<u32>, u32>,
+    unsafe_seen: HashSet<(u32, u32)>,
+    conflict_seen: HashSet<(u32, u32)>,
+    livelock_seen: HashSet<Vec<u32>>,
+}
+
+impl Ctx<'_> {
+    fn name_of(&self, r: u32) -> String {
+        let l = &self.sem.layout;
+        let rule = &l.rules[r as usize];
+        let net = &self.p.nets[rule.net as usize];
+        format!(
+            "{}.{}",
+            net.name, net.transitions[rule.transition as usize].name
+        )
+    }
+
+    /// What the last step showed, with the trace that led to it.
+    fn record(&mut self, g: &mut Graph, trace: &dyn Fn(&Graph) -> Trace) {
+        for &r in &self.rec.fired {
+            g.ever_fired[r as usize] = true;
+        }
+        for k in 0..self.rec.refused.len() {
+            let (r, place) = self.rec.refused[k];
+            if self.unsafe_seen.insert((r, place)) {
+                g.unsafe_places.push(UnsafeFinding {
+                    transition: self.name_of(r),
+                    place: self.sem.layout.describe_bit(self.p, place),
+                    trace: trace(g),
+                });
+            }
+        }
+        if let Some(cycle) = self.rec.livelock.clone() {
+            let mut key = cycle.clone();
+            key.sort_unstable();
+            if self.livelock_seen.insert(key) {
+                g.livelocks.push(LivelockFinding {
+                    transitions: cycle.iter().map(|&r| self.name_of(r)).collect(),
+                    trace: trace(g),
+                });
+            }
+        }
+    }
+
+    fn label(
+        &mut self,
+        g: &mut Graph,
+        key: (u32, Vec<bool>, Option<u32>, bool),
+        make: impl FnOnce() -> Label,
+    ) -> u32 {
+        *self.label_ids.entry(key).or_insert_with(|| {
+            g.labels.push(make());
+            (g.labels.len() - 1) as u32
+        })
+    }
+
+    /// The set of transitions the last step fired, as an index into `g.fired_sets`.
+    fn fired_set(&mut self, g: &mut Graph) -> u32 {
+        let mut fired = self.rec.fired.clone();
+        fired.sort_unstable();
+        fired.dedup();
+        *self.fired_ids.entry(fired).or_insert_with_key(|f| {
+            g.fired_sets.push(f.clone());
+            (g.fired_sets.len() - 1) as u32
+        })
+    }
+
+    /// The deliveries the environment can make in state `i` (`s`), and the conflicts they
+    /// show.
+    fn moves(&mut self, g: &mut Graph, i: u32, s: &[u64], out: &mut Vec<Move>) {
+        out.clear();
+        for di in 0..self.deliveries.len() {
+            let d = &self.deliveries[di];
+            let counters: Vec<Option<u32>> = match self.env.gate(s, d.event, d.target) {
+                Gate::Closed => continue,
+                Gate::Free => vec![None],
+                Gate::Counters(list) => list.into_iter().map(Some).collect(),
+            };
+            self.sem.candidates(
+                s,
+                d.event,
+                d.target,
+                &mut MayHold {
+                    guards: &self.guards,
+                    params: &d.params,
+                },
+                &mut self.candidates,
+            );
+            if self.candidates.is_empty() {
+                // No transition takes it here. A free event then changes nothing (the player
+                // counts it unused), but a pending answer or emission is consumed all the
+                // same: the player takes it from its queue, finds no candidate and drops it
+                // (docs/semantics.md, "Processing one event", step 5). The verifier must not
+                // let it wait for a consumer that may come later. A counter at "many" stays
+                // there: that drop changes nothing.
+                let once: Vec<Option<u32>> = counters
+                    .into_iter()
+                    .filter(|c| c.is_some_and(|c| self.env.is_once(s, c)))
+                    .collect();
+                if !once.is_empty() {
+                    out.push(Move {
+                        delivery: di,
+                        counters: once,
+                        dropped: true,
+                    });
+                }
+                continue;
+            }
+            for a in 0..self.candidates.len() {
+                let ra = self.candidates[a];
+                for b in a + 1..self.candidates.len() {
+                    let rb = self.candidates[b];
+                    if self.sem.layout.share_input(ra, rb) && self.conflict_seen.insert((ra, rb)) {
+                        let mut trace = g.trace(i);
+                        trace.push(self.deliveries[di].label.clone());
+                        g.conflicts.push(ConflictFinding {
+                            event: self.p.events[self.deliveries[di].event as usize]
+                                .name
+                                .clone(),
+                            winner: self.name_of(ra),
+                            loser: self.name_of(rb),
+                            trace,
+                        });
+                    }
+                }
+            }
+            out.push(Move {
+                delivery: di,
+                counters,
+                dropped: false,
+            });
+        }
+    }
+
+    /// Runs move `m` from state `i` (`s`): one step per counter and per outcome of the guards
+    /// it cannot decide.
+    fn run(
+        &mut self,
+        g: &mut Graph,
+        i: u32,
+        s: &[u64],
+        m: &Move,
+        out: &mut Vec<Successor>,
+    ) -> Result<(), VerifyError> {
+        let di = m.delivery;
+        for &counter in &m.counters {
+            if m.dropped {
+                let d = &self.deliveries[di];
+                let t = run_step(
+                    self.sem,
+                    self.env,
+                    &mut self.rec,
+                    &mut self.scratch,
+                    s,
+                    Some(d),
+                    &[],
+                    counter,
+                );
+                let (label, event) = (format!("{} (unused)", d.label), d.event);
+                let lid = self.label(g, (di as u32, Vec::new(), counter, true), || Label {
+                    text: label,
+                    event,
+                    delivery: di as u32,
+                    choices: Vec::new(),
+                    counter,
+                });
+                let fid = self.fired_set(g);
+                out.push((t, Via::Step(i, lid), Some((lid, fid))));
+                continue;
+            }
+            // Every outcome of the guards this delivery cannot decide.
+            let mut prefixes: Vec<Vec<bool>> = vec![Vec::new()];
+            let mut runs = 0usize;
+            while let Some(prefix) = prefixes.pop() {
+                runs += 1;
+                let d = &self.deliveries[di];
+                if runs > MAX_GUARD_RUNS {
+                    return Err(VerifyError::TooManyUndecidedGuards {
+                        event: self.p.events[d.event as usize].name.clone(),
+                    });
+                }
+                let t = run_step(
+                    self.sem,
+                    self.env,
+                    &mut self.rec,
+                    &mut self.scratch,
+                    s,
+                    Some(d),
+                    &prefix,
+                    counter,
+                );
+                Oracle::next_prefixes(&prefix, self.rec.oracle.used, &mut prefixes);
+                let choices: Vec<bool> = (0..self.rec.oracle.used)
+                    .map(|k| prefix.get(k).copied().unwrap_or(false))
+                    .collect();
+                let (base, event) = (d.label.clone(), d.event);
+                let lid = self.label(g, (di as u32, choices.clone(), counter, false), || {
+                    let mut text = base;
+                    if !choices.is_empty() {
+                        let taken: Vec<&str> = choices
+                            .iter()
+                            .map(|c| if *c { "true" } else { "false" })
+                            .collect();
+                        text = format!("{text} (undecided guards taken {})", taken.join(", "));
+                    }
+                    Label {
+                        text,
+                        event,
+                        delivery: di as u32,
+                        choices,
+                        counter,
+                    }
+                });
+                let fid = self.fired_set(g);
+                let text = g.labels[lid as usize].text.clone();
+                self.record(g, &|g| {
+                    let mut t = g.trace(i);
+                    t.push(text.clone());
+                    t
+                });
+                out.push((t, Via::Step(i, lid), Some((lid, fid))));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Explores every stable state of `p` (with `reduce`, a subset that keeps what
+/// [`super::reduction`] says).
+#[allow(clippy::too_many_arguments)]
 pub(super) fn explore(
     p: &CompiledProject,
     sem: &Semantics,
@@ -276,7 +531,6 @@ pub(super) fn explore(
     start: Option<&[u64]>,
 ) -> Result<Graph, VerifyError> {
     let l = &sem.layout;
-    let mut scratch = Scratch::default();
     let guards: Vec<Option<Guard>> = l
         .rules
         .iter()
@@ -286,18 +540,23 @@ pub(super) fn explore(
                 .clone()
         })
         .collect();
-    let mut rec = Recorder::with_guards(guards.clone());
-    let name_of = |r: u32| {
-        let rule = &l.rules[r as usize];
-        let net = &p.nets[rule.net as usize];
-        format!(
-            "{}.{}",
-            net.name, net.transitions[rule.transition as usize].name
-        )
+    let mut ctx = Ctx {
+        p,
+        sem,
+        env,
+        deliveries: deliveries(p, l)?,
+        rec: Recorder::with_guards(guards.clone()),
+        guards,
+        scratch: Scratch::default(),
+        candidates: Vec::new(),
+        label_ids: HashMap::new(),
+        fired_ids: HashMap::new(),
+        unsafe_seen: HashSet::new(),
+        conflict_seen: HashSet::new(),
+        livelock_seen: HashSet::new(),
     };
-    let deliveries = deliveries(p, l)?;
     let mut g = Graph {
-        states: Vec::new(),
+        states: StateStore::new(env.words),
         via: Vec::new(),
         edges: Vec::new(),
         labels: Vec::new(),
@@ -311,40 +570,13 @@ pub(super) fn explore(
         ever_active: vec![false; p.nets.len()],
         max_tokens_per_marking: 0,
         alone: false,
+        reduced: 0,
     };
-    // Keyed by delivery, guard outcomes, counter, and whether the delivery went unused.
-    let mut label_ids: HashMap<(u32, Vec<bool>, Option<u32>, bool), u32> = HashMap::new();
-    let mut fired_ids: HashMap<Vec<u32>, u32> = HashMap::new();
-    let mut index: HashMap<State, u32> = HashMap::new();
-    let mut unsafe_seen: HashMap<(u32, u32), ()> = HashMap::new();
-    let mut conflict_seen: HashMap<(u32, u32), ()> = HashMap::new();
-    let mut livelock_seen: HashMap<Vec<u32>, ()> = HashMap::new();
-
-    // What one step showed, with the trace that led to it.
-    let mut record = |g: &mut Graph, rec: &Recorder, trace: &dyn Fn(&Graph) -> Trace| {
-        for &r in &rec.fired {
-            g.ever_fired[r as usize] = true;
-        }
-        for &(r, place) in &rec.refused {
-            if unsafe_seen.insert((r, place), ()).is_none() {
-                g.unsafe_places.push(UnsafeFinding {
-                    transition: name_of(r),
-                    place: l.describe_bit(p, place),
-                    trace: trace(g),
-                });
-            }
-        }
-        if let Some(cycle) = &rec.livelock {
-            let mut key = cycle.clone();
-            key.sort_unstable();
-            if livelock_seen.insert(key, ()).is_none() {
-                g.livelocks.push(LivelockFinding {
-                    transitions: cycle.iter().map(|&r| name_of(r)).collect(),
-                    trace: trace(g),
-                });
-            }
-        }
-    };
+    // Breadth-first depth of each state, and whether it was (or must be) expanded in full:
+    // the cycle proviso of the reduction.
+    let mut depth: Vec<u32> = Vec::new();
+    let mut full: Vec<bool> = Vec::new();
+    let mut must_full: Vec<bool> = Vec::new();
 
     // The initial states: the given one (a reload's), or one per outcome of the guards the
     // start cannot decide.
@@ -352,8 +584,7 @@ pub(super) fn explore(
         let mut t = from.to_vec();
         t.resize(env.words, 0);
         env.saturate(&mut t);
-        index.insert(t.clone(), 0);
-        g.states.push(t);
+        g.states.push(&t);
         g.via.push(Via::Start);
     }
     let mut prefixes: Vec<Vec<bool>> = if start.is_some() {
@@ -369,19 +600,54 @@ pub(super) fn explore(
                 event: "(start)".into(),
             });
         }
-        let initial = run_step(sem, env, &mut rec, &mut scratch, &[], None, &prefix, None);
-        record(&mut g, &rec, &|_| Vec::new());
-        Oracle::next_prefixes(&prefix, rec.oracle.used, &mut prefixes);
-        if !index.contains_key(&initial) {
-            index.insert(initial.clone(), g.states.len() as u32);
-            g.states.push(initial);
+        let initial = run_step(
+            sem,
+            env,
+            &mut ctx.rec,
+            &mut ctx.scratch,
+            &[],
+            None,
+            &prefix,
+            None,
+        );
+        ctx.record(&mut g, &|_| Vec::new());
+        Oracle::next_prefixes(&prefix, ctx.rec.oracle.used, &mut prefixes);
+        if g.states.find(&initial).is_none() {
+            g.states.push(&initial);
             g.via.push(Via::Start);
         }
     }
+    depth.resize(g.states.len(), 0);
+    full.resize(g.states.len(), false);
+    // The initial states are expanded in full: the loops of each component come back to them.
+    must_full.resize(g.states.len(), true);
+
+    // The reduction: the component of each delivery (`None`: every component).
+    // With catastrophic events counted on the way to an end, any component that can reach
+    // one ends the mission: an end would no longer be one component's question.
+    let ends_local = (p.finals.is_empty() && p.goals.is_empty())
+        || p.progress_excludes.contains(&Category::Catastrophic);
+    let counted = |di: usize, deliveries: &[Delivery]| {
+        !p.progress_excludes
+            .contains(&p.events[deliveries[di].event as usize].category)
+    };
+    let components = (!opts.no_reduction && free.is_empty() && ends_local)
+        .then(|| super::reduction::Components::new(p, l))
+        .filter(|c| c.count > 1);
+    let delivery_component: Vec<Option<u32>> = match &components {
+        Some(c) => ctx
+            .deliveries
+            .iter()
+            .map(|d| c.of_delivery(p, l, d))
+            .collect(),
+        None => Vec::new(),
+    };
 
     let mut last_progress = Instant::now();
     let mut next = 0usize;
-    let mut candidates = Vec::new();
+    let mut moves: Vec<Move> = Vec::new();
+    let mut tried: Vec<Successor> = Vec::new();
+    let mut order: Vec<u32> = Vec::new();
     while next < g.states.len() {
         let i = next as u32;
         next += 1;
@@ -395,172 +661,111 @@ pub(super) fn explore(
                 );
             }
         }
-        let s = g.states[i as usize].clone();
+        let s = g.states[i as usize].to_vec();
         for (n, seen) in g.ever_active.iter_mut().enumerate() {
             *seen |= l.is_active(&s, n as NetId);
         }
         g.max_tokens_per_marking = g.max_tokens_per_marking.max(l.tokens(&s) as u64);
         let mut successors: Vec<Successor> = Vec::new();
-        let mut any_enabled = false;
-        if !l.is_over(&s) {
-            for (di, d) in deliveries.iter().enumerate() {
-                let counters: Vec<Option<u32>> = match env.gate(&s, d.event, d.target) {
-                    Gate::Closed => continue,
-                    Gate::Free => vec![None],
-                    Gate::Counters(list) => list.into_iter().map(Some).collect(),
+        if l.is_over(&s) {
+            moves.clear();
+        } else {
+            ctx.moves(&mut g, i, &s, &mut moves);
+        }
+        // A drop counts: the player still has that event to process.
+        let mut any_enabled = !moves.is_empty();
+
+        // One component's deliveries, when they make a persistent set (no catastrophic event
+        // enabled: it touches everything) and pass the cycle proviso; else every delivery.
+        let mut reduced = false;
+        if components.is_some() && !must_full[i as usize] {
+            order.clear();
+            let mut global = false;
+            for m in &moves {
+                match delivery_component[m.delivery] {
+                    None => global = true,
+                    Some(c) => {
+                        if !order.contains(&c) {
+                            order.push(c);
+                        }
+                    }
+                }
+            }
+            if !global && order.len() > 1 {
+                // The component that moved last first: it tends to go round its own loop
+                // back to a state expanded in full.
+                let last = match g.via[i as usize] {
+                    Via::Step(_, lid) => {
+                        let dl = g.labels[lid as usize].delivery as usize;
+                        delivery_component.get(dl).copied().flatten()
+                    }
+                    _ => None,
                 };
-                sem.candidates(
-                    &s,
-                    d.event,
-                    d.target,
-                    &mut MayHold {
-                        guards: &guards,
-                        params: &d.params,
-                    },
-                    &mut candidates,
-                );
-                if candidates.is_empty() {
-                    // No transition takes it here. A free event then changes nothing (the
-                    // player counts it unused), but a pending answer or emission is consumed
-                    // all the same: the player takes it from its queue, finds no candidate
-                    // and drops it (docs/semantics.md, "Processing one event", step 5). The
-                    // verifier must not let it wait for a consumer that may come later.
-                    for counter in counters.into_iter().flatten() {
-                        let t = run_step(
-                            sem,
-                            env,
-                            &mut rec,
-                            &mut scratch,
-                            &s,
-                            Some(d),
-                            &[],
-                            Some(counter),
-                        );
-                        if t == s {
-                            // A counter at "many" stays there: nothing happened.
-                            continue;
-                        }
-                        // The player still has this event to process: not a dead marking.
-                        any_enabled = true;
-                        let key = (di as u32, vec![], Some(counter), true);
-                        let lid = match label_ids.get(&key) {
-                            Some(&l) => l,
-                            None => {
-                                g.labels.push(Label {
-                                    text: format!("{} (unused)", d.label),
-                                    event: d.event,
-                                    delivery: di as u32,
-                                    choices: Vec::new(),
-                                    counter: Some(counter),
-                                });
-                                let l = (g.labels.len() - 1) as u32;
-                                label_ids.insert(key, l);
-                                l
-                            }
-                        };
-                        let fid = match fired_ids.get(&Vec::new()) {
-                            Some(&f) => f,
-                            None => {
-                                g.fired_sets.push(Vec::new());
-                                let f = (g.fired_sets.len() - 1) as u32;
-                                fired_ids.insert(Vec::new(), f);
-                                f
-                            }
-                        };
-                        successors.push((t, Via::Step(i, lid), Some((lid, fid))));
+                order.sort_unstable_by_key(|&c| (Some(c) != last, c));
+                // A component whose deliveries all belong to categories progress does not count
+                // on is no choice while others offer counted ones: the states it leads to would
+                // hide the counted ways to an end.
+                let any_counted = moves.iter().any(|m| counted(m.delivery, &ctx.deliveries));
+                for &c in &order {
+                    if any_counted
+                        && !moves.iter().any(|m| {
+                            delivery_component[m.delivery] == Some(c)
+                                && counted(m.delivery, &ctx.deliveries)
+                        })
+                    {
+                        continue;
                     }
-                    continue;
-                }
-                any_enabled = true;
-                for (a, &ra) in candidates.iter().enumerate() {
-                    for &rb in &candidates[a + 1..] {
-                        if l.share_input(ra, rb) && conflict_seen.insert((ra, rb), ()).is_none() {
-                            let mut trace = g.trace(i);
-                            trace.push(d.label.clone());
-                            g.conflicts.push(ConflictFinding {
-                                event: p.events[d.event as usize].name.clone(),
-                                winner: name_of(ra),
-                                loser: name_of(rb),
-                                trace,
-                            });
-                        }
+                    tried.clear();
+                    for m in moves
+                        .iter()
+                        .filter(|m| delivery_component[m.delivery] == Some(c))
+                    {
+                        ctx.run(&mut g, i, &s, m, &mut tried)?;
                     }
-                }
-                for counter in counters {
-                    // Every outcome of the guards this delivery cannot decide.
-                    let mut prefixes: Vec<Vec<bool>> = vec![Vec::new()];
-                    let mut runs = 0usize;
-                    while let Some(prefix) = prefixes.pop() {
-                        runs += 1;
-                        if runs > MAX_GUARD_RUNS {
-                            return Err(VerifyError::TooManyUndecidedGuards {
-                                event: p.events[d.event as usize].name.clone(),
-                            });
+                    // The cycle proviso: every edge that does not go one level deeper ends
+                    // in a state expanded in full (or that will be), so every loop of the
+                    // reduced graph holds a state expanded in full and no component is
+                    // ignored forever.
+                    let ok = tried.iter().all(|(t, _, _)| match g.states.find(t) {
+                        None => true,
+                        Some(j) => {
+                            depth[j as usize] > depth[i as usize]
+                                || (j != i && (j > i || full[j as usize]))
                         }
-                        let t = run_step(
-                            sem,
-                            env,
-                            &mut rec,
-                            &mut scratch,
-                            &s,
-                            Some(d),
-                            &prefix,
-                            counter,
-                        );
-                        Oracle::next_prefixes(&prefix, rec.oracle.used, &mut prefixes);
-                        let choices: Vec<bool> = (0..rec.oracle.used)
-                            .map(|k| prefix.get(k).copied().unwrap_or(false))
-                            .collect();
-                        let key = (di as u32, choices.clone(), counter, false);
-                        let lid = match label_ids.get(&key) {
-                            Some(&l) => l,
-                            None => {
-                                let mut text = d.label.clone();
-                                if !choices.is_empty() {
-                                    let taken: Vec<&str> = choices
-                                        .iter()
-                                        .map(|c| if *c { "true" } else { "false" })
-                                        .collect();
-                                    text = format!(
-                                        "{text} (undecided guards taken {})",
-                                        taken.join(", ")
-                                    );
+                    });
+                    if ok {
+                        for (t, _, _) in &tried {
+                            if let Some(j) = g.states.find(t) {
+                                if j > i && depth[j as usize] <= depth[i as usize] {
+                                    must_full[j as usize] = true;
                                 }
-                                g.labels.push(Label {
-                                    text,
-                                    event: d.event,
-                                    delivery: di as u32,
-                                    choices,
-                                    counter,
-                                });
-                                let l = (g.labels.len() - 1) as u32;
-                                label_ids.insert(key, l);
-                                l
                             }
-                        };
-                        let mut fired = rec.fired.clone();
-                        fired.sort_unstable();
-                        fired.dedup();
-                        let fid = match fired_ids.get(&fired) {
-                            Some(&f) => f,
-                            None => {
-                                g.fired_sets.push(fired.clone());
-                                let f = (g.fired_sets.len() - 1) as u32;
-                                fired_ids.insert(fired, f);
-                                f
-                            }
-                        };
-                        let text = g.labels[lid as usize].text.clone();
-                        record(&mut g, &rec, &|g| {
-                            let mut t = g.trace(i);
-                            t.push(text.clone());
-                            t
-                        });
-                        successors.push((t, Via::Step(i, lid), Some((lid, fid))));
+                        }
+                        successors.append(&mut tried);
+                        reduced = true;
+                        break;
                     }
                 }
             }
         }
+        if !reduced {
+            for m in &moves {
+                ctx.run(&mut g, i, &s, m, &mut successors)?;
+            }
+        } else {
+            g.reduced += 1;
+        }
+        if components.is_some() && !ctx.livelock_seen.is_empty() {
+            // A loop of immediate transitions leaves a state that is not stable: every later
+            // step's fixpoint runs into it again, whatever component the step is of, and the
+            // components are no longer independent. Explore again, in full.
+            opts.no_reduction = true;
+            let full = explore(p, sem, env, free, opts, started, start);
+            opts.no_reduction = false;
+            return full;
+        }
+        full[i as usize] = !reduced;
+
         for (k, f) in free.iter().enumerate() {
             let set = !Layout::bit(&s, f.bit);
             if (set && !f.mark) || (!set && !f.empty) {
@@ -572,40 +777,34 @@ pub(super) fn explore(
             let mut t = s.clone();
             t[(f.bit / 64) as usize] ^= 1 << (f.bit % 64);
             // The environment's change may enable immediate transitions.
-            rec.reset();
-            rec.params.clear();
-            rec.oracle.prefix.clear();
-            sem.fixpoint(&mut t, &mut rec, &mut scratch);
-            env.apply(&mut t, &rec.requests);
-            record(&mut g, &rec, &|g| g.trace(i));
+            ctx.rec.reset();
+            ctx.rec.params.clear();
+            ctx.rec.oracle.prefix.clear();
+            sem.fixpoint(&mut t, &mut ctx.rec, &mut ctx.scratch);
+            env.apply(&mut t, &ctx.rec.requests);
+            ctx.record(&mut g, &|g| g.trace(i));
             // An edge like the others, labelled with the environment's move (no event).
-            let key = (u32::MAX - k as u32, vec![set], None, false);
-            let lid = *label_ids.entry(key).or_insert_with(|| {
-                g.labels.push(Label {
+            let name = f.name.clone();
+            let lid = ctx.label(
+                &mut g,
+                (u32::MAX - k as u32, vec![set], None, false),
+                || Label {
                     text: format!(
-                        "environment {} {}",
-                        if set { "marks" } else { "empties" },
-                        f.name
+                        "environment {} {name}",
+                        if set { "marks" } else { "empties" }
                     ),
                     event: NO_EVENT,
                     delivery: u32::MAX,
                     choices: Vec::new(),
                     counter: None,
-                });
-                (g.labels.len() - 1) as u32
-            });
-            let mut fired = rec.fired.clone();
-            fired.sort_unstable();
-            fired.dedup();
-            let fid = *fired_ids.entry(fired.clone()).or_insert_with(|| {
-                g.fired_sets.push(fired);
-                (g.fired_sets.len() - 1) as u32
-            });
+                },
+            );
+            let fid = ctx.fired_set(&mut g);
             successors.push((t, Via::Env(i, lid), Some((lid, fid))));
         }
         for (t, how, step) in successors {
-            let j = match index.get(&t) {
-                Some(&j) => j,
+            let j = match g.states.find(&t) {
+                Some(j) => j,
                 None => {
                     let j = g.states.len() as u32;
                     if let Some(limit) = opts.max_states {
@@ -613,14 +812,16 @@ pub(super) fn explore(
                             return Err(VerifyError::TooManyStates { limit });
                         }
                     }
-                    index.insert(t.clone(), j);
-                    g.states.push(t);
+                    g.states.push(&t);
                     g.via.push(how);
+                    depth.push(depth[i as usize] + 1);
+                    full.push(false);
+                    must_full.push(false);
                     j
                 }
             };
             if let Some((label, fired)) = step {
-                g.edges.push(super::explore::Edge {
+                g.edges.push(Edge {
                     from: i,
                     to: j,
                     label,
@@ -632,6 +833,6 @@ pub(super) fn explore(
             g.dead.push(i);
         }
     }
-    g.deliveries = deliveries;
+    g.deliveries = ctx.deliveries;
     Ok(g)
 }

@@ -98,7 +98,7 @@ impl<'a> Minimizer<'a> {
         while let Via::Step(prev, _) | Via::Env(prev, _) = self.g.via[root as usize] {
             root = prev;
         }
-        let root = self.g.states[root as usize].clone();
+        let root = self.g.states[root as usize].to_vec();
         let labels: Vec<u32> = steps.into_iter().flatten().collect();
         let mut needed = vec![true; labels.len()];
         for k in 0..labels.len() {

@@ -19,7 +19,9 @@ mod analysis;
 mod env;
 mod explore;
 mod minimize;
+mod reduction;
 mod render;
+mod store;
 
 pub use render::{
     diagnostics, diagnostics_all, render_human, render_human_all, render_summary, to_json,
@@ -45,6 +47,11 @@ pub struct VerifyOptions {
     /// Skip what issue 13 added over the graph: progress, stuck nets, starvation and the
     /// minimization of traces (to measure what they cost; `petrel verify` always runs them).
     pub skip_liveness: bool,
+    /// Explore every interleaving (`--no-reduction`): no partial-order reduction. The
+    /// reduction keeps dead markings, unsafe places, loops of immediate transitions,
+    /// invariants, conflicts, progress and stuck nets exact (docs/verification.md);
+    /// starvation and loops need every state, and are checked only when it left none out.
+    pub no_reduction: bool,
 }
 
 /// Why a verification could not finish.
@@ -266,6 +273,12 @@ pub struct Report {
     pub unused_events: Vec<String>,
     /// The environment's counters (declared answers, internal events), for people.
     pub protocols: Vec<String>,
+    /// States the partial-order reduction expanded with one component's deliveries only.
+    pub reduced_states: u64,
+    /// The reduction left states out: starvation and loops need every state and were not
+    /// checked (`--no-reduction` checks them); traces are witnesses, not necessarily the
+    /// shortest (those to dead markings are).
+    pub partial: bool,
     /// Seconds spent.
     pub seconds: f64,
     /// Each net's template (its declaration in the net files), for locating findings.
@@ -389,20 +402,8 @@ fn verify_inner(
             m.trace(i, keep)
         }
     };
-    // Which graph state a replayed state is (built only when a finding needs it).
-    let index: std::cell::OnceCell<HashMap<&[u64], u32>> = std::cell::OnceCell::new();
-    let index_of = |s: &[u64]| -> Option<u32> {
-        index
-            .get_or_init(|| {
-                g.states
-                    .iter()
-                    .enumerate()
-                    .map(|(k, st)| (st.as_slice(), k as u32))
-                    .collect()
-            })
-            .get(s)
-            .copied()
-    };
+    // Which graph state a replayed state is.
+    let index_of = |s: &[u64]| -> Option<u32> { g.states.find(s) };
     // The nets a finding at `target` is about: the active ones not at an end of theirs. An
     // event matters when, without it, those nets would not be where they are.
     let concerned = |target: &[u64]| -> Vec<NetId> {
@@ -431,7 +432,7 @@ fn verify_inner(
         .map(|(mut f, i)| {
             // Hundreds of ends after a catastrophic event need no minimal trace each.
             if !f.after_catastrophic {
-                let target = g.states[i as usize].clone();
+                let target = g.states[i as usize].to_vec();
                 let nets = concerned(&target);
                 let intended = f.intended;
                 // Still a dead marking of the same kind, the nets it is about where they are.
@@ -457,6 +458,10 @@ fn verify_inner(
             f
         })
         .collect();
+    report.reduced_states = g.reduced;
+    report.partial = g.reduced > 0;
+    // What needs every state (loops, what stays reachable) is not asked of a partial graph.
+    let whole = !report.partial;
     let ends = analysis::ends(p, l, &g);
     if !opts.skip_liveness {
         let rev = analysis::Reverse::new(&g);
@@ -465,7 +470,7 @@ fn verify_inner(
                 // Any state from which no end is reachable will do for the first trace; for the
                 // state the mission stays in, the nets not at an end must be where they are.
                 f.trace = at(first, &|s| index_of(s).is_some_and(|k| !reach[k as usize]));
-                let target = g.states[stays as usize].clone();
+                let target = g.states[stays as usize].to_vec();
                 let nets = concerned(&target);
                 f.stays_in_trace = at(stays, &|s| {
                     index_of(s).is_some_and(|k| !reach[k as usize])
@@ -492,11 +497,13 @@ fn verify_inner(
             })
             .collect();
     }
-    let components = analysis::components(&g);
-    if !opts.skip_liveness {
-        report.starvation = analysis::starvation(p, l, &g, &components);
+    if whole {
+        let components = analysis::components(&g);
+        if !opts.skip_liveness {
+            report.starvation = analysis::starvation(p, l, &g, &components);
+        }
+        report.event_loops = analysis::event_loops(p, &g, &components);
     }
-    report.event_loops = analysis::event_loops(p, &g, &components);
     report.unsafe_places = g.unsafe_places.clone();
     report.livelocks = g.livelocks.clone();
     report.conflicts = g.conflicts.clone();
@@ -541,14 +548,7 @@ fn verify_inner(
         .collect();
     if opts.keep_states {
         // The project's own words only: the environment's counters are the verifier's.
-        report.reachable = g
-            .states
-            .into_iter()
-            .map(|mut s| {
-                s.truncate(l.words);
-                s
-            })
-            .collect();
+        report.reachable = g.states.iter().map(|s| s[..l.words].to_vec()).collect();
         report.reachable.sort();
         report.reachable.dedup();
     }

@@ -64,6 +64,13 @@ fn render(project_name: &str, r: &Report, all: bool, details: bool) -> String {
         "verified `{project_name}`: {} stable states, {} event deliveries, {:.3} s",
         r.states, r.edges, r.seconds
     );
+    if r.partial {
+        let _ = writeln!(
+            o,
+            "partial-order reduction: {} state(s) expanded with one independent group of nets only; dead markings, safety, loops of immediate transitions, invariants, conflicts, progress and stuck nets are exact, traces other than to dead markings are witnesses (not always the shortest); starvation and loops need every state: not checked (--no-reduction checks them)",
+            r.reduced_states
+        );
+    }
     let _ = writeln!(
         o,
         "marked places: at most {} in one state; no place ever holds two tokens",
@@ -243,7 +250,11 @@ fn render(project_name: &str, r: &Report, all: bool, details: bool) -> String {
             );
         }
     }
-    let _ = writeln!(o, "starvation: {}", r.starvation.len());
+    if r.partial {
+        let _ = writeln!(o, "starvation: not checked (partial-order reduction)");
+    } else {
+        let _ = writeln!(o, "starvation: {}", r.starvation.len());
+    }
     for s in &r.starvation {
         item(
             &mut o,
@@ -258,11 +269,18 @@ fn render(project_name: &str, r: &Report, all: bool, details: bool) -> String {
             ),
         );
     }
-    let _ = writeln!(
-        o,
-        "loops that need outside events (expected): {}",
-        r.event_loops.len()
-    );
+    if r.partial {
+        let _ = writeln!(
+            o,
+            "loops that need outside events: not checked (partial-order reduction)"
+        );
+    } else {
+        let _ = writeln!(
+            o,
+            "loops that need outside events (expected): {}",
+            r.event_loops.len()
+        );
+    }
     for l in r.event_loops.iter().take(limit(r.event_loops.len())) {
         let _ = writeln!(
             o,
