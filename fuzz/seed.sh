@@ -17,7 +17,7 @@ seed() { # seed TARGET FILE...
     done
     return 0
 }
-for t in "${@:-net_parse net_check manifest can_toml pnml wire journal dbc candump script}"; do
+for t in "${@:-net_parse net_check manifest can_toml pnml wire journal dbc candump script reload_mapping}"; do
   for t in $t; do
     case $t in
     net_parse | net_check)
@@ -49,6 +49,9 @@ for t in "${@:-net_parse net_check manifest can_toml pnml wire journal dbc candu
         mkdir -p corpus/journal
         printf '\x00PETRELJ1' >corpus/journal/magic_only
         printf '\x01\x04\x00\x01\x02go' >corpus/journal/one_record ;;
+    reload_mapping)
+        mkdir -p corpus/reload_mapping
+        printf '[rename]\nnets = { MISSION = "MISSION" }\nplaces = { "MISSION.transiting" = "MISSION.transiting", "global.in_flight" = "global.in_flight" }\ntimers = { dec_answer = "dec_answer" }\n[vanished]\nplaces = ["EVENTS.watching"]\nnets = ["EVENTS"]\ntimers = ["dec_answer"]\n' >corpus/reload_mapping/every_key.toml ;;
     *) echo "seed.sh: unknown target $t" >&2; exit 2 ;;
     esac
     # Every input that once crashed a target runs again first (fuzz/regressions/TARGET).

@@ -18,7 +18,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/../fuzz"
 
-targets=(net_parse net_check manifest can_toml pnml wire journal dbc candump script)
+targets=(net_parse net_check manifest can_toml pnml wire journal dbc candump script reload_mapping)
 target_dir=${CARGO_TARGET_DIR:-target}
 triple=$(rustc -vV | sed -n 's/^host: //p')
 bin_dir="$target_dir/$triple/release"
@@ -53,12 +53,11 @@ run() {
     for t in "${targets[@]}"; do
         [ -n "$only" ] && [ "$t" != "$only" ] && continue
         mkdir -p "corpus/$t" "artifacts/$t"
-        if [ -z "$(ls -A "corpus/$t")" ]; then
-            ./seed.sh "$t"
-        elif [ -d "regressions/$t" ]; then
-            # A corpus of an earlier run: the crashes found since are replayed all the same.
-            cp regressions/"$t"/* "corpus/$t/"
-        fi
+        # Seeded every run, not only when the corpus is empty: a corpus of an earlier run
+        # lacks the files added to the repository since (a new mission's nets once crashed
+        # the checker on a clean clone while a kept local corpus passed), and the crashes
+        # found since are replayed all the same.
+        ./seed.sh "$t"
         local log
         log=$(mktemp)
         local status=0

@@ -7,9 +7,20 @@
 # vehicle is back at the surface; its recorded bus replays offline to the same events.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# The monitor lays its nets out with Graphviz; its screenshot needs Chromium and its WebDriver.
+need=()
+command -v dot >/dev/null 2>&1 || need+=(graphviz)
+command -v chromium >/dev/null 2>&1 || need+=(chromium)
+command -v chromedriver >/dev/null 2>&1 || need+=(chromium-driver)
+if [ "${#need[@]}" -gt 0 ] && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+    echo "== installing ${need[*]}"
+    apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${need[@]}" >/dev/null
+fi
 mission=${1:-missions/uav}
 cargo build --release --quiet --bin petrel -p petrel-cli
 cargo build --release --quiet -p petrel-programs --example uav_gui --example uav_dec --example auv_gui
+cargo build --release --quiet -p petrel-tests --example monitor_shot
 petrel=target/release/petrel
 echo "== petrel check $mission"
 "$petrel" check "$mission"
@@ -44,19 +55,60 @@ RUST_LOG=${RUST_LOG:-warn} "$petrel" play "$mission" --vehicle "$vehicle" --run-
     --journal "target/journal/$vehicle" &
 pids+=($!)
 until "$petrel" status "$mission" --vehicle "$vehicle" >/dev/null 2>&1; do sleep 0.1; done
-target/release/examples/uav_gui --vehicle "$vehicle" >/dev/null 2>&1 & pids+=($!)
-target/release/examples/uav_dec --vehicle "$vehicle" >/dev/null 2>&1 & pids+=($!)
+target/release/examples/uav_gui --vehicle "$vehicle" --speed 60 >/dev/null 2>&1 & pids+=($!)
+target/release/examples/uav_dec --vehicle "$vehicle" --speed 60 >/dev/null 2>&1 & pids+=($!)
+# The web monitor of the flight (docs/monitor.md), and its screenshot mid-flight in
+# docs/img/monitor-uav.png (README) when headless Chromium is there.
+"$petrel" monitor "$mission" --vehicle "$vehicle" --listen 127.0.0.1:0 --run-for 60 \
+    > "target/monitor-$vehicle.out" &
+pids+=($!)
+until grep -q listening "target/monitor-$vehicle.out" 2>/dev/null; do sleep 0.1; done
+monitor_url=$(sed -n 's/^petrel monitor: listening on //p' "target/monitor-$vehicle.out")
+echo "== petrel monitor: $monitor_url"
 sleep 0.5
 "$petrel" send "$mission" --vehicle "$vehicle" start_mission
+if command -v chromedriver >/dev/null 2>&1; then
+    mkdir -p docs/img
+    # Headless Chromium under WebDriver: it waits for the page to be in step and to show 8
+    # steps (the aircraft in transit) before the shot.
+    target/release/examples/monitor_shot "$monitor_url" docs/img/monitor-uav.png 8 || true
+else
+    echo "== no chromium here: no screenshot of the monitor (apt-get install chromium chromium-driver)"
+fi
 wait_status "$mission" "$vehicle" '"landed"'
 "$petrel" status "$mission" --vehicle "$vehicle"
-# The programs first, then the player: every process of the flight ends here.
-kill "${pids[2]}" "${pids[1]}" 2>/dev/null || true
-wait "${pids[2]}" "${pids[1]}" 2>/dev/null || true
+# The monitor and the programs first, then the player: every process of the flight ends here.
+kill "${pids[3]}" "${pids[2]}" "${pids[1]}" 2>/dev/null || true
+wait "${pids[3]}" "${pids[2]}" "${pids[1]}" 2>/dev/null || true
 kill "${pids[0]}" 2>/dev/null || true
 wait "${pids[0]}" 2>/dev/null || true
 echo "== the flight recorder: target/journal/$vehicle"
 "$petrel" replay "target/journal/$vehicle"
+
+# Redermor's 22 nets in the monitor, after the first events of its current scenario (its
+# programs are not processes yet: the events are sent as an operator would): the screenshot
+# docs/img/monitor-redermor.png.
+red=missions/redermor
+if [ -f "$red/petrel.toml" ] && command -v chromedriver >/dev/null 2>&1; then
+    rv="red$$"
+    echo "== petrel monitor on $red (vehicle $rv)"
+    pids=()
+    RUST_LOG=error "$petrel" play "$red" --vehicle "$rv" --run-for 60 --no-journal & pids+=($!)
+    until "$petrel" status "$red" --vehicle "$rv" >/dev/null 2>&1; do sleep 0.1; done
+    "$petrel" monitor "$red" --vehicle "$rv" --listen 127.0.0.1:0 --run-for 60 \
+        > "target/monitor-$rv.out" &
+    pids+=($!)
+    until grep -q listening "target/monitor-$rv.out" 2>/dev/null; do sleep 0.1; done
+    red_url=$(sed -n 's/^petrel monitor: listening on //p' "target/monitor-$rv.out")
+    grep -E '^[0-9.]+ ' "$red/scripts/current.script" | head -n 12 | cut -d' ' -f2- |
+        while read -r event; do "$petrel" send "$red" --vehicle "$rv" "$event" >/dev/null; done
+    target/release/examples/monitor_shot "$red_url" docs/img/monitor-redermor.png 12 \
+        MISSION/MISSION_PHASES || true
+    kill "${pids[1]}" 2>/dev/null || true
+    wait "${pids[1]}" 2>/dev/null || true
+    kill "${pids[0]}" 2>/dev/null || true
+    wait "${pids[0]}" 2>/dev/null || true
+fi
 
 auv=missions/auv
 echo "== petrel check $auv (nets, can.toml and its DBC)"

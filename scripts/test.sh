@@ -4,9 +4,15 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-# Debian packages the suite needs: graphviz checks that `petrel dot` output is real DOT.
+# Debian packages the suite needs: graphviz checks that `petrel dot` output is real DOT and
+# lays out `petrel monitor`'s drawing; chromium and its WebDriver (chromium-driver) load the
+# monitor's page in a real headless browser (tests/tests/monitor.rs).
 need=()
 command -v dot >/dev/null 2>&1 || need+=(graphviz)
+command -v chromium >/dev/null 2>&1 || need+=(chromium)
+command -v chromedriver >/dev/null 2>&1 || need+=(chromium-driver)
+# Installed above: the browser tests fail rather than skip if the browser is missing.
+export PETREL_REQUIRE_BROWSER=1
 if [ "${#need[@]}" -gt 0 ]; then
     echo "== installing ${need[*]}"
     apt-get update -qq

@@ -2,7 +2,7 @@
 //!
 //! One module per family of commands: [`project`] (check, verify, fmt, dot, export, import),
 //! [`script`] (run), [`vehicle`] (play, send, status), [`recorder`] (replay, journal),
-//! [`bridge`], [`up`] (a whole vehicle from its vehicle.toml); [`common`] holds what they share, first of all the one way a project is loaded
+//! [`bridge`], [`up`] (a whole vehicle from its vehicle.toml), [`monitor`] (the web monitor), [`gen`] (program prototypes); [`common`] holds what they share, first of all the one way a project is loaded
 //! and checked ([`common::check_project`]). A new command is a new module and one line in
 //! [`Command`].
 //!
@@ -11,8 +11,11 @@
 
 mod bridge;
 mod common;
+mod gen;
+mod monitor;
 mod project;
 mod recorder;
+mod reload;
 mod script;
 mod up;
 mod vehicle;
@@ -38,8 +41,9 @@ struct Cli {
 enum Command {
     /// Check a mission project: syntax, names, types, markings.
     Check(project::CheckArgs),
-    /// Verify a project (or one net of it): safety, dead markings, loops, conflicts, with the
-    /// shortest event sequence to each finding. Given a PNML file, explore it as a plain P/T
+    /// Verify a project (or one net of it): safety, dead markings, progress to the declared
+    /// ends, stuck nets, starvation, invariants, loops, conflicts, each finding located in the
+    /// text with the shortest event sequence to it (docs/verification.md). Given a PNML file, explore it as a plain P/T
     /// net (arc weights and token counts above one allowed).
     Verify(project::VerifyArgs),
     /// Play the mission: the player process on iceoryx2, talking to the vehicle's programs.
@@ -69,8 +73,21 @@ enum Command {
     Send(vehicle::SendArgs),
     /// Print the live marking of every active net and the player's counters.
     Status(vehicle::StatusArgs),
+    /// A web monitor of a running mission (`--vehicle`), or the replay of a recorded one
+    /// (`--journal`): every net drawn, the marking in red, the event log, the programs.
+    Monitor(monitor::MonitorArgs),
+    /// Generate a program prototype (a Cargo project on the programs SDK) from the project's
+    /// declared interface: one typed handler per function, typed helpers for the events it
+    /// may send, a README and a test against `petrel play`. Regenerating keeps the handlers.
+    Gen(gen::GenArgs),
+    /// Reload a running player's project with a new version, mid-mission: the player maps
+    /// its state onto the new version by names (and the --mapping file), verifies the new
+    /// version from that state, and swaps between two steps; or refuses, with the reason, the
+    /// finding and its trace, and the mission goes on unchanged. Exit 0 accepted, 1 refused.
+    Reload(reload::ReloadArgs),
     /// Run a mission script in virtual time, with no process: events at given times and
-    /// expectations; each step prints as a JSON line. A failed expectation exits 1.
+    /// expectations; each step prints as a JSON line. A failed expectation exits 1. The format
+    /// is in docs/scripts.md.
     Run(script::RunArgs),
     /// Rewrite the project's net files in canonical layout (running it twice changes nothing).
     Fmt(project::FmtArgs),
@@ -106,6 +123,9 @@ fn main() -> ExitCode {
         Command::Play(a) => vehicle::play(a),
         Command::Send(a) => vehicle::send(a),
         Command::Status(a) => vehicle::status(a),
+        Command::Monitor(a) => monitor::monitor(a),
+        Command::Gen(a) => gen::gen(a),
+        Command::Reload(a) => reload::reload(a),
         Command::Replay(a) => recorder::replay(a),
         Command::Journal { command } => recorder::journal(command),
         Command::Bridge(a) => bridge::bridge(a),

@@ -102,6 +102,11 @@ pub struct VerifyArgs {
     /// Stop with an error beyond this many states (at least 1).
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     max_states: Option<u64>,
+    /// List every finding: each dead marking as its own diagnostic, every intended end, every
+    /// end after a catastrophic event, every loop and conflict (by default they are grouped,
+    /// with counts).
+    #[arg(long)]
+    all: bool,
 }
 
 /// Verifies a project (or one of its nets), or explores a PNML file as a P/T net.
@@ -144,14 +149,47 @@ pub fn verify(a: VerifyArgs) -> Outcome {
     if interactive {
         eprint!("\r\x1b[K");
     }
+    // Each finding located in the project's text, as `petrel check` shows its own.
+    let mut d = if a.all {
+        verify::diagnostics_all(&checked.loaded.project, &r)
+    } else {
+        verify::diagnostics(&checked.loaded.project, &r)
+    };
+    petrel_nets::check::apply_allows(
+        &checked.loaded.project,
+        &mut d,
+        petrel_nets::check::AllowPass::FilterOnly,
+    );
+    d.sort();
+    let sources = &checked.loaded.sources;
     match a.format {
-        Format::Json => out(&format!(
-            "{}\n",
-            serde_json::to_string_pretty(&verify::to_json(&r)).unwrap_or_default()
-        )),
-        Format::Human => out(&verify::render_human(&c.name, &r)),
+        Format::Json => {
+            // The report's every finding, and the diagnostics with file, line and column.
+            let mut doc = verify::to_json(&r);
+            if let Some(map) = doc.as_object_mut() {
+                map.insert("errors".into(), r.errors().into());
+                map.insert("warnings".into(), r.warnings().into());
+                map.insert(
+                    "diagnostics".into(),
+                    d.to_json(sources)["diagnostics"].clone(),
+                );
+            }
+            out(&format!(
+                "{}\n",
+                serde_json::to_string_pretty(&doc).unwrap_or_default()
+            ));
+        }
+        Format::Human => {
+            let mut text = d.render_human(sources);
+            if !text.is_empty() {
+                text.push('\n');
+            }
+            text.push_str(&verify::render_summary(&c.name, &r, a.all));
+            out(&text);
+        }
     }
-    if r.is_clean() {
+    // Warnings do not fail the verification; errors do.
+    if r.errors() == 0 {
         Outcome::Clean
     } else {
         Outcome::Errors

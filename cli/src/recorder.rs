@@ -74,7 +74,14 @@ pub fn replay(a: ReplayArgs) -> Outcome {
         Ok(c) => c,
         Err(o) => return o,
     };
-    if petrel_player::journal::project_digest(&c) != digest {
+    let reloaded = petrel_player::replay::last_reload(&read.entries).is_some();
+    let from_last_reload = petrel_player::journal::project_digest(&c) != digest && reloaded;
+    if from_last_reload {
+        eprintln!(
+            "note: {} is not the version the mission started with; the journal holds reloads: replaying from its last reload, on the version kept beside the journal (give the first version's directory to replay the whole mission)",
+            dir.display()
+        );
+    } else if petrel_player::journal::project_digest(&c) != digest {
         eprintln!(
             "error: {} is not the project this journal recorded (its nets or manifest changed): replay would not mean anything",
             dir.display()
@@ -83,7 +90,13 @@ pub fn replay(a: ReplayArgs) -> Outcome {
     }
     // `seconds` bounds it: the product is a whole number of microseconds a u64 holds.
     let until_us = until.map(|s| (s * 1e6).round() as u64);
-    let (engine, r) = petrel_player::replay::replay(&c, &read.entries, until_us);
+    let (engine, r) = petrel_player::replay::replay_in(
+        &c,
+        &read.entries,
+        until_us,
+        Some(journal.as_path()),
+        from_last_reload,
+    );
     if let Some(d) = &r.divergence {
         if d.kind == petrel_player::replay::DivergenceKind::Journal {
             eprintln!(
@@ -124,9 +137,14 @@ pub fn replay(a: ReplayArgs) -> Outcome {
         );
     }
     out(&format!(
-        "replayed {} entries, {} steps: every recorded marking reproduced{}{}\nstate at t = {:.6} s: {}\n",
+        "replayed {} entries, {} steps{}: every recorded marking reproduced{}{}\nstate at t = {:.6} s: {}\n",
         r.entries,
         r.steps,
+        match r.reloads {
+            0 => String::new(),
+            1 => " across 1 reload".to_string(),
+            n => format!(" across {n} reloads"),
+        },
         if r.gaps > 0 { " (from a checkpoint after each gap)" } else { "" },
         if r.stopped_early { " (stopped at --until)" } else { "" },
         match until {
@@ -221,6 +239,17 @@ fn journal_show(journal: &Path, format: &str) -> Outcome {
                 vec![],
                 String::new(),
                 format!("{lost} entries lost: {reason}"),
+                vec![],
+                vec![],
+            ),
+            Entry::Reload {
+                dir, source_hash, ..
+            } => (
+                "reload",
+                source_hash.clone(),
+                vec![],
+                dir.clone(),
+                String::new(),
                 vec![],
                 vec![],
             ),

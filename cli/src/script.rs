@@ -8,7 +8,7 @@ use std::path::PathBuf;
 pub struct RunArgs {
     /// The project directory.
     dir: PathBuf,
-    /// The script: lines `TIME EVENT(args)`, `TIME wait`, `expect ...`.
+    /// The script: lines `TIME EVENT(args)`, `TIME wait`, `expect ...` (docs/scripts.md).
     #[arg(long)]
     script: PathBuf,
     /// Print nothing but the result of the expectations.
@@ -16,7 +16,7 @@ pub struct RunArgs {
     quiet: bool,
 }
 
-/// Runs a script; a failed expectation exits 1.
+/// Runs a script; a failed expectation exits 1, a script that does not read exits 2.
 pub fn run(a: RunArgs) -> Outcome {
     let (script_path, quiet) = (&a.script, a.quiet);
     let c = match compiled(&a.dir, "run") {

@@ -99,8 +99,8 @@ pub fn play(a: PlayArgs) -> Outcome {
         return match petrel_player::shadow::shadow(&c, &opts) {
             Ok(r) => {
                 eprintln!(
-                    "shadow stopped: {} vehicle steps followed, {} divergence alarm(s)",
-                    r.steps, r.alarms
+                    "shadow stopped: {} vehicle steps followed, {} reload(s) followed, {} divergence alarm(s)",
+                    r.steps, r.reloads, r.alarms
                 );
                 if r.alarms == 0 {
                     Outcome::Clean
@@ -409,6 +409,24 @@ pub fn status(a: StatusArgs) -> Outcome {
         return Outcome::Errors;
     };
     let mut doc: serde_json::Value = serde_json::from_str(&beat.status).unwrap_or_default();
+    // Each program's liveness, as this command sees the vehicle's nodes (not the player's
+    // word): alive, dead (crashed, not yet cleaned up) or absent.
+    let programs: serde_json::Map<String, serde_json::Value> = c
+        .programs
+        .iter()
+        .map(|p| {
+            let st = match petrel_ipc::program_status(&v, &p.name) {
+                Ok(petrel_ipc::ProgramStatus::Alive) => "alive",
+                Ok(petrel_ipc::ProgramStatus::Dead) => "dead",
+                Ok(petrel_ipc::ProgramStatus::Absent) => "absent",
+                Err(_) => "unknown",
+            };
+            (p.name.clone(), st.into())
+        })
+        .collect();
+    if let Some(obj) = doc.as_object_mut() {
+        obj.insert("programs".into(), programs.clone().into());
+    }
     let bridge_doc: Option<serde_json::Value> = bridge
         .as_ref()
         .and_then(|b| serde_json::from_str(&b.status).ok());
@@ -420,12 +438,21 @@ pub fn status(a: StatusArgs) -> Outcome {
         return Outcome::Clean;
     }
     let mut text = format!(
-        "vehicle `{}`, project `{}`, mission time {:.3} s{}\n",
+        "vehicle `{}`, project `{}`{}, mission time {:.3} s{}{}\n",
         v.name(),
         doc["project"].as_str().unwrap_or("?"),
+        match doc["version"].as_str() {
+            Some(h) => format!(" (reloaded: version {h})"),
+            None => String::new(),
+        },
         doc["time"].as_f64().unwrap_or(0.0),
         if doc["over"].as_bool() == Some(true) {
             ", OVER (catastrophic event)"
+        } else {
+            ""
+        },
+        if doc["reloading"].as_bool() == Some(true) {
+            ", a reload is being verified"
         } else {
             ""
         }
@@ -440,6 +467,13 @@ pub fn status(a: StatusArgs) -> Outcome {
         }
     }
     text.push_str(&format!("  counters: {}\n", doc["stats"]));
+    if !programs.is_empty() {
+        let list: Vec<String> = programs
+            .iter()
+            .map(|(p, st)| format!("{p} {}", st.as_str().unwrap_or("?")))
+            .collect();
+        text.push_str(&format!("  programs: {}\n", list.join(", ")));
+    }
     let recorder = &doc["recorder"];
     match recorder["state"].as_str() {
         Some("ok") => text.push_str("  flight recorder: ok\n"),

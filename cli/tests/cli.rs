@@ -343,13 +343,17 @@ fn verify_and_check_report_each_flaw_with_its_trace() {
     assert_eq!(o.status.code(), Some(1));
     let out = stdout(&o);
     for line in [
-        "error: A.begin would put a second token in global.busy, after go → done → go",
-        "error: dead marking: A{stuck}, after spare",
-        "error: immediate transitions loop forever: A.wob → A.ble, after go → more",
-        "warning: on done, A.end fires and A.stop does not (written order), after go → done",
+        "error[E0601]: A.begin would put a second token in global.busy, after go → done → go",
+        "error[E0602]: dead marking: A{stuck}, after spare",
+        "error[E0603]: immediate transitions loop forever: A.wob → A.ble, after go → more",
+        "warning[W0601]: on done, A.end fires and A.stop does not (written order), after go → done",
         "nets never activated: Unused",
     ] {
         assert!(out.contains(line), "missing `{line}` in:\n{out}");
+    }
+    // Each finding is also shown where it is, as `petrel check` shows its own.
+    for at in ["a.pn:9:16", "a.pn:15:16", "a.pn:6:11", "a.pn:21:5"] {
+        assert!(out.contains(at), "missing `{at}` in:\n{out}");
     }
 
     // `check` runs the same verification and points at the transitions.
@@ -373,18 +377,115 @@ fn verify_and_check_report_each_flaw_with_its_trace() {
     assert_eq!(o.status.code(), Some(2));
 }
 
+fn progress_data(name: &str) -> String {
+    repo()
+        .join("nets/tests/data/progress")
+        .join(name)
+        .display()
+        .to_string()
+}
+
+#[test]
+fn verify_groups_findings_and_all_lists_each() {
+    let leaked = progress_data("leaked_mutex");
+    let o = petrel(&["verify", &leaked]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    let out = stdout(&o);
+    // One diagnostic for the three dead markings, located at the place, with a count.
+    assert_eq!(out.matches("[E0602] Error").count(), 1, "{out}");
+    assert!(out.contains("3 dead markings; the first"), "{out}");
+    assert!(out.contains("robot.pn:3:11"), "{out}");
+    // E0605 and E0606 with their traces, the events that do not matter elided.
+    assert!(
+        out.contains("[E0605] Error: the mission cannot finish"),
+        "{out}"
+    );
+    assert_eq!(out.matches("[E0606] Error").count(), 2, "{out}");
+    assert!(
+        out.contains("error[E0602]: dead marking: R1{done} R2{waiting}, after start_mission → ... → granted(\"r2\") → shock(\"r2\")"),
+        "{out}"
+    );
+    assert!(out.ends_with("result: 6 error(s), 0 warning(s)\n"), "{out}");
+
+    let o = petrel(&["verify", &leaked, "--all"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(
+        stdout(&o).matches("[E0602] Error").count(),
+        3,
+        "{}",
+        stdout(&o)
+    );
+
+    // A catastrophic event's ends: one line, or each with --all.
+    let stuck = progress_data("stuck_transit");
+    let o = petrel(&["verify", &stuck]);
+    let out = stdout(&o);
+    assert!(out.contains("3 end(s) after a catastrophic event"), "{out}");
+    assert!(
+        out.contains("mission.pn:5:11"),
+        "E0605 at `transit1`: {out}"
+    );
+    let o = petrel(&["verify", &stuck, "--all"]);
+    assert_eq!(
+        stdout(&o)
+            .matches("end after a catastrophic event:")
+            .count(),
+        3,
+        "{}",
+        stdout(&o)
+    );
+}
+
+#[test]
+fn verify_exits_1_for_errors_only_and_json_locates_each_finding() {
+    // A warning (starvation) alone: exit 0.
+    let o = petrel(&["verify", &progress_data("starvation")]);
+    assert_eq!(o.status.code(), Some(0), "{}{}", stdout(&o), stderr(&o));
+    assert!(stdout(&o).contains("[W0606] Warning"), "{}", stdout(&o));
+    assert!(stdout(&o).ends_with("result: verified, no error, 1 warning(s)\n"));
+
+    // The lock-order deadlock: exit 1, and JSON with the resource cycle and the locations.
+    let o = petrel(&["verify", &progress_data("lock_order"), "--format", "json"]);
+    assert_eq!(o.status.code(), Some(1));
+    let doc: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON");
+    assert_eq!(doc["errors"], 2);
+    assert_eq!(doc["warnings"], 0);
+    assert_eq!(
+        doc["stuck_nets"][0]["resource_cycle"][0],
+        "A waits for global.y, which B holds"
+    );
+    let diags = doc["diagnostics"].as_array().expect("diagnostics");
+    assert_eq!(diags.len(), 2);
+    for (d, line) in diags.iter().zip([1, 11]) {
+        assert_eq!(d["code"], "E0606");
+        assert!(d["file"].as_str().unwrap().ends_with("nets.pn"), "{d}");
+        assert_eq!(d["line"], line);
+        assert_eq!(d["column"], 5);
+    }
+}
+
 #[test]
 fn run_plays_the_mission_scripts_in_virtual_time_as_json_lines() {
-    for (mission, name) in [
-        ("uav", "nominal"),
-        ("uav", "payload_failure"),
-        ("uav", "engine_failure"),
-        ("auv", "nominal"),
-        ("auv", "leak"),
-        ("auv", "bus_lost"),
-    ] {
-        let dir = repo().join("missions").join(mission);
-        let script = dir.join(format!("scripts/{name}.script"));
+    // Every script of every mission: a new one is covered as soon as it is written.
+    let mut scripts = Vec::new();
+    for mission in std::fs::read_dir(repo().join("missions"))
+        .unwrap()
+        .flatten()
+    {
+        let Ok(list) = std::fs::read_dir(mission.path().join("scripts")) else {
+            continue;
+        };
+        for script in list.flatten() {
+            if script.path().extension().is_some_and(|e| e == "script") {
+                scripts.push((mission.path(), script.path()));
+            }
+        }
+    }
+    scripts.sort();
+    assert!(scripts.len() >= 8, "{scripts:?}");
+    let mut outcomes = std::collections::BTreeSet::new();
+    for (dir, script) in &scripts {
+        let name = script.display();
         let o = petrel(&[
             "run",
             &dir.display().to_string(),
@@ -399,9 +500,25 @@ fn run_plays_the_mission_scripts_in_virtual_time_as_json_lines() {
             for key in ["time", "event", "fired", "marking", "actions"] {
                 assert!(step.get(key).is_some(), "{key} missing in {line}");
             }
+            for key in ["line", "reason", "timers"] {
+                assert!(step.get(key).is_some(), "{key} missing in {line}");
+            }
+            // One vocabulary: the journal's words (and `start` for the first line).
+            let outcome = step["outcome"].as_str().unwrap_or_default();
+            assert!(
+                ["start", "processed", "unused", "refused"].contains(&outcome),
+                "{line}"
+            );
+            outcomes.insert(outcome.to_string());
         }
         assert!(stderr(&o).contains("expectations met"), "{}", stderr(&o));
     }
+    // The missions' scripts show every outcome (UGV's emergency stop, a catastrophic event,
+    // makes the later events refused).
+    assert_eq!(
+        outcomes.into_iter().collect::<Vec<_>>(),
+        ["processed", "refused", "start", "unused"]
+    );
     // A failed expectation exits 1 and shows what was found.
     let dir = tempfile::tempdir().unwrap();
     let bad = dir.path().join("bad.script");
@@ -424,6 +541,29 @@ fn run_plays_the_mission_scripts_in_virtual_time_as_json_lines() {
         stderr(&o)
     );
     assert!(stderr(&o).contains("bad.script:2:"), "{}", stderr(&o));
+    // `expect always` is checked after every later step; its failure names the `expect` line
+    // and the step that broke it.
+    std::fs::write(
+        &bad,
+        "0 start_mission\nexpect always MISSION.rolling\n8 rotation_speed\n",
+    )
+    .unwrap();
+    let o = petrel(&["run", &uav(), "--script", &bad.display().to_string(), "-q"]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = stderr(&o);
+    assert!(
+        err.contains("bad.script:2: expectation failed: expected always MISSION.rolling (from line 2 on)\n  found: broken at 8 by the step of `rotation_speed` (timed line 3)"),
+        "{err}"
+    );
+    // An outcome expected after a `wait` is an error of the script: a wait sends no event.
+    std::fs::write(&bad, "0 start_mission\n5 wait\nexpect refused\n").unwrap();
+    let o = petrel(&["run", &uav(), "--script", &bad.display().to_string()]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("bad.script:3: `expect refused` checks the event of the last timed line, and line 2 is a `wait`"),
+        "{}",
+        stderr(&o)
+    );
 }
 
 #[test]
@@ -489,4 +629,168 @@ fn bridge_replays_a_recorded_bus_to_its_events() {
     let o = petrel(&["bridge", &uav(), "--replay", &path.display().to_string()]);
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("no can.toml"), "{}", stderr(&o));
+}
+
+/// `@allow(CODE)` next to a construct silences the verifier's warning of that code on it when
+/// `petrel check` runs its verification (W0601 on the transition that loses the conflict, W0602
+/// on an observer that must never fire); an `@allow` that silences nothing is W0105.
+#[test]
+fn check_silences_the_verifiers_warnings_that_an_allow_intends() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("petrel.toml"),
+        "[project]\nname = \"w\"\nfiles = [\"a.pn\"]\nstart = [\"A\"]\n\n[events]\ngo = { category = \"nominal\" }\n",
+    )
+    .unwrap();
+    let nets = |allows: bool| {
+        let allow = |text: &str| {
+            if allows {
+                text.to_string()
+            } else {
+                String::new()
+            }
+        };
+        format!(
+            "net A {{\n    place a = 1\n    place b\n    place never\n    transition t on go: a -> b\n{}    transition t2 on go: a -> b\n{}    transition watch on go: never -> never\n{}    transition back on go: b -> a\n}}\n",
+            allow("    @allow(W0601, \"t first, by written order\")\n"),
+            allow("    @allow(W0602, \"an observer: fires only if the mission breaks\")\n"),
+            allow("    @allow(W0603, \"nothing to silence here\")\n"),
+        )
+    };
+    let codes = |o: &Output| -> Vec<String> {
+        let json: serde_json::Value = serde_json::from_str(&stdout(o)).expect("JSON");
+        json["diagnostics"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|d| {
+                format!(
+                    "{}@{}",
+                    d["code"].as_str().unwrap(),
+                    d["line"].as_u64().unwrap_or(0)
+                )
+            })
+            .collect()
+    };
+    let a = dir.path().join("a.pn");
+    let path = dir.path().display().to_string();
+    // Without the allows: the verifier warns about t2 (conflict, and it never fires) and watch.
+    std::fs::write(&a, nets(false)).unwrap();
+    let o = petrel(&["check", &path, "--format", "json"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let before = codes(&o);
+    for code in ["W0601@6", "W0602@6", "W0602@7"] {
+        assert!(before.contains(&code.to_string()), "{code}: {before:?}");
+    }
+    // With them: the warnings they name are gone, W0602 of t2 (not allowed) stays, and the idle
+    // allow is reported where it is written.
+    std::fs::write(&a, nets(true)).unwrap();
+    let o = petrel(&["check", &path, "--format", "json"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let after = codes(&o);
+    assert_eq!(after, ["W0602@7", "W0105@10"], "{after:?}");
+}
+
+/// Each kind of expectation, failing on a mission, names its line, what it expected and what
+/// the run found; a line that does not read names its line and what is wrong (exit 2).
+#[test]
+fn run_says_what_each_failed_expectation_expected_and_found() {
+    let ugv = repo().join("missions/ugv").display().to_string();
+    let dir = tempfile::tempdir().unwrap();
+    let script = dir.path().join("s.script");
+    let run = |text: &str, project: &str| {
+        std::fs::write(&script, text).unwrap();
+        petrel(&[
+            "run",
+            project,
+            "--script",
+            &script.display().to_string(),
+            "-q",
+        ])
+    };
+    let start = "0 start_mission\n1 next_move(\"r1\", \"enter_bottleneck\")\n";
+    for (expect, found) in [
+        // What became of the event: after the catastrophic emergency stop, refused.
+        (
+            "3 emergency_stop\n4 move_done(\"r1\")\nexpect processed\n",
+            "expected event `move_done` (line 4) processed\n  found: refused: event `move_done` refused: a catastrophic event ended the mission",
+        ),
+        (
+            "3 emergency_stop\nexpect refused\n",
+            "expected event `emergency_stop` (line 3) refused\n  found: processed",
+        ),
+        // Calls: counted, in order.
+        (
+            "expect 2 calls MOVES_R1.execute(_)\n",
+            "expected 2 calls MOVES_R1.execute(_) since line 2\n  found: 1, among calls MOVES_R1.execute(\"enter_bottleneck\")",
+        ),
+        (
+            "3 emergency_stop\nexpect calls MOVES_R2.stop() then MOVES_R1.stop()\n",
+            "expected calls MOVES_R2.stop() then MOVES_R1.stop() in this order since line 3\n  found: calls MOVES_R1.stop(), MOVES_R2.stop() (no MOVES_R1.stop() after MOVES_R2.stop())",
+        ),
+        // Emissions.
+        (
+            "expect emit granted(\"r2\")\n",
+            "expected emit granted(\"r2\")\n  found: emits request(\"r1\"), granted(\"r1\")",
+        ),
+        // Always: broken by a later step, which is named.
+        (
+            "expect always active R1/PASS\n2 move_done(\"r1\")\n3 move_done(\"r1\")\n",
+            "expected always active R1/PASS (from line 3 on)\n  found: broken at 3 by the step of `move_done` (timed line 5)",
+        ),
+    ] {
+        let o = run(&format!("{start}{expect}"), &ugv);
+        assert_eq!(o.status.code(), Some(1), "{expect}: {}", stderr(&o));
+        assert!(stderr(&o).contains(found), "{expect}:\n{}", stderr(&o));
+    }
+    // A timer (the UAV has one).
+    let o = run(
+        "0 start_mission\n8 rotation_speed\n10 airborne\n60 altitude_reached\nexpect timer dec_answer expires at 80\n",
+        &uav(),
+    );
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("s.script:5: expectation failed: expected timer dec_answer running, expiring at 80\n  found: running dec_answer (expires at 70)"),
+        "{}",
+        stderr(&o)
+    );
+    // Lines that do not read: each with its line and what is wrong.
+    let o = run(
+        "0 start_mission\nexpect 2 calls NOPE.f()\nexpect calls MOVES_R1.stop() then request(\"r1\")\nexpect timer t expires\nexpect always R1.nowhere\nexpect not always active R1\n",
+        &ugv,
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let err = stderr(&o);
+    for line in [
+        "s.script:2: unknown program `NOPE`",
+        "s.script:3: `request(\"r1\")` is not a call such as `PROGRAM.function(1, _)`",
+        "s.script:4: expected `timer NAME` or `timer NAME expires at SECONDS`",
+        "s.script:5: unknown place `R1.nowhere` in the formula",
+        "s.script:6: `not always` does not read",
+    ] {
+        assert!(err.contains(line), "{line}:\n{err}");
+    }
+}
+
+/// The example at the top of docs/scripts.md is a script that runs on missions/uav as shown.
+#[test]
+fn the_example_of_docs_scripts_md_runs_on_the_uav() {
+    let doc = std::fs::read_to_string(repo().join("docs/scripts.md")).unwrap();
+    let start = doc
+        .find("```text\n# The nominal flight, abridged.")
+        .expect("the example")
+        + "```text\n".len();
+    let end = start + doc[start..].find("```").unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let script = dir.path().join("example.script");
+    std::fs::write(&script, &doc[start..end]).unwrap();
+    let o = petrel(&[
+        "run",
+        &uav(),
+        "--script",
+        &script.display().to_string(),
+        "-q",
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stderr(&o).contains("expectations met"), "{}", stderr(&o));
 }

@@ -2,7 +2,9 @@
 //! process of the vehicle reads out of shared memory written by another.
 #![no_main]
 use libfuzzer_sys::fuzz_target;
-use petrel_ipc::wire::{decode, CallMsg, EventMsg, Heartbeat, MarkingMsg, SignalsMsg};
+use petrel_ipc::wire::{
+    decode, CallMsg, EventMsg, Heartbeat, MarkingMsg, ReloadAnswer, ReloadRequest, SignalsMsg,
+};
 
 fuzz_target!(|data: &[u8]| {
     let _ = decode::<EventMsg>(data);
@@ -10,4 +12,6 @@ fuzz_target!(|data: &[u8]| {
     let _ = decode::<MarkingMsg>(data);
     let _ = decode::<Heartbeat>(data);
     let _ = decode::<SignalsMsg>(data);
+    let _ = decode::<ReloadRequest>(data);
+    let _ = decode::<ReloadAnswer>(data);
 });

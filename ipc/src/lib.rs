@@ -8,6 +8,8 @@
 //!  player --MarkingMsg--> petrel/<vehicle>/marking -----------------------------> monitors
 //!  anyone --Heartbeat--> petrel/<vehicle>/heartbeat ----------------------------> anyone
 //!  CAN bridge --SignalsMsg--> petrel/<vehicle>/signals -------------------------> programs
+//!  petrel reload --ReloadRequest--> petrel/<vehicle>/reload --------------------> player
+//!  player --ReloadAnswer--> petrel/<vehicle>/reload/answer ---------> petrel reload, shadows
 //! ```
 //!
 //! Each arrow is an iceoryx2 publish-subscribe service on `[u8]` (a bincode body, see
@@ -77,11 +79,12 @@ pub use participant::{Participant, ServiceFailure, SetupError};
 pub use port::{
     CallReceiver, CallSender, Drained, EventReceiver, EventSender, HeartbeatPublisher,
     HeartbeatSubscriber, MarkingPublisher, MarkingSubscriber, Received, Receiver, ReceiverStats,
-    RecvError, SendError, Sender, SenderAccount, SenderStats, Sent, ServiceSpec, SignalsPublisher,
+    RecvError, ReloadAnswerPublisher, ReloadAnswerSubscriber, ReloadReceiver, ReloadRequester,
+    SendError, Sender, SenderAccount, SenderStats, Sent, ServiceSpec, SignalsPublisher,
     SignalsSubscriber, Wakeups,
 };
 pub use reactor::{FdSource, Reactor, ReactorError, Ready, Source, WaitStrategy};
 pub use wire::{
     Ack, AckRefusal, CallMsg, EventMsg, Heartbeat, MarkingMsg, Origin, Recorder, RecorderState,
-    SignalsMsg, Value, WireError,
+    ReloadAnswer, ReloadRequest, SignalsMsg, Value, WireError,
 };

@@ -278,6 +278,18 @@ impl Vehicle {
         format!("petrel/{}/signals", self.name)
     }
 
+    /// Reload requests into the player, `petrel/<vehicle>/reload`, and the paired event
+    /// service of the same name.
+    pub fn reload_service(&self) -> String {
+        format!("petrel/{}/reload", self.name)
+    }
+
+    /// The player's reload answers, `petrel/<vehicle>/reload/answer`, and the paired event
+    /// service of the same name.
+    pub fn reload_answer_service(&self) -> String {
+        format!("petrel/{}/reload/answer", self.name)
+    }
+
     /// Heartbeats, `petrel/<vehicle>/heartbeat`, and the paired event service of the same name.
     pub fn heartbeat_service(&self) -> String {
         format!("petrel/{}/heartbeat", self.name)

@@ -25,8 +25,9 @@ use crate::access::{AccessError, Session};
 use crate::naming::{NameError, Role, Vehicle};
 use crate::port::{
     CallReceiver, CallSender, EventReceiver, EventSender, HeartbeatPublisher, HeartbeatSubscriber,
-    MarkingPublisher, MarkingSubscriber, Receiver, Sender, ServiceSpec, SignalsPublisher,
-    SignalsSubscriber, CALLS, EVENTS, HEARTBEAT, MARKING, SIGNALS, WAKE_MAX, WAKE_SENDER_DIED,
+    MarkingPublisher, MarkingSubscriber, Receiver, ReloadAnswerPublisher, ReloadAnswerSubscriber,
+    ReloadReceiver, ReloadRequester, Sender, ServiceSpec, SignalsPublisher, SignalsSubscriber,
+    CALLS, EVENTS, HEARTBEAT, MARKING, RELOAD, RELOAD_ANSWER, SIGNALS, WAKE_MAX, WAKE_SENDER_DIED,
     WAKE_SENDER_JOINED, WAKE_SENDER_LEFT,
 };
 use crate::wire::{Message, MsgHeader, Origin};
@@ -287,6 +288,26 @@ impl Participant {
     /// A subscriber to marking deltas.
     pub fn marking_subscriber(&self) -> Result<MarkingSubscriber, SetupError> {
         self.receiver(self.vehicle.marking_service(), MARKING)
+    }
+
+    /// A sender of reload requests to the player (`petrel reload`).
+    pub fn reload_requester(&self) -> Result<ReloadRequester, SetupError> {
+        self.sender(self.vehicle.reload_service(), RELOAD)
+    }
+
+    /// The player's receiver of reload requests (one player receives).
+    pub fn reload_receiver(&self) -> Result<ReloadReceiver, SetupError> {
+        self.receiver(self.vehicle.reload_service(), RELOAD)
+    }
+
+    /// The player's publisher of reload answers.
+    pub fn reload_answer_publisher(&self) -> Result<ReloadAnswerPublisher, SetupError> {
+        self.sender(self.vehicle.reload_answer_service(), RELOAD_ANSWER)
+    }
+
+    /// A subscriber to the player's reload answers.
+    pub fn reload_answer_subscriber(&self) -> Result<ReloadAnswerSubscriber, SetupError> {
+        self.receiver(self.vehicle.reload_answer_service(), RELOAD_ANSWER)
     }
 
     /// A publisher of heartbeats.

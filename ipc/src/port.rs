@@ -155,6 +155,32 @@ pub const SIGNALS: ServiceSpec = ServiceSpec {
     safe_overflow: true,
 };
 
+/// Reload requests into the player (`petrel reload`): a few at a time, from a few tools.
+pub const RELOAD: ServiceSpec = ServiceSpec {
+    kind: MsgKind::ReloadRequest,
+    subscriber_buffer: 8,
+    history: 0,
+    max_publishers: 8,
+    max_subscribers: 1,
+    max_nodes: 16,
+    initial_slice_len: 1_024,
+    max_body_len: 128 * 1024,
+    safe_overflow: false,
+};
+
+/// The player's answers to reload requests, to the requesters and shadows listening.
+pub const RELOAD_ANSWER: ServiceSpec = ServiceSpec {
+    kind: MsgKind::ReloadAnswer,
+    subscriber_buffer: 8,
+    history: 0,
+    max_publishers: 2,
+    max_subscribers: 16,
+    max_nodes: 32,
+    initial_slice_len: 4_096,
+    max_body_len: wire::MAX_BODY_LEN,
+    safe_overflow: true,
+};
+
 /// What a successful [`Sender::send`] did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Sent {
@@ -263,9 +289,11 @@ impl fmt::Display for SendError {
                 let hint = match kind {
                     MsgKind::Event => "is the player running?",
                     MsgKind::Call => "is the program running?",
-                    MsgKind::Marking | MsgKind::Heartbeat | MsgKind::Signals => {
-                        "no monitor is connected"
-                    }
+                    MsgKind::ReloadRequest => "is the player running?",
+                    MsgKind::Marking
+                    | MsgKind::Heartbeat
+                    | MsgKind::Signals
+                    | MsgKind::ReloadAnswer => "no monitor is connected",
                 };
                 write!(
                     f,
@@ -332,6 +360,10 @@ pub type MarkingPublisher = Sender<wire::MarkingMsg>;
 pub type HeartbeatPublisher = Sender<wire::Heartbeat>;
 /// Publishes the latest CAN signal values (the CAN data server).
 pub type SignalsPublisher = Sender<wire::SignalsMsg>;
+/// Sends reload requests to the player.
+pub type ReloadRequester = Sender<wire::ReloadRequest>;
+/// The player's sender of reload answers.
+pub type ReloadAnswerPublisher = Sender<wire::ReloadAnswer>;
 
 impl<M: Message> fmt::Debug for Sender<M> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -758,6 +790,10 @@ pub type MarkingSubscriber = Receiver<wire::MarkingMsg>;
 pub type HeartbeatSubscriber = Receiver<wire::Heartbeat>;
 /// Reads the latest CAN signal values (programs).
 pub type SignalsSubscriber = Receiver<wire::SignalsMsg>;
+/// The player's receiver of reload requests.
+pub type ReloadReceiver = Receiver<wire::ReloadRequest>;
+/// Receives the player's reload answers.
+pub type ReloadAnswerSubscriber = Receiver<wire::ReloadAnswer>;
 
 impl<M: Message> fmt::Debug for Receiver<M> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {

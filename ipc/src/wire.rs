@@ -16,6 +16,8 @@
 //! | marking   | [`MarkingMsg`]| player to monitors                     |
 //! | heartbeat | [`Heartbeat`] | anyone to anyone who listens; the player's carries its acknowledgements ([`Ack`]) |
 //! | signals   | [`SignalsMsg`]| CAN bridge to programs (latest values) |
+//! | reload    | [`ReloadRequest`] | `petrel reload` to player          |
+//! | reload/answer | [`ReloadAnswer`] | player to `petrel reload` and shadows |
 //!
 //! Events travel by **name**: programs do not know the player's event indices.
 //!
@@ -45,7 +47,9 @@ use iceoryx2::prelude::ZeroCopySend;
 /// Version of the wire format. It is written in every header, and it is part of the header's
 /// iceoryx2 type name, so a process built with another wire version cannot even open the
 /// services. Version 2: the heartbeat carries typed acknowledgements and the recorder's state.
-pub const WIRE_VERSION: u16 = 2;
+/// Version 3: a marking delta carries its step's mission time, the event's parameters and the
+/// step's actions as text, so that a monitor shows the whole step.
+pub const WIRE_VERSION: u16 = 3;
 
 /// Most senders one heartbeat acknowledges (the most recently active first). The events
 /// service takes 32 senders at once; the rest is room for senders that just left.
@@ -136,6 +140,13 @@ pub struct MarkingMsg {
     /// True when `marked` and `activated` list the whole state rather than a change (sent at
     /// start, and whenever a monitor may have lost track).
     pub snapshot: bool,
+    /// Mission time of the step, microseconds.
+    pub time_us: u64,
+    /// The parameters of the event processed, in declaration order.
+    pub params: Vec<Value>,
+    /// Every action and notice of the step as text (`call GUI.climb(300.0)`, `start
+    /// dec_answer (expires at 12.5)`), as the journal records them.
+    pub actions: Vec<String>,
 }
 
 /// A sign of life, with what the sender promises and what it has done.
@@ -343,6 +354,63 @@ impl SignalsMsg {
     }
 }
 
+/// A request to reload the player's project (`petrel reload`): the new version is named by its
+/// directory and the content hash of its files, which the player reads and hashes itself (it
+/// runs on the same computer): a project may be larger than a message carries.
+#[derive(Debug, Clone, PartialEq, Default, Encode, Decode)]
+pub struct ReloadRequest {
+    /// The new version's project directory, absolute.
+    pub dir: String,
+    /// The content hash of its files as the requester read them (16 hex digits).
+    pub source_hash: String,
+    /// The mapping file's text (empty: no mapping file).
+    pub mapping: String,
+    /// Say what would happen, swap nothing.
+    pub dry_run: bool,
+}
+
+/// The player's answer to a [`ReloadRequest`], to every listener (the requester finds its own
+/// by its sender id and sequence number; a shadow follows accepted reloads).
+#[derive(Debug, Clone, PartialEq, Default, Encode, Decode)]
+pub struct ReloadAnswer {
+    /// The requesting port's sender id.
+    pub request_sender: u64,
+    /// The request's sequence number.
+    pub request_seq: u64,
+    /// The reload is (or, for a dry run, would be) accepted.
+    pub accepted: bool,
+    /// It was a dry run: nothing was swapped.
+    pub dry_run: bool,
+    /// The new version's directory and content hash, as requested.
+    pub dir: String,
+    /// The content hash.
+    pub source_hash: String,
+    /// The player's step number after which the new version runs (accepted, not a dry run).
+    pub step: u64,
+    /// What the mapping did, one line each.
+    pub summary: Vec<String>,
+    /// Why it is refused, one line each (the mapping's reasons, or the verification's finding).
+    pub reasons: Vec<String>,
+    /// The shortest sequence of events from the mapped state to the finding, if any.
+    pub trace: Vec<String>,
+    /// Stable states the verification explored from the mapped state.
+    pub states: u64,
+    /// Milliseconds from the request to the answer.
+    pub millis: u64,
+}
+
+impl ReloadAnswer {
+    /// Cuts the answer to fit the service ([`MAX_BODY_LEN`]): long lists lose their tail.
+    pub fn bound(&mut self) {
+        for list in [&mut self.summary, &mut self.reasons, &mut self.trace] {
+            list.truncate(1000);
+            for line in list.iter_mut() {
+                cut_text(line, 512);
+            }
+        }
+    }
+}
+
 /// The kinds of message bodies, as written in the header.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[repr(u16)]
@@ -357,6 +425,10 @@ pub enum MsgKind {
     Heartbeat = 4,
     /// [`SignalsMsg`].
     Signals = 5,
+    /// [`ReloadRequest`].
+    ReloadRequest = 6,
+    /// [`ReloadAnswer`].
+    ReloadAnswer = 7,
 }
 
 impl MsgKind {
@@ -368,6 +440,8 @@ impl MsgKind {
             3 => Some(MsgKind::Marking),
             4 => Some(MsgKind::Heartbeat),
             5 => Some(MsgKind::Signals),
+            6 => Some(MsgKind::ReloadRequest),
+            7 => Some(MsgKind::ReloadAnswer),
             _ => None,
         }
     }
@@ -381,6 +455,8 @@ impl fmt::Display for MsgKind {
             MsgKind::Marking => "marking",
             MsgKind::Heartbeat => "heartbeat",
             MsgKind::Signals => "signals",
+            MsgKind::ReloadRequest => "reload request",
+            MsgKind::ReloadAnswer => "reload answer",
         })
     }
 }
@@ -392,6 +468,8 @@ mod sealed {
     impl Sealed for super::MarkingMsg {}
     impl Sealed for super::Heartbeat {}
     impl Sealed for super::SignalsMsg {}
+    impl Sealed for super::ReloadRequest {}
+    impl Sealed for super::ReloadAnswer {}
 }
 
 /// A message body of this crate. Sealed: only the four bodies above travel on Petrel's
@@ -416,6 +494,12 @@ impl Message for Heartbeat {
 impl Message for SignalsMsg {
     const KIND: MsgKind = MsgKind::Signals;
 }
+impl Message for ReloadRequest {
+    const KIND: MsgKind = MsgKind::ReloadRequest;
+}
+impl Message for ReloadAnswer {
+    const KIND: MsgKind = MsgKind::ReloadAnswer;
+}
 
 /// The fixed header of every sample, in iceoryx2's user-header slot.
 ///
@@ -423,7 +507,7 @@ impl Message for SignalsMsg {
 /// depend on the module path and changes with [`WIRE_VERSION`].
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("petrel::MsgHeader/v2")]
+#[type_name("petrel::MsgHeader/v3")]
 pub struct MsgHeader {
     /// The sending port's id, unique among the vehicle's live ports.
     pub sender: u64,
@@ -619,6 +703,9 @@ mod tests {
             activated: vec![],
             deactivated: vec!["nav".into()],
             snapshot: false,
+            time_us: 12_500_000,
+            params: every_value(),
+            actions: vec!["call GUI.climb(300.0)".into()],
         });
         round_trip(Heartbeat {
             uptime_ms: 1,

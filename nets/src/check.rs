@@ -72,6 +72,8 @@ enum NetRef {
 /// A child of a net's `children` line.
 struct ChildInfo<'p> {
     decl: usize,
+    /// The child's name in the `children` line.
+    span: Span,
     args: Option<&'p [Expr]>,
     /// How many leading parameters the `children` line fixes.
     fixed: usize,
@@ -256,12 +258,13 @@ impl<'p> Checker<'p> {
         // Instances, from the roots down.
         let mut insts: Vec<Inst> = Vec::new();
         let mut root_inst: Vec<usize> = Vec::new();
+        let mut name_bytes = 0;
         for r in 0..self.roots.len() {
             let binding = self.root_binding(r);
-            let (decl, name) = (self.roots[r].decl, self.roots[r].name.clone());
             root_inst.push(insts.len());
-            let mut path = Vec::new();
-            self.expand(&templates, &mut insts, decl, name, binding, None, &mut path);
+            // Past the limits nothing is compiled: what follows would work on a partial list.
+            self.expand(&templates, &mut insts, r, binding, &mut name_bytes)
+                .ok()?;
         }
         let nets: Vec<c::Net> = insts
             .iter()
@@ -637,54 +640,115 @@ impl<'p> Checker<'p> {
         );
     }
 
-    /// Expands an instance and, recursively, its children (pre-order). `fixed` holds the values
-    /// of its leading parameters; the rest are bound at activation.
-    #[allow(clippy::too_many_arguments)]
+    /// Expands a root instance and its children, pre-order, over an explicit stack (a chain of
+    /// children as deep as the project is long cannot overflow the call stack). `fixed` holds
+    /// the values of the root's leading parameters; the rest are bound at activation.
+    ///
+    /// The expansion is bounded like [`crate::instances`]'s, with the same limits: children
+    /// multiply at each level (24 levels of two children are 16 million nets), so past
+    /// [`MAX_INSTANCES`](crate::instances::MAX_INSTANCES) nets or
+    /// [`MAX_NAME_BYTES`](crate::instances::MAX_NAME_BYTES) of their names, E0305 says where and
+    /// the expansion stops (`Err`).
     fn expand(
         &mut self,
         templates: &[Template<'p>],
         insts: &mut Vec<Inst>,
-        decl: usize,
-        name: String,
+        root: usize,
         fixed: Fixed,
-        parent: Option<(usize, u32)>,
-        path: &mut Vec<usize>,
-    ) -> usize {
+        name_bytes: &mut usize,
+    ) -> Result<(), ()> {
+        use crate::instances::{MAX_INSTANCES, MAX_NAME_BYTES};
+        let (decl, name) = (self.roots[root].decl, self.roots[root].name.clone());
+        if insts.len() >= MAX_INSTANCES || *name_bytes + name.len() > MAX_NAME_BYTES {
+            self.too_many_nets(insts.len(), root, None, self.decls[decl].name.span);
+            return Err(());
+        }
+        *name_bytes += name.len();
         let me = insts.len();
         insts.push(Inst {
-            name: name.clone(),
+            name,
             decl,
-            fixed: fixed.clone(),
-            parent,
+            fixed,
+            parent: None,
             children: Vec::new(),
         });
-        // `cycles` reported any cycle; this only keeps the expansion finite.
-        if path.contains(&decl) {
-            return me;
-        }
-        path.push(decl);
-        let own_places = self.decls[decl].places().count() as u32;
-        for (k, ch) in templates[decl].children.iter().enumerate() {
+        // The declarations on the path from the root: a child that is its own ancestor (the
+        // cycle is reported by `cycles`) is made, but not expanded further.
+        let mut on_path = vec![false; self.decls.len()];
+        on_path[decl] = true;
+        let mut stack: Vec<(usize, usize)> = vec![(me, 0)];
+        while let Some(top) = stack.last_mut() {
+            let (parent, k) = *top;
+            let pdecl = insts[parent].decl;
+            let Some(ch) = templates[pdecl].children.get(k) else {
+                on_path[pdecl] = false;
+                stack.pop();
+                continue;
+            };
+            top.1 += 1;
             let child_fixed = match ch.args {
                 Some(args) if ch.fixed > 0 => {
-                    self.child_args(decl, &fixed, ch, args).unwrap_or_default()
+                    let parent_fixed = insts[parent].fixed.clone();
+                    self.child_args(pdecl, &parent_fixed, ch, args)
+                        .unwrap_or_default()
                 }
                 _ => Vec::new(),
             };
-            let child_name = format!("{name}/{}", self.decls[ch.decl].name);
-            let id = self.expand(
-                templates,
-                insts,
-                ch.decl,
-                child_name,
-                child_fixed,
-                Some((me, own_places + k as u32)),
-                path,
-            );
-            insts[me].children.push(id);
+            let child_name = format!("{}/{}", insts[parent].name, self.decls[ch.decl].name);
+            if insts.len() >= MAX_INSTANCES || *name_bytes + child_name.len() > MAX_NAME_BYTES {
+                self.too_many_nets(insts.len(), root, Some(stack.len()), ch.span);
+                return Err(());
+            }
+            *name_bytes += child_name.len();
+            let own_places = self.decls[pdecl].places().count() as u32;
+            let id = insts.len();
+            insts.push(Inst {
+                name: child_name,
+                decl: ch.decl,
+                fixed: child_fixed,
+                parent: Some((parent, own_places + k as u32)),
+                children: Vec::new(),
+            });
+            insts[parent].children.push(id);
+            if !on_path[ch.decl] {
+                on_path[ch.decl] = true;
+                stack.push((id, 0));
+            }
         }
-        path.pop();
-        me
+        Ok(())
+    }
+
+    /// E0305: the expansion of `root` stopped at a limit, `depth` levels of children down (at
+    /// the `children` line `span`), with `made` nets made so far.
+    fn too_many_nets(&mut self, made: usize, root: usize, depth: Option<usize>, span: Span) {
+        use crate::instances::{MAX_INSTANCES, MAX_NAME_BYTES};
+        let root = &self.roots[root].name;
+        let (limit, label) = if made >= MAX_INSTANCES {
+            (
+                format!("more than {MAX_INSTANCES} nets"),
+                format!("net number {} would be made here", made + 1),
+            )
+        } else {
+            (
+                format!("nets whose names take more than {MAX_NAME_BYTES} bytes in all"),
+                "the names of nested children grow with their depth".to_string(),
+            )
+        };
+        let at = match depth {
+            Some(depth) => format!(", {depth} level(s) of children below `{root}`"),
+            None => String::new(),
+        };
+        self.d.push(
+            Diagnostic::error(
+                "E0305",
+                span,
+                format!("the project expands to {limit} (instances and their children){at}"),
+            )
+            .label(label)
+            .help(format!(
+                "each `children` line makes an instance of the child for every instance of its parent, so children multiply at each level; the expansion from root `{root}` stopped here: a mission runs tens of nets, make the tree shallower or narrower"
+            )),
+        );
     }
 
     /// The values of a `children X(args)` line for one instance of its parent: literals, or the
@@ -1290,6 +1354,7 @@ impl<'p> Checker<'p> {
             });
             children.push(ChildInfo {
                 decl: k,
+                span: ch.net.span,
                 args: ch.args.as_deref(),
                 fixed,
             });
@@ -1406,11 +1471,14 @@ impl<'p> Checker<'p> {
                 return None;
             }
             NetRef::SelfNet
-        } else if let Some(k) = net.children().position(|c| c.net.text == n.text) {
-            // A child's instance of this net, if the child exists.
-            if !self.decl_ids.contains_key(n.as_str()) {
-                return None;
-            }
+        } else if net.children().any(|c| c.net.text == n.text) {
+            // A child's instance of this net, if the child exists. The template lists only the
+            // children whose net is declared (the others are reported where they are named),
+            // so the index is the one among those, as the instances are made.
+            let k = t
+                .children
+                .iter()
+                .position(|c| self.decls[c.decl].name.text == n.text)?;
             NetRef::Child(k)
         } else if let Some(&r) = self.root_ids.get(n.as_str()) {
             NetRef::Root(r)

@@ -26,6 +26,10 @@ pub fn format_file(file: &NetFile) -> String {
 
 fn comments(out: &mut String, indent: &str, list: &[String]) {
     for c in list {
+        if c == crate::model::BLANK_LINE {
+            out.push('\n');
+            continue;
+        }
         out.push_str(indent);
         out.push_str(&comment(c));
         out.push('\n');

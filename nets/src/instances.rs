@@ -16,7 +16,8 @@
 //!   (the checker reports the cycle).
 //!
 //! Expansion is iterative and bounded ([`MAX_INSTANCES`], [`MAX_NAME_BYTES`]): a hostile file
-//! whose children lines multiply at each level cannot make it run out of time or memory. A
+//! whose children lines multiply at each level cannot make it run out of time or memory. The
+//! checker's expansion is bounded by the same limits and reports E0305 when one is crossed. A
 //! test in `nets/tests/pnml.rs` checks that the names and order agree with the checker's.
 
 use crate::model::{Expr, NetDecl, Project};

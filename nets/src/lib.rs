@@ -20,6 +20,7 @@ pub mod pnml;
 pub mod project;
 pub mod pt;
 pub mod reach;
+pub mod reload;
 pub mod semantics;
 pub mod source;
 pub mod syntax;

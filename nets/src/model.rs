@@ -333,9 +333,15 @@ pub struct Manifest {
 pub struct Trivia {
     /// Whether a blank line separates this item from the previous one.
     pub blank_before: bool,
-    /// Whole-line comments before the item, without the `//`.
+    /// Whole-line comments before the item, without the `//`; a blank line between two of
+    /// them (or, in end comments, above the first) is an entry [`BLANK_LINE`] (a comment's
+    /// text never holds a line break).
     pub comments: Vec<String>,
 }
+
+/// The entry of a comment list that stands for a blank line between two comments, so that
+/// `petrel fmt` keeps a file's header comment apart from the first net's own comment.
+pub const BLANK_LINE: &str = "\n";
 
 /// A literal or a name in an action's argument list.
 #[derive(Clone, Debug, PartialEq)]

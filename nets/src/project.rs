@@ -152,6 +152,22 @@ pub fn load(dir: &Path) -> Result<LoadedProject, LoadError> {
     })
 }
 
+impl LoadedProject {
+    /// The project's source files as `(path, text)`: the manifest, then each net file read,
+    /// in the manifest's order (what [`crate::reload::source_digest`] hashes, and what a
+    /// reload keeps beside the journal).
+    pub fn source_files(&self) -> Vec<(String, String)> {
+        let mut out = vec![(
+            MANIFEST.to_string(),
+            self.sources.get(self.manifest_file).text.clone(),
+        )];
+        for (f, id) in self.project.files.iter().zip(&self.file_ids) {
+            out.push((f.path.clone(), self.sources.get(*id).text.clone()));
+        }
+        out
+    }
+}
+
 /// Reads and checks a project: every finding, sorted, and the compiled project if it has no
 /// error.
 pub fn load_and_check(

@@ -339,6 +339,16 @@ fn lex(file: FileId, text: &str, diags: &mut Diagnostics) -> Vec<Token> {
     toks
 }
 
+/// The comments before a closing `}`: a blank line above them is kept as a leading
+/// [`BLANK_LINE`](crate::model::BLANK_LINE) (the canonical layout has none of its own there).
+fn closing_comments(t: Trivia) -> Vec<String> {
+    let mut comments = t.comments;
+    if t.blank_before && !comments.is_empty() {
+        comments.insert(0, crate::model::BLANK_LINE.to_string());
+    }
+    comments
+}
+
 /// How deeply lists may nest in an argument. The language's only list type is `[float]`, so
 /// one level is all a valid file holds; the bound keeps the recursive descent (and every
 /// recursive walk of the expressions it builds) from overflowing the stack on crafted input
@@ -430,6 +440,9 @@ impl Parser<'_> {
         let blank_before = self.peek().blank_before;
         let mut comments = std::mem::take(&mut self.pending);
         while let Tok::Comment(c) = &self.peek().tok {
+            if self.peek().blank_before && !comments.is_empty() {
+                comments.push(crate::model::BLANK_LINE.to_string());
+            }
             comments.push(c.clone());
             self.bump();
         }
@@ -598,7 +611,7 @@ impl Parser<'_> {
                     name,
                     params,
                     items,
-                    end_comments: trivia.comments,
+                    end_comments: closing_comments(trivia),
                 });
             }
             if self.at(&Tok::Eof) {
@@ -779,7 +792,7 @@ impl Parser<'_> {
                 let trivia = self.leading();
                 if self.at(&Tok::RBrace) {
                     self.bump();
-                    end_comments = trivia.comments;
+                    end_comments = closing_comments(trivia);
                     break;
                 }
                 if self.at(&Tok::Eof) {
@@ -905,22 +918,31 @@ impl Parser<'_> {
 
     /// A guard: `or` of `and` of `not` of comparisons.
     fn guard(&mut self) -> PResult<Guard> {
-        self.depth += 1;
-        if self.depth > MAX_GUARD_DEPTH {
-            self.depth = 0;
+        self.nested_guard(|p| {
+            let mut g = p.guard_and()?;
+            while p.at_ident("or") {
+                p.bump();
+                let rhs = p.guard_and()?;
+                g = Guard::Or(Box::new(g), Box::new(rhs));
+            }
+            Ok(g)
+        })
+    }
+
+    /// Runs `read` one guard level deeper, refusing past [`MAX_GUARD_DEPTH`]. The level is
+    /// given back on every path, errors included: a guard that does not read must not count
+    /// against the guards after it.
+    fn nested_guard(&mut self, read: impl FnOnce(&mut Self) -> PResult<Guard>) -> PResult<Guard> {
+        if self.depth >= MAX_GUARD_DEPTH {
             return Err(self.error(
                 "a simpler guard",
                 &format!("guards nest at most {MAX_GUARD_DEPTH} levels deep"),
             ));
         }
-        let mut g = self.guard_and()?;
-        while self.at_ident("or") {
-            self.bump();
-            let rhs = self.guard_and()?;
-            g = Guard::Or(Box::new(g), Box::new(rhs));
-        }
+        self.depth += 1;
+        let g = read(self);
         self.depth -= 1;
-        Ok(g)
+        g
     }
 
     fn guard_and(&mut self) -> PResult<Guard> {
@@ -936,16 +958,7 @@ impl Parser<'_> {
     fn guard_not(&mut self) -> PResult<Guard> {
         if self.at_ident("not") {
             self.bump();
-            self.depth += 1;
-            if self.depth > MAX_GUARD_DEPTH {
-                self.depth = 0;
-                return Err(self.error(
-                    "a simpler guard",
-                    &format!("guards nest at most {MAX_GUARD_DEPTH} levels deep"),
-                ));
-            }
-            let inner = self.guard_not()?;
-            self.depth -= 1;
+            let inner = self.nested_guard(Self::guard_not)?;
             return Ok(Guard::Not(Box::new(inner)));
         }
         if self.at(&Tok::LParen) {

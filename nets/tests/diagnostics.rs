@@ -149,7 +149,7 @@ fn json_report_names_file_line_and_column() {
 fn templates_instances_and_activation_arguments() {
     let codes = golden("templates");
     for code in [
-        "E0209", "E0210", "E0303", "E0304", "E0401", "E0402", "E0412",
+        "E0209", "E0210", "E0303", "E0304", "E0401", "E0402", "E0412", "E0418",
     ] {
         assert!(codes.contains(&code), "{code} missing from {codes:?}");
     }

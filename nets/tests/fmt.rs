@@ -120,15 +120,37 @@ fn the_model_holds_what_was_written() {
 
 #[test]
 fn example_missions_are_in_canonical_layout() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../missions/uav");
-    for name in ["mission.pn", "events.pn"] {
-        let text = std::fs::read_to_string(dir.join(name)).unwrap();
-        assert_eq!(
-            format_file(&parse_clean(&text)),
-            text,
-            "{name} is not canonical"
-        );
+    let missions = Path::new(env!("CARGO_MANIFEST_DIR")).join("../missions");
+    let mut seen = 0;
+    for dir in std::fs::read_dir(missions).unwrap() {
+        for file in std::fs::read_dir(dir.unwrap().path()).unwrap() {
+            let path = file.unwrap().path();
+            if path.extension().is_some_and(|e| e == "pn") {
+                let text = std::fs::read_to_string(&path).unwrap();
+                assert_eq!(
+                    format_file(&parse_clean(&text)),
+                    text,
+                    "{} is not canonical",
+                    path.display()
+                );
+                seen += 1;
+            }
+        }
     }
+    assert!(seen >= 10, "net files found: {seen}");
+}
+
+/// Before: `petrel fmt` joined a file's header comment to the first net's own comment,
+/// dropping the blank line that kept them apart (and any blank line between comments).
+#[test]
+fn blank_lines_between_comments_are_kept() {
+    let text = "// The file's header.\n\n// About A.\nnet A {\n    // One.\n\n    // Two.\n    place p = 1\n\n    // The end, first part.\n\n    // The end, second part.\n}\n\n// After, one.\n\n// After, two.\n";
+    let model = parse_clean(text);
+    assert_eq!(
+        model.nets[0].trivia.comments,
+        ["The file's header.", BLANK_LINE, "About A."]
+    );
+    assert_eq!(format_file(&model), text);
 }
 
 // ---- properties ----
@@ -159,12 +181,21 @@ fn comment_text() -> impl Strategy<Value = String> {
 }
 
 fn trivia() -> impl Strategy<Value = Trivia> {
-    (any::<bool>(), prop::collection::vec(comment_text(), 0..2)).prop_map(
-        |(blank_before, comments)| Trivia {
-            blank_before,
-            comments,
-        },
+    (
+        any::<bool>(),
+        prop::collection::vec(comment_text(), 0..3),
+        any::<bool>(),
     )
+        .prop_map(|(blank_before, mut comments, apart)| {
+            // A blank line between two comments is kept (never first nor last).
+            if apart && comments.len() >= 2 {
+                comments.insert(1, BLANK_LINE.to_string());
+            }
+            Trivia {
+                blank_before,
+                comments,
+            }
+        })
 }
 
 fn expr() -> impl Strategy<Value = Expr> {

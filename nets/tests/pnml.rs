@@ -6,7 +6,7 @@ use petrel_nets::model::*;
 use petrel_nets::pnml::{export_pnml, import_pnml, parse_pnml, PtNode};
 use petrel_nets::source::{FileId, LineCol, SourceMap, Span};
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 fn mcc_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/mcc")
@@ -1492,6 +1492,7 @@ fn instances_expand_as_the_checker_does() {
         data_dir("language"),
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../missions/uav"),
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../missions/auv"),
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../missions/redermor"),
     ] {
         let (loaded, compiled, diags) = petrel_nets::project::load_and_check(&dir).unwrap();
         let compiled = compiled.unwrap_or_else(|| panic!("{}: {:?}", dir.display(), codes(&diags)));
@@ -1951,4 +1952,49 @@ fn a_child_that_is_its_own_ancestor_is_made_once_without_children() {
     let xml = export_pnml(&p);
     let back = import_pnml(FileId(0), &xml, &mut Diagnostics::new());
     assert_eq!(back, Some(p));
+}
+
+/// Every mission of the repository survives export and import as it was written: Redermor's
+/// program answers and internal events were once lost, and the imported project failed its
+/// check.
+#[test]
+fn every_mission_of_the_repository_survives_export_and_import() {
+    let missions = Path::new(env!("CARGO_MANIFEST_DIR")).join("../missions");
+    let mut seen = 0;
+    for entry in std::fs::read_dir(&missions).unwrap() {
+        let dir = entry.unwrap().path();
+        if !dir.join("petrel.toml").exists() {
+            continue;
+        }
+        let loaded = petrel_nets::project::load(&dir).expect("the mission reads");
+        let xml = export_pnml(&loaded.project);
+        let mut map = SourceMap::new();
+        let file = map.add("mission.pnml", xml.clone());
+        let mut diags = Diagnostics::new();
+        let back = import_pnml(file, &xml, &mut diags).expect("imports");
+        assert!(
+            diags.is_empty(),
+            "{}: {}",
+            dir.display(),
+            diags.render_human(&map)
+        );
+        assert_eq!(back.manifest, loaded.project.manifest, "{}", dir.display());
+        assert_eq!(back.files, loaded.project.files, "{}", dir.display());
+        assert_eq!(export_pnml(&back), xml, "{}", dir.display());
+        seen += 1;
+    }
+    assert!(seen >= 4, "missions found: {seen}");
+}
+
+/// Blank lines between comments (kept by `petrel fmt`) survive a PNML round trip too.
+#[test]
+fn blank_lines_between_comments_survive_export_and_import() {
+    let manifest = "[project]\nname = \"t\"\nfiles = [\"a.pn\"]\nstart = [\"A\"]\n";
+    let text = "// Header.\n\n// About A.\nnet A {\n    // One.\n\n    // Two.\n    place p = 1\n\n    // End.\n}\n\n// After, one.\n\n// After, two.\n";
+    let (project, _, d, _) = petrel_nets::project::from_sources(manifest, &[("a.pn", text)]);
+    assert!(d.is_empty(), "{d:?}");
+    let xml = export_pnml(&project);
+    let back = import_pnml(FileId(0), &xml, &mut Diagnostics::new()).expect("imports");
+    assert_eq!(back, project);
+    assert_eq!(petrel_nets::fmt::format_file(&back.files[0]), text);
 }

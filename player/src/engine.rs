@@ -103,8 +103,8 @@ pub trait Sink {
     fn fired(&mut self, _net: NetId, _transition: u32) {}
     /// `call PROGRAM.FUNCTION(args)`: deliver it (the engine does not wait for an answer).
     fn call(&mut self, _program: ProgramId, _function: FunctionId, _args: Args<'_>) {}
-    /// An event was emitted by a net (it is queued by the engine).
-    fn emitted(&mut self, _event: EventId) {}
+    /// An event was emitted by a net, with its arguments (it is queued by the engine).
+    fn emitted(&mut self, _event: EventId, _params: &[Value]) {}
     /// A timer was started; it expires at `deadline`.
     fn timer_started(&mut self, _timer: TimerId, _deadline: Micros) {}
     /// A timer was cancelled.
@@ -158,6 +158,9 @@ pub enum Refusal {
     },
     /// A catastrophic event was processed: the mission is over.
     AfterCatastrophic(String),
+    /// The event was queued when the project was reloaded, and the new version cannot take it
+    /// (it no longer declares it, or with other parameters, or its target net is gone).
+    Reloaded(String),
 }
 
 impl std::fmt::Display for Refusal {
@@ -179,6 +182,7 @@ impl std::fmt::Display for Refusal {
                 f,
                 "event `{e}` refused: a catastrophic event ended the mission, no further event is processed"
             ),
+            Refusal::Reloaded(why) => write!(f, "refused at the reload: {why}"),
         }
     }
 }
@@ -534,6 +538,119 @@ impl<'p> Engine<'p> {
         step
     }
 
+    /// Every net's activation arguments, by net.
+    pub fn all_net_args(&self) -> &[Vec<Value>] {
+        &self.net_args
+    }
+
+    /// The queue as [`Engine::take_queue`] would give it, without emptying it.
+    pub fn queued_names(&self) -> Vec<(String, Vec<Value>, Option<String>)> {
+        let p = self.sem.project;
+        self.queues
+            .iter()
+            .flatten()
+            .map(|q| {
+                (
+                    p.events[q.event as usize].name.clone(),
+                    q.params.clone(),
+                    q.target.map(|n| p.nets[n as usize].name.clone()),
+                )
+            })
+            .collect()
+    }
+
+    /// Empties the queue, for a reload: each event by name, with its parameters and the name
+    /// of the net it is addressed to, highest category first, oldest first within one. The
+    /// counters still count them as received: [`Engine::adopt`] settles them.
+    pub fn take_queue(&mut self) -> Vec<(String, Vec<Value>, Option<String>)> {
+        let p = self.sem.project;
+        let mut out = Vec::new();
+        for q in &mut self.queues {
+            for Queued {
+                event,
+                params,
+                target,
+            } in q.drain(..)
+            {
+                out.push((
+                    p.events[event as usize].name.clone(),
+                    params,
+                    target.map(|n| p.nets[n as usize].name.clone()),
+                ));
+            }
+        }
+        out
+    }
+
+    /// Takes over from the engine of the version a reload replaces (docs/semantics.md): time
+    /// `now`, the mapped `state`, `deadlines` and activation arguments, the old engine's
+    /// counters, and its queued events ([`Engine::take_queue`]) in order, each by name
+    /// (addressed nets renamed by `renamed_nets`). An event the new version cannot take is
+    /// refused and counted so, and returned with the reason: `received = processed + unused +
+    /// refused + queued` still holds. False (and nothing changed) when the sizes are not this
+    /// project's.
+    #[allow(clippy::too_many_arguments)]
+    pub fn adopt(
+        &mut self,
+        now: Micros,
+        state: &[u64],
+        deadlines: &[Option<Micros>],
+        net_args: Vec<Vec<Value>>,
+        stats: Stats,
+        queued: Vec<(String, Vec<Value>, Option<String>)>,
+        renamed_nets: &std::collections::BTreeMap<String, String>,
+    ) -> Option<Vec<(String, Refusal)>> {
+        if !self.restore(now, state, deadlines) || net_args.len() != self.net_args.len() {
+            return None;
+        }
+        self.net_args = net_args;
+        self.stats = stats;
+        for (k, inv) in self.sem.project.invariants.iter().enumerate() {
+            self.invariant_held[k] = self.sem.layout.holds(&inv.formula, &self.state);
+        }
+        let mut refused = Vec::new();
+        for (name, params, target) in queued {
+            let p = self.sem.project;
+            let target_id = match &target {
+                None => Ok(None),
+                Some(t) => {
+                    let t = renamed_nets.get(t).unwrap_or(t);
+                    p.net_id(t).map(Some).ok_or_else(|| {
+                        Refusal::Reloaded(format!(
+                            "event `{name}` is addressed to net `{t}`, which the new version does not have"
+                        ))
+                    })
+                }
+            };
+            let result = match (target_id, p.event_id(&name)) {
+                (Err(r), _) => {
+                    self.stats.refused += 1;
+                    Err(r)
+                }
+                (Ok(_), None) => {
+                    self.stats.refused += 1;
+                    Err(Refusal::Reloaded(format!(
+                        "the new version does not declare event `{name}`"
+                    )))
+                }
+                (Ok(t), Some(e)) => {
+                    // Counted as received once already, when it first arrived; a refusal
+                    // here is of a received event, like one refused after a catastrophic end.
+                    self.stats.received -= 1;
+                    let r = self.submit_to(e, params, t);
+                    if r.is_err() {
+                        self.stats.received += 1;
+                    }
+                    r
+                }
+            };
+            if let Err(r) = result {
+                refused.push((name, r));
+            }
+        }
+        Some(refused)
+    }
+
     /// Each timer's deadline, if it runs.
     pub fn deadlines(&self) -> &[Option<Micros>] {
         &self.deadlines
@@ -739,12 +856,12 @@ impl<S: Sink> Effects for Adapter<'_, '_, S> {
             net_params: &self.net_args[net],
         };
         params.extend(a.iter().map(ArgValue::to_value));
+        self.sink.emitted(event, &params);
         self.emitted.push(Queued {
             event,
             params,
             target,
         });
-        self.sink.emitted(event);
     }
 
     fn guard(&mut self, rule: u32) -> bool {

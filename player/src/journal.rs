@@ -90,8 +90,8 @@ pub fn decode_entry(body: &[u8]) -> Result<Entry, String> {
 }
 
 /// The journal format this Petrel writes (the header's `version`): 2 added [`Entry::Gap`] and
-/// [`Entry::Checkpoint`]. Version 1 journals read the same.
-pub const FORMAT_VERSION: u32 = 2;
+/// [`Entry::Checkpoint`], 3 [`Entry::Reload`]. Journals of versions 1 and 2 read the same.
+pub const FORMAT_VERSION: u32 = 3;
 
 /// One journal entry.
 #[derive(Clone, Debug, PartialEq, Encode, Decode)]
@@ -187,6 +187,31 @@ pub enum Entry {
         /// Running timers' deadlines (microseconds), by timer.
         deadlines: Vec<Option<u64>>,
     },
+    /// The project was reloaded (`petrel reload`) between two steps: from here on the new
+    /// version runs. Its files are kept beside the journal, in `project-<source_hash>/`
+    /// (written before this entry); replay maps the state again and checks it against
+    /// `state`, and `--resume` after it resumes on the new version. (Last of the variants:
+    /// bincode numbers them, and the entries of earlier versions keep their encoding.)
+    Reload {
+        /// Mission time, microseconds.
+        time: u64,
+        /// The new version's directory, as requested (for people: the journal keeps a copy).
+        dir: String,
+        /// The content hash of its files: the name of the copy beside the journal.
+        source_hash: String,
+        /// The digest of the new compiled project.
+        digest: u64,
+        /// The mapping file's text (empty: none).
+        mapping: String,
+        /// The mapped state the new version starts from.
+        state: Vec<u64>,
+        /// The running timers' deadlines after the mapping (microseconds), by new timer.
+        deadlines: Vec<Option<u64>>,
+        /// The events queued at the reload, carried over to the new version in this order:
+        /// name, parameters, the net it is addressed to (`--resume` from this entry queues
+        /// them again; their submissions are before it).
+        queued: Vec<(String, Vec<Value>, Option<String>)>,
+    },
 }
 
 impl Entry {
@@ -200,6 +225,7 @@ impl Entry {
             | Entry::Refused { time, .. }
             | Entry::Step { time, .. }
             | Entry::Gap { time, .. }
+            | Entry::Reload { time, .. }
             | Entry::Checkpoint { time, .. } => Some(*time),
         }
     }

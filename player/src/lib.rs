@@ -3,18 +3,23 @@
 //! - [`engine`]: sans-I/O; events in, actions out, time injected.
 //! - [`record`]: the record of one step (event, firings, actions), which every reader of the
 //!   player's steps goes through.
-//! - [`script`]: missions as unit tests, in virtual time (`petrel run --script`).
+//! - [`script`]: missions as unit tests, in virtual time (`petrel run --script`); [`expect`]:
+//!   what a script's `expect` lines say and how they are checked.
 //! - [`runtime`]: the player process on iceoryx2 (`petrel play`); [`ack`], its ledger of what
 //!   it took from each sender, refused and recorded (the acknowledgements of its heartbeat).
 //! - [`journal`], [`replay`]: the flight recorder and its replay (`--resume` too).
 //! - [`shadow`]: the ground-station copy that follows a vehicle's steps.
+//! - [`reload`]: a new version of the project read, checked and kept beside the journal
+//!   (`petrel reload`; the mapping and verification are `petrel_nets::reload`'s).
 //!
 //! The command line is the `petrel-cli` crate (binary `petrel`).
 
 pub mod ack;
 pub mod engine;
+pub mod expect;
 pub mod journal;
 pub mod record;
+pub mod reload;
 pub mod replay;
 pub mod runtime;
 pub mod script;

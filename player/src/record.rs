@@ -6,6 +6,11 @@
 //! in global.x`). The script runner prints it and checks expectations against it, the player
 //! journals it and publishes it to monitors, the replay compares it with the journal. The texts
 //! are part of the journal and of `petrel run`'s JSON lines, so they stay stable.
+//!
+//! What became of an event is said in one vocabulary, [`Outcome`]: `processed`, `unused`,
+//! `refused`. The journal records these words, the replay compares them, `petrel run` prints
+//! them in each JSON line's `outcome` and a script's `expect processed` / `expect unused` /
+//! `expect refused` is read with them, so that what a step says is what a script expects.
 
 use crate::engine::{ArgValue, Args, Micros, Sink};
 use petrel_nets::compiled::{
@@ -25,6 +30,8 @@ pub struct StepRecord<'p> {
     pub actions: Vec<String>,
     /// Calls made, with their arguments.
     pub calls: Vec<(ProgramId, FunctionId, Vec<Value>)>,
+    /// Events emitted by nets, with their arguments (queued, not yet processed).
+    pub emits: Vec<(EventId, Vec<Value>)>,
     /// Nets activated, in order.
     pub activated: Vec<NetId>,
     /// Nets deactivated, in order.
@@ -40,6 +47,7 @@ impl<'p> StepRecord<'p> {
             fired: Vec::new(),
             actions: Vec::new(),
             calls: Vec::new(),
+            emits: Vec::new(),
             activated: Vec::new(),
             deactivated: Vec::new(),
         }
@@ -59,6 +67,7 @@ impl<'p> StepRecord<'p> {
         self.fired.clear();
         self.actions.clear();
         self.calls.clear();
+        self.emits.clear();
         self.activated.clear();
         self.deactivated.clear();
     }
@@ -89,13 +98,60 @@ pub fn call_text(
     )
 }
 
-/// How the journal and the replay name a step's outcome.
-pub fn outcome_name(outcome: StepOutcome) -> &'static str {
-    match outcome {
-        StepOutcome::Processed => "processed",
-        StepOutcome::Unused => "unused",
-        StepOutcome::RefusedAfterCatastrophic => "refused",
+/// What became of an event, in the words the journal, the replay, `petrel run`'s JSON lines and
+/// scripts' expectations share.
+///
+/// The words are those journals have always recorded: changing one would make old journals
+/// diverge on replay. Why an event was refused is not part of the word; it travels apart (the
+/// journal's refused entries, the `reason` of a JSON line).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Outcome {
+    /// The event fired or offered at least one transition.
+    Processed,
+    /// No transition waited for the event in the state it found.
+    Unused,
+    /// The event was not processed: refused at submission (unknown event, wrong parameters, a
+    /// catastrophic event already processed) or when taken after a catastrophic event.
+    Refused,
+}
+
+impl Outcome {
+    /// Every outcome, in the order documentation lists them.
+    pub const ALL: [Outcome; 3] = [Outcome::Processed, Outcome::Unused, Outcome::Refused];
+
+    /// The outcome's word: `processed`, `unused` or `refused`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Outcome::Processed => "processed",
+            Outcome::Unused => "unused",
+            Outcome::Refused => "refused",
+        }
     }
+
+    /// The outcome named `word`, if it is one of the words.
+    pub fn from_name(word: &str) -> Option<Outcome> {
+        Outcome::ALL.into_iter().find(|o| o.name() == word)
+    }
+
+    /// The outcome of a step the engine took.
+    pub fn of(step: StepOutcome) -> Outcome {
+        match step {
+            StepOutcome::Processed => Outcome::Processed,
+            StepOutcome::Unused => Outcome::Unused,
+            StepOutcome::RefusedAfterCatastrophic => Outcome::Refused,
+        }
+    }
+}
+
+impl std::fmt::Display for Outcome {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// How the journal and the replay name a step's outcome: [`Outcome::name`] of the step.
+pub fn outcome_name(outcome: StepOutcome) -> &'static str {
+    Outcome::of(outcome).name()
 }
 
 fn seconds(t: Micros) -> f64 {
@@ -120,9 +176,11 @@ impl Sink for StepRecord<'_> {
         ));
         self.calls.push((program, function, values));
     }
-    fn emitted(&mut self, event: EventId) {
+    fn emitted(&mut self, event: EventId, params: &[Value]) {
+        // The action's text stays `emit NAME` (journals hold it); the arguments are in `emits`.
         self.actions
             .push(format!("emit {}", self.project.events[event as usize].name));
+        self.emits.push((event, params.to_vec()));
     }
     fn timer_started(&mut self, timer: TimerId, deadline: Micros) {
         self.actions.push(format!(

@@ -62,6 +62,50 @@ pub struct ReplayReport {
     pub gaps: u64,
     /// Entries the recorder dropped, all gaps together.
     pub lost: u64,
+    /// Reloads of the project replayed across.
+    pub reloads: u64,
+}
+
+/// Replaces `engine` (running `project`) by one running the version of content hash `hash`
+/// kept beside the journal in `kept`, as the player did at the reload: the state mapped
+/// again with the recorded mapping, the queue carried over.
+fn reload_engine<'p>(
+    project: &'p CompiledProject,
+    engine: &mut Engine<'p>,
+    kept: Option<&std::path::Path>,
+    hash: &str,
+    mapping: &str,
+    time: Micros,
+) -> Result<&'p CompiledProject, String> {
+    let dir = kept.ok_or_else(|| {
+        format!("a reload to version {hash}: the journal directory is needed to find its files")
+    })?;
+    let new = crate::reload::load_kept(dir, hash)?;
+    let mapping = petrel_nets::reload::Mapping::parse(mapping)
+        .map_err(|e| format!("the reload's mapping does not read: {e}"))?;
+    let from = petrel_nets::reload::OldState {
+        state: engine.state(),
+        deadlines: engine.deadlines(),
+        net_args: engine.all_net_args(),
+    };
+    let mapped = petrel_nets::reload::map_state(project, &from, &new, &mapping)
+        .map_err(|r| format!("the reload does not map again: {}", r.reasons.join("; ")))?;
+    let new = crate::reload::leak(new);
+    let queued = engine.take_queue();
+    let stats = engine.stats();
+    let mut next = Engine::new(new);
+    next.adopt(
+        time,
+        &mapped.state,
+        &mapped.deadlines,
+        mapped.net_args,
+        stats,
+        queued,
+        &mapping.nets,
+    )
+    .ok_or_else(|| "the mapped state is not of the new version's size".to_string())?;
+    *engine = next;
+    Ok(new)
 }
 
 /// A state as `NET.place` / `global.place` names, active nets as `NET+`, running timers.
@@ -77,21 +121,119 @@ pub fn describe(project: &CompiledProject, layout: &Layout, state: &[u64]) -> Ve
 }
 
 /// Replays `entries` on a fresh engine for `project`, up to mission time `until` (included).
-/// Returns the engine in the state the journal reached, and the report.
+/// Returns the engine in the state the journal reached, and the report. A reload in the
+/// journal is a divergence here: see [`replay_in`].
 pub fn replay<'p>(
     project: &'p CompiledProject,
     entries: &[Entry],
     until: Option<Micros>,
 ) -> (Engine<'p>, ReplayReport) {
+    replay_in(project, entries, until, None, false)
+}
+
+/// The index of the last [`Entry::Reload`] of `entries`, if any.
+pub fn last_reload(entries: &[Entry]) -> Option<usize> {
+    entries
+        .iter()
+        .rposition(|e| matches!(e, Entry::Reload { .. }))
+}
+
+/// Replays `entries` as [`replay`] does, across reloads: the versions a reload brought are
+/// read from the journal directory `kept` ([`crate::reload::load_kept`]), the state is mapped
+/// again and checked against the recorded one, and the replay goes on with the new version.
+/// With `from_last_reload`, the replay starts at the journal's last reload, on the version it
+/// brought (its recorded state restored like a checkpoint's): for `--resume`, and for a
+/// replay whose project directory holds a later version than the mission's first.
+pub fn replay_in<'p>(
+    project: &'p CompiledProject,
+    entries: &[Entry],
+    until: Option<Micros>,
+    kept: Option<&std::path::Path>,
+    from_last_reload: bool,
+) -> (Engine<'p>, ReplayReport) {
+    let mut project = project;
     let mut engine = Engine::new(project);
-    let mut log = StepRecord::new(project);
     let mut report = ReplayReport::default();
+    let mut skip_to = 0;
+    if let (true, Some(k)) = (from_last_reload, last_reload(entries)) {
+        if let Entry::Reload {
+            time,
+            source_hash,
+            mapping,
+            state,
+            deadlines,
+            queued,
+            ..
+        } = &entries[k]
+        {
+            let loaded = match kept {
+                Some(dir) => crate::reload::load_kept(dir, source_hash),
+                None => Err("the journal directory is needed to find the reloaded version".into()),
+            };
+            match loaded {
+                Ok(p) => {
+                    project = crate::reload::leak(p);
+                    engine = Engine::new(project);
+                    let renamed = petrel_nets::reload::Mapping::parse(mapping)
+                        .map(|m| m.nets)
+                        .unwrap_or_default();
+                    // The events queued at the reload were received before it.
+                    let stats = crate::engine::Stats {
+                        received: queued.len() as u64,
+                        ..Default::default()
+                    };
+                    let args = vec![Vec::new(); project.nets.len()];
+                    let adopted = engine.adopt(
+                        *time,
+                        state,
+                        deadlines,
+                        args,
+                        stats,
+                        queued.clone(),
+                        &renamed,
+                    );
+                    if adopted.is_none() {
+                        report.divergence = Some(Divergence {
+                            kind: DivergenceKind::Replay,
+                            entry: k,
+                            time: *time,
+                            event: "(reload)".into(),
+                            what: "the reload's state is not of its version's size".into(),
+                            recorded: Vec::new(),
+                            replayed: Vec::new(),
+                        });
+                        return (engine, report);
+                    }
+                    report.last_time = *time;
+                    report.reloads += 1;
+                    skip_to = k + 1;
+                }
+                Err(what) => {
+                    report.divergence = Some(Divergence {
+                        kind: DivergenceKind::Replay,
+                        entry: k,
+                        time: *time,
+                        event: "(reload)".into(),
+                        what,
+                        recorded: Vec::new(),
+                        replayed: Vec::new(),
+                    });
+                    return (engine, report);
+                }
+            }
+        }
+    }
+    let mut log = StepRecord::new(project);
     // After a gap, the next checkpoint is where the replay starts over.
     let mut after_gap = false;
     // The journal's first header, and the time of the last entry that had one.
     let mut first: Option<(&str, u64, Option<u64>)> = None;
     let mut previous: Option<(usize, u64)> = None;
     for (i, entry) in entries.iter().enumerate() {
+        // Headers are checked all the same: the journal holds together or not.
+        if i < skip_to && !matches!(entry, Entry::Header { .. }) {
+            continue;
+        }
         if let (Some(limit), Some(t)) = (until, entry.time()) {
             if t > limit {
                 report.stopped_early = true;
@@ -106,7 +248,7 @@ pub fn replay<'p>(
                 event: "(journal)".into(),
                 what,
                 recorded: Vec::new(),
-                replayed: describe(project, engine.layout(), engine.state()),
+                replayed: describe(engine.project(), engine.layout(), engine.state()),
             });
             break;
         }
@@ -121,11 +263,60 @@ pub fn replay<'p>(
                 time,
                 event: event.to_string(),
                 what,
-                recorded: describe(project, engine.layout(), recorded),
-                replayed: describe(project, engine.layout(), engine.state()),
+                recorded: describe(engine.project(), engine.layout(), recorded),
+                replayed: describe(engine.project(), engine.layout(), engine.state()),
             };
         match entry {
             Entry::Header { .. } | Entry::Refused { .. } => {}
+            Entry::Reload {
+                time,
+                source_hash,
+                mapping,
+                state,
+                deadlines,
+                queued,
+                ..
+            } => {
+                engine.advance_to(*time);
+                let carried = engine.queued_names();
+                if &carried != queued {
+                    report.divergence = Some(diverge(
+                        &engine,
+                        format!(
+                            "the queue at the reload differs: [{}] in the replay, [{}] in the journal",
+                            carried.iter().map(|q| q.0.as_str()).collect::<Vec<_>>().join(", "),
+                            queued.iter().map(|q| q.0.as_str()).collect::<Vec<_>>().join(", ")
+                        ),
+                        "(reload)",
+                        *time,
+                        state,
+                    ));
+                    break;
+                }
+                match reload_engine(project, &mut engine, kept, source_hash, mapping, *time) {
+                    Ok(next) => {
+                        project = next;
+                        log = StepRecord::new(project);
+                        report.reloads += 1;
+                        if engine.state() != state.as_slice()
+                            || engine.deadlines() != deadlines.as_slice()
+                        {
+                            report.divergence = Some(diverge(
+                                &engine,
+                                "the state mapped at the reload differs".into(),
+                                "(reload)",
+                                *time,
+                                state,
+                            ));
+                            break;
+                        }
+                    }
+                    Err(what) => {
+                        report.divergence = Some(diverge(&engine, what, "(reload)", *time, state));
+                        break;
+                    }
+                }
+            }
             // The player came back at this mission time: timers whose deadline passed while it
             // was down expire now, as they did live.
             Entry::Resume { time } => engine.advance_to(*time),
@@ -194,7 +385,7 @@ pub fn replay<'p>(
                         event: event.clone(),
                         what: format!("the engine refuses the recorded event: {r}"),
                         recorded: Vec::new(),
-                        replayed: describe(project, engine.layout(), engine.state()),
+                        replayed: describe(engine.project(), engine.layout(), engine.state()),
                     });
                     break;
                 }

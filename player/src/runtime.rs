@@ -22,8 +22,8 @@ use crate::journal::{
 use crate::record::{marked_places, outcome_name, StepRecord};
 use petrel_ipc::{
     CallMsg, CallSender, EventReceiver, Heartbeat, HeartbeatPublisher, MarkingMsg,
-    MarkingPublisher, Participant, ProgramWatch, Reactor, RecvError, Role, SendError, Vehicle,
-    WaitStrategy,
+    MarkingPublisher, Participant, ProgramWatch, Reactor, RecvError, ReloadAnswer,
+    ReloadAnswerPublisher, ReloadReceiver, ReloadRequest, Role, SendError, Vehicle, WaitStrategy,
 };
 use petrel_nets::compiled::{
     CompiledProject, EventId, FunctionId, NetId, ProgramId, TimerId, Value,
@@ -135,6 +135,10 @@ pub struct PlayReport {
     /// Heartbeats that could not be published at all (no shared memory, a bug in their size):
     /// each is logged (the first, then one in a hundred) and counted here.
     pub heartbeats_refused: u64,
+    /// Reloads of the project accepted (and swapped).
+    pub reloads: u64,
+    /// Reload requests refused (or dry runs answered).
+    pub reloads_refused: u64,
 }
 
 /// Runs the player until SIGINT/SIGTERM (or `run_for`).
@@ -187,8 +191,8 @@ impl Sink for RuntimeSink<'_, '_> {
         }
     }
 
-    fn emitted(&mut self, event: EventId) {
-        self.record.emitted(event);
+    fn emitted(&mut self, event: EventId, params: &[Value]) {
+        self.record.emitted(event, params);
     }
 
     fn timer_started(&mut self, timer: TimerId, deadline: Micros) {
@@ -234,6 +238,8 @@ struct Ports {
     calls: Vec<CallSender>,
     marking: MarkingPublisher,
     heartbeat: HeartbeatPublisher,
+    reload: ReloadReceiver,
+    reload_answers: ReloadAnswerPublisher,
     /// The node: dropped last, after its ports.
     _me: Participant,
 }
@@ -313,7 +319,7 @@ fn take_journal(
 fn resume<'p>(
     project: &'p CompiledProject,
     opts: &PlayOptions,
-) -> Result<(Engine<'p>, Micros, u64), PlayError> {
+) -> Result<(Engine<'p>, Micros, u64, Option<String>), PlayError> {
     let dir = opts.journal.as_ref().ok_or_else(|| {
         PlayError::Journal("--resume needs the journal (do not pass --no-journal)".into())
     })?;
@@ -337,14 +343,22 @@ fn resume<'p>(
         })?;
     }
     let digest = crate::journal::project_digest(project);
+    let reloaded = crate::replay::last_reload(&read.entries).is_some();
     if let Some(Entry::Header { digest: d, .. }) = read.entries.first() {
-        if *d != digest {
+        // After a reload the mission resumes on the version the journal keeps, whatever the
+        // project directory holds now (an operator may have edited it in place).
+        if *d != digest && !reloaded {
             return Err(PlayError::Journal(
                 "the journal was recorded with another version of the project".into(),
             ));
         }
     }
-    let (engine, r) = crate::replay::replay(project, &read.entries, None);
+    let (engine, r) =
+        crate::replay::replay_in(project, &read.entries, None, Some(dir.as_path()), reloaded);
+    let version = reloaded.then(|| engine_version(&read.entries));
+    if let Some(hash) = &version {
+        info!(%hash, "resuming on the version of the journal's last reload");
+    }
     if let Some(d) = r.divergence {
         return Err(PlayError::Journal(format!(
             "the journal does not replay (entry {}, {}): refusing to resume",
@@ -353,7 +367,15 @@ fn resume<'p>(
     }
     let restored = engine.marking();
     info!(steps = r.steps, time_s = r.last_time as f64 / 1e6, queued = engine.queued(), ?restored, timers = ?engine.deadlines(), "resumed from the journal");
-    Ok((engine, r.last_time, r.steps))
+    Ok((engine, r.last_time, r.steps, version))
+}
+
+/// The content hash of the version the journal's last reload brought ("" without a reload).
+fn engine_version(entries: &[Entry]) -> String {
+    match crate::replay::last_reload(entries).map(|k| &entries[k]) {
+        Some(Entry::Reload { source_hash, .. }) => source_hash.clone(),
+        _ => String::new(),
+    }
 }
 
 /// Why an event that arrived on the events service names a built-in event it may not: `None`
@@ -420,9 +442,32 @@ pub struct PlayerLoop<'p> {
     step_no: u64,
     next_heartbeat: Instant,
     next_liveness: Instant,
+    /// The next marking message is a snapshot (after a reload).
+    snapshot_next: bool,
+    /// The vehicle, for the programs' liveness watch of a reloaded version.
+    vehicle: Vehicle,
+    /// The reload under verification, if any.
+    pending: Option<PendingReload>,
+    /// The content hash of the version running, once a reload brought one.
+    version: Option<String>,
     /// The hold on the journal directory: released last, after the journal is closed.
     _lock: Option<JournalLock>,
 }
+
+/// A reload whose new version is being verified from the mapped state, in a thread of its
+/// own, while the loop goes on taking events (and, for a dry run, processing them).
+struct PendingReload {
+    request: ReloadRequest,
+    sender: u64,
+    seq: u64,
+    received: Instant,
+    candidate: crate::reload::Candidate,
+    summary: Vec<String>,
+    verdict: std::thread::JoinHandle<Result<u64, petrel_nets::reload::Finding>>,
+}
+
+/// The most stable states a reload's verification explores before it refuses the reload.
+const RELOAD_MAX_STATES: u64 = 2_000_000;
 
 impl<'p> PlayerLoop<'p> {
     /// Sets the player up: removes what dead processes left, restores the journal for
@@ -462,6 +507,12 @@ impl<'p> PlayerLoop<'p> {
         } else {
             None
         };
+        // A resume after a reload runs the reloaded version.
+        let project: &'p CompiledProject = match &resumed {
+            Some((engine, ..)) => engine.project(),
+            None => project,
+        };
+        let version = resumed.as_ref().and_then(|r| r.3.clone());
 
         let setup = |e: petrel_ipc::SetupError| PlayError::Setup(e.to_string());
         let me = Participant::join(&vehicle, Role::Player).map_err(setup)?;
@@ -483,6 +534,8 @@ impl<'p> PlayerLoop<'p> {
                 .map_err(setup)?,
             marking: me.marking_publisher().map_err(setup)?,
             heartbeat: me.heartbeat_publisher_sized(heartbeat_max).map_err(setup)?,
+            reload: me.reload_receiver().map_err(setup)?,
+            reload_answers: me.reload_answer_publisher().map_err(setup)?,
             _me: me,
         };
         let watch = ProgramWatch::new(&vehicle, project.programs.iter().map(|p| p.name.clone()));
@@ -495,7 +548,12 @@ impl<'p> PlayerLoop<'p> {
                     version: crate::journal::FORMAT_VERSION,
                     project: project.name.clone(),
                     project_dir: opts.project_dir.clone(),
-                    digest: crate::journal::project_digest(project),
+                    // A mission's segments all name its first version (a resume after a
+                    // reload runs a later one: the reload entries say which).
+                    digest: match (opts.resume, crate::journal::first_header(dir)) {
+                        (true, Some(Entry::Header { digest, .. })) => digest,
+                        _ => crate::journal::project_digest(project),
+                    },
                     vehicle: opts.vehicle.clone(),
                     // Every segment of a mission names its start: replay checks they agree.
                     started_unix_ms: mission_start_ms,
@@ -512,7 +570,7 @@ impl<'p> PlayerLoop<'p> {
         let mut failed = Vec::new();
         let mut report = PlayReport::default();
         let (engine, base) = match resumed {
-            Some((mut engine, last, steps)) => {
+            Some((mut engine, last, steps, _)) => {
                 report.resumed_steps = steps;
                 // Mission time went on while the player was down: timers keep their wall-clock
                 // deadlines, and those that passed expire now, in deadline order. The resume
@@ -589,6 +647,10 @@ impl<'p> PlayerLoop<'p> {
             step_no: 0,
             next_heartbeat: Instant::now(),
             next_liveness: Instant::now() + opts.liveness,
+            snapshot_next: false,
+            vehicle,
+            pending: None,
+            version,
             _lock: lock,
         })
     }
@@ -627,7 +689,14 @@ impl<'p> PlayerLoop<'p> {
             if let Some(d) = self.engine.next_deadline() {
                 timeout = timeout.min(Duration::from_micros(d.saturating_sub(self.now())));
             }
-            let ready = match self.reactor.wait(&[&self.ports.events], Some(timeout)) {
+            if self.pending.is_some() {
+                // The verifier's thread says nothing when it is done: look again soon.
+                timeout = timeout.min(Duration::from_millis(2));
+            }
+            let ready = match self
+                .reactor
+                .wait(&[&self.ports.events, &self.ports.reload], Some(timeout))
+            {
                 Ok(r) => r,
                 Err(e) => {
                     warn!(error = %e, "waiting failed; retrying");
@@ -644,6 +713,8 @@ impl<'p> PlayerLoop<'p> {
             if someone_died || Instant::now() >= self.next_liveness {
                 self.check_liveness();
             }
+            self.take_reload_requests();
+            self.finish_reload();
         }
         if self.journal.flush() != Settlement::Recorded {
             error!(
@@ -668,7 +739,13 @@ impl<'p> PlayerLoop<'p> {
     /// Processes everything queued (by the start, a timer, an event), journals and publishes
     /// each step, and raises `call_failed` for the calls that could not be delivered.
     fn process_queue(&mut self) {
+        // The recorder's changes are raised (queued) even while a reload holds the steps, so
+        // that the loop does not come back here for them before it waits.
         self.raise_recorder_changes();
+        // A reload under way holds the steps: the new version starts from the state it maps.
+        if self.pending.as_ref().is_some_and(|p| !p.request.dry_run) {
+            return;
+        }
         loop {
             let mut sink = RuntimeSink {
                 record: &mut self.record,
@@ -780,7 +857,11 @@ impl<'p> PlayerLoop<'p> {
             },
         };
         hb.bound();
-        let snapshot = StatusSnapshot::of(&self.engine, &self.report, &self.ledger, &self.journal);
+        let snapshot = StatusSnapshot {
+            version: self.version.clone(),
+            reloading: self.pending.is_some(),
+            ..StatusSnapshot::of(&self.engine, &self.report, &self.ledger, &self.journal)
+        };
         hb.status = status_json(&snapshot);
         if Heartbeat::max_encoded_len(hb.status.len()) > max {
             // Only a project past the largest body a service carries gets here (see `new`).
@@ -928,6 +1009,310 @@ impl<'p> PlayerLoop<'p> {
         }
     }
 
+    /// Takes the reload requests that arrived: each is read, checked and mapped at once (the
+    /// engine is between two steps), then verified in a thread of its own.
+    fn take_reload_requests(&mut self) {
+        let mut requests = Vec::new();
+        let drained = self.ports.reload.drain(|r| match r {
+            Ok(rcv) => requests.push((rcv.sender, rcv.seq, rcv.origin.to_string(), rcv.msg)),
+            Err(e) => warn!(error = %e, "a reload request could not be read"),
+        });
+        if let Err(e) = drained {
+            warn!(error = %e, "reload requests could not be read");
+        }
+        for (sender, seq, origin, request) in requests {
+            info!(from = %origin, dir = %request.dir, hash = %request.source_hash, dry_run = request.dry_run, "reload requested");
+            self.begin_reload(sender, seq, request);
+        }
+    }
+
+    /// Answers a reload request (to every listener: the requester finds its own).
+    fn answer_reload(&mut self, mut answer: ReloadAnswer) {
+        if !answer.accepted || answer.dry_run {
+            self.report.reloads_refused += 1;
+        }
+        if answer.accepted {
+            info!(dry_run = answer.dry_run, hash = %answer.source_hash, states = answer.states, ms = answer.millis, summary = ?answer.summary, "reload accepted");
+        } else {
+            warn!(dry_run = answer.dry_run, hash = %answer.source_hash, reasons = ?answer.reasons, trace = ?answer.trace, "reload refused: the mission goes on unchanged");
+        }
+        answer.bound();
+        if let Err(e) = self.ports.reload_answers.send(&answer) {
+            warn!(error = %e, "the reload answer could not be sent");
+        }
+    }
+
+    fn refuse_reload(
+        &mut self,
+        sender: u64,
+        seq: u64,
+        request: &ReloadRequest,
+        since: Instant,
+        reasons: Vec<String>,
+    ) {
+        self.answer_reload(ReloadAnswer {
+            request_sender: sender,
+            request_seq: seq,
+            accepted: false,
+            dry_run: request.dry_run,
+            dir: request.dir.clone(),
+            source_hash: request.source_hash.clone(),
+            reasons,
+            millis: since.elapsed().as_millis() as u64,
+            ..ReloadAnswer::default()
+        });
+    }
+
+    /// The old version's state, mapped onto `candidate`.
+    fn map_onto(
+        &self,
+        candidate: &crate::reload::Candidate,
+    ) -> Result<petrel_nets::reload::Mapped, petrel_nets::reload::MapRefusal> {
+        let from = petrel_nets::reload::OldState {
+            state: self.engine.state(),
+            deadlines: self.engine.deadlines(),
+            net_args: self.engine.all_net_args(),
+        };
+        petrel_nets::reload::map_state(self.project, &from, &candidate.project, &candidate.mapping)
+    }
+
+    fn begin_reload(&mut self, sender: u64, seq: u64, request: ReloadRequest) {
+        let since = Instant::now();
+        if self.pending.is_some() {
+            let why = "another reload is being verified: ask again when it is answered".to_string();
+            return self.refuse_reload(sender, seq, &request, since, vec![why]);
+        }
+        let candidate = match crate::reload::load_candidate(
+            std::path::Path::new(&request.dir),
+            &request.source_hash,
+            &request.mapping,
+        ) {
+            Ok(c) => c,
+            Err(reasons) => return self.refuse_reload(sender, seq, &request, since, reasons),
+        };
+        let mapped = match self.map_onto(&candidate) {
+            Ok(m) => m,
+            Err(r) => return self.refuse_reload(sender, seq, &request, since, r.reasons),
+        };
+        // The verifier gets its own copy: a refused version is dropped whole.
+        let project = candidate.project.clone();
+        let state = mapped.clone();
+        let verdict = std::thread::Builder::new()
+            .name("reload-verify".into())
+            .spawn(move || {
+                petrel_nets::reload::verify_mapped(&project, &state, Some(RELOAD_MAX_STATES))
+            });
+        match verdict {
+            Ok(verdict) => {
+                self.pending = Some(PendingReload {
+                    request,
+                    sender,
+                    seq,
+                    received: since,
+                    candidate,
+                    summary: mapped.summary,
+                    verdict,
+                })
+            }
+            Err(e) => {
+                let why = format!("cannot start the verification: {e}");
+                self.refuse_reload(sender, seq, &request, since, vec![why])
+            }
+        }
+    }
+
+    /// Answers the reload under verification once the verdict is in, and swaps versions if it
+    /// is accepted (between two steps: none was taken since the mapping).
+    fn finish_reload(&mut self) {
+        if !self
+            .pending
+            .as_ref()
+            .is_some_and(|p| p.verdict.is_finished())
+        {
+            return;
+        }
+        let Some(p) = self.pending.take() else { return };
+        let verdict = p.verdict.join().unwrap_or_else(|_| {
+            Err(petrel_nets::reload::Finding {
+                what: "the verification failed (its thread panicked): a bug in Petrel".into(),
+                trace: Vec::new(),
+            })
+        });
+        let states = match verdict {
+            Ok(states) => states,
+            Err(f) => {
+                let mut reasons = vec![format!("verification from the mapped state: {}", f.what)];
+                reasons.push(if f.trace.is_empty() {
+                    "in the mapped state itself".to_string()
+                } else {
+                    format!("from the mapped state by: {}", f.trace.join(", "))
+                });
+                return self.answer_reload(ReloadAnswer {
+                    request_sender: p.sender,
+                    request_seq: p.seq,
+                    accepted: false,
+                    dry_run: p.request.dry_run,
+                    dir: p.request.dir.clone(),
+                    source_hash: p.candidate.source_hash.clone(),
+                    summary: p.summary,
+                    reasons,
+                    trace: f.trace,
+                    millis: p.received.elapsed().as_millis() as u64,
+                    ..ReloadAnswer::default()
+                });
+            }
+        };
+        let mut answer = ReloadAnswer {
+            request_sender: p.sender,
+            request_seq: p.seq,
+            accepted: true,
+            dry_run: p.request.dry_run,
+            dir: p.request.dir.clone(),
+            source_hash: p.candidate.source_hash.clone(),
+            step: self.step_no,
+            summary: p.summary,
+            states,
+            ..ReloadAnswer::default()
+        };
+        if !p.request.dry_run {
+            match self.swap(p.candidate, &p.request.dir) {
+                Ok(handed) => answer.summary.push(handed),
+                Err(reasons) => {
+                    answer.accepted = false;
+                    answer.reasons = reasons;
+                }
+            }
+        }
+        answer.millis = p.received.elapsed().as_millis() as u64;
+        let swapped = answer.accepted && !answer.dry_run;
+        self.answer_reload(answer);
+        if swapped {
+            // After the answer: a shadow reading the snapshot has the answer already, and
+            // knows which version the snapshot's names are of.
+            self.publish_delta();
+        }
+    }
+
+    /// Swaps to the candidate version: the state mapped again (a timer may have fallen due
+    /// during the verification: its event is queued, and goes to the new version), its files
+    /// kept beside the journal and the reload journaled, then the engine, the record, the
+    /// calls and the liveness watch of the new version.
+    fn swap(
+        &mut self,
+        candidate: crate::reload::Candidate,
+        dir: &str,
+    ) -> Result<String, Vec<String>> {
+        let mapped = self.map_onto(&candidate).map_err(|r| r.reasons)?;
+        if let Some(journal) = &self.opts.journal {
+            crate::reload::keep(journal, &candidate.source_hash, &candidate.files).map_err(
+                |e| {
+                    vec![format!(
+                        "cannot keep the new version beside the journal in {}: {e}",
+                        journal.display()
+                    )]
+                },
+            )?;
+        }
+        let setup =
+            |e: petrel_ipc::SetupError| vec![format!("cannot open the new version's calls: {e}")];
+        // The calls of programs both versions have are kept: no program sees an interruption.
+        let mut old_calls: Vec<Option<CallSender>> = std::mem::take(&mut self.ports.calls)
+            .into_iter()
+            .map(Some)
+            .collect();
+        let mut calls = Vec::new();
+        let mut failed = None;
+        for prog in &candidate.project.programs {
+            let kept = self
+                .project
+                .programs
+                .iter()
+                .position(|p| p.name == prog.name)
+                .and_then(|i| old_calls[i].take());
+            match kept {
+                Some(c) => calls.push(c),
+                None => match self.ports._me.call_sender(&prog.name) {
+                    Ok(c) => calls.push(c),
+                    Err(e) => {
+                        failed = Some(setup(e));
+                        break;
+                    }
+                },
+            }
+        }
+        if let Some(reasons) = failed {
+            // Put the old calls back as they were.
+            self.ports.calls = old_calls.into_iter().flatten().collect();
+            return Err(reasons);
+        }
+        let time = self.engine.now();
+        let new = crate::reload::leak(candidate.project);
+        let queued = self.engine.take_queue();
+        let carried = queued.clone();
+        let carried_len = carried.len();
+        let mut engine = Engine::new(new);
+        let refused = engine
+            .adopt(
+                time,
+                &mapped.state,
+                &mapped.deadlines,
+                mapped.net_args,
+                self.engine.stats(),
+                queued,
+                &candidate.mapping.nets,
+            )
+            .unwrap_or_default();
+        self.journal.append(&Entry::Reload {
+            time,
+            dir: dir.to_string(),
+            source_hash: candidate.source_hash.clone(),
+            digest: crate::journal::project_digest(new),
+            mapping: candidate.mapping_text,
+            state: mapped.state,
+            deadlines: mapped.deadlines,
+            queued: carried,
+        });
+        let handed = format!(
+            "queue: {} event(s) handed over to the new version, {} refused",
+            carried_len,
+            refused.len()
+        );
+        for (event, why) in refused {
+            warn!(event, reason = %why, "a queued event refused at the reload");
+        }
+        self.ports.calls = calls;
+        self.engine = engine;
+        self.project = new;
+        self.record = StepRecord::new(new);
+        self.watch = ProgramWatch::new(&self.vehicle, new.programs.iter().map(|p| p.name.clone()));
+        if let Err(e) = self.watch.check() {
+            warn!(error = %e, "liveness check failed");
+        }
+        self.builtins = Builtins {
+            program_lost: new.event_id("program_lost"),
+            call_failed: new.event_id("call_failed"),
+            bad_message: new.event_id("bad_message"),
+            recorder_failed: new.event_id("recorder_failed"),
+            recorder_restored: new.event_id("recorder_restored"),
+        };
+        // A larger version gets a heartbeat publisher sized for it.
+        let heartbeat_max = Heartbeat::max_encoded_len(status_bound(new));
+        if heartbeat_max > self.ports.heartbeat.spec().max_body_len {
+            match self.ports._me.heartbeat_publisher_sized(heartbeat_max) {
+                Ok(h) => self.ports.heartbeat = h,
+                Err(e) => {
+                    warn!(error = %e, "the heartbeat publisher could not grow for the new version: a status too large leaves its marking out")
+                }
+            }
+        }
+        // The snapshot of the new state follows the answer (see `finish_reload`).
+        self.previous = vec![0; self.engine.state().len()];
+        self.snapshot_next = true;
+        self.report.reloads += 1;
+        self.version = Some(candidate.source_hash);
+        Ok(handed)
+    }
+
     /// Publishes what the last step changed (the first message of a run is a full snapshot).
     fn publish_delta(&mut self) {
         let project = self.project;
@@ -935,7 +1320,7 @@ impl<'p> PlayerLoop<'p> {
         let now = self.engine.state();
         let before = marked_places(project, layout, &self.previous);
         let after = marked_places(project, layout, now);
-        let snapshot = self.step_no == 0;
+        let snapshot = self.step_no == 0 || std::mem::take(&mut self.snapshot_next);
         let record = &mut self.record;
         let net_names = |ids: &mut Vec<NetId>| -> Vec<String> {
             ids.drain(..)
@@ -947,9 +1332,16 @@ impl<'p> PlayerLoop<'p> {
             .filter(|&n| self.engine.is_active(n))
             .map(|n| project.nets[n as usize].name.clone())
             .collect();
+        let (event, params) = match record.taken.take() {
+            Some((e, p)) => (Some(e), p),
+            None => (None, Vec::new()),
+        };
         let msg = MarkingMsg {
             step: self.step_no,
-            event: record.taken.take().map(|t| t.0),
+            event,
+            time_us: self.engine.now(),
+            params,
+            actions: record.actions.clone(),
             fired: record.fired_names(),
             marked: if snapshot {
                 after.clone()
@@ -992,13 +1384,17 @@ struct StatusSnapshot {
     /// The marked places of each active net (`global` last); `None`: left out (too large).
     marking: Option<Vec<(String, Vec<String>)>>,
     /// The counters of `stats`, in [`STATS_FIELDS`] order.
-    stats: [u64; 13],
+    stats: [u64; 15],
     /// Each sender: origin, last_seq, received, undecodable, missing, taken, refused, pending,
     /// unrecorded, settled_seq.
     senders: Vec<(String, [u64; 9])>,
     /// The flight recorder: its state, why it fails, and its counters in [`RECORDER_FIELDS`]
     /// order.
     recorder: (&'static str, String, [u64; 4]),
+    /// The content hash of the version running, once a reload brought one.
+    version: Option<String>,
+    /// A reload is being verified.
+    reloading: bool,
 }
 
 /// The names of the recorder's counters in the status JSON's `recorder`.
@@ -1010,7 +1406,7 @@ const RECORDER_FIELDS: [&str; 4] = [
 ];
 
 /// The names of the counters in the status JSON's `stats`, in [`StatusSnapshot::stats`] order.
-const STATS_FIELDS: [&str; 13] = [
+const STATS_FIELDS: [&str; 15] = [
     "messages",
     "bad_messages",
     "received",
@@ -1024,6 +1420,8 @@ const STATS_FIELDS: [&str; 13] = [
     "resumed_steps",
     "heartbeats_sent",
     "heartbeats_refused",
+    "reloads",
+    "reloads_refused",
 ];
 
 /// The names of a sender's counters in the status JSON, in [`StatusSnapshot::senders`] order.
@@ -1092,8 +1490,12 @@ impl StatusSnapshot {
                 report.resumed_steps,
                 report.heartbeats_sent,
                 report.heartbeats_refused,
+                report.reloads,
+                report.reloads_refused,
             ],
             senders,
+            version: None,
+            reloading: false,
         }
     }
 }
@@ -1106,6 +1508,8 @@ fn status_json(s: &StatusSnapshot) -> String {
     doc.insert("project".into(), s.project.clone().into());
     doc.insert("time".into(), s.time_s.into());
     doc.insert("over".into(), s.over.into());
+    doc.insert("version".into(), s.version.clone().into());
+    doc.insert("reloading".into(), s.reloading.into());
     match &s.marking {
         Some(m) => {
             let marking: serde_json::Map<String, serde_json::Value> = m
@@ -1180,7 +1584,7 @@ fn status_bound(project: &CompiledProject) -> usize {
         time_s: -f64::MAX,
         over: false,
         marking: Some(marking),
-        stats: [u64::MAX; 13],
+        stats: [u64::MAX; 15],
         senders: (0..petrel_ipc::wire::MAX_ACKS)
             .map(|i| (origin(i), [u64::MAX; 9]))
             .collect(),
@@ -1189,6 +1593,8 @@ fn status_bound(project: &CompiledProject) -> usize {
             "\u{1}".repeat(petrel_ipc::wire::MAX_REASON_LEN),
             [u64::MAX; 4],
         ),
+        version: Some("f".repeat(16)),
+        reloading: true,
     };
     status_json(&worst).len()
 }

@@ -5,24 +5,34 @@
 //! ```text
 //! # the nominal flight
 //! 0.0 start_mission
-//! expect MISSION.rolling            # a place marked (or a transition fired since the last event)
-//! expect call GUI.roll()            # a call made since the last event (`_` matches any argument)
+//! expect MISSION.rolling            # a place marked (or a transition fired since the line)
+//! expect call GUI.roll()            # a call made since the last timed line (`_`: any argument)
+//! expect processed                  # what became of the line's event (or `unused`, `refused`)
+//! expect never MISSION.landed and global.in_flight   # now and after every later step
 //! 12.5 payload_failure("camera")
 //! expect not MISSION.transiting     # the opposite
 //! expect inactive MISSION           # or `expect active NET`
-//! expect unused                     # the last event fired nothing
+//! expect 2 calls DEC.replan_without(_) since start
+//! expect calls PLD.stop_payload() then DEC.replan_without("camera")
+//! expect emit replanned             # an event emitted by a net
+//! expect timer dec_answer expires at 22.5
 //! 40 wait                           # let time pass: timers expire
 //! ```
 //!
-//! Each step prints as one JSON line (time, event, parameters, outcome, fired transitions,
-//! actions, the marking of every active net). Timers fire in virtual time, in deadline order.
+//! Each step prints as one JSON line (time, the script line, event, parameters, outcome and
+//! the reason of a refusal, fired transitions, actions, running timers, the marking of every
+//! active net). Timers fire in virtual time, in deadline order. The format is documented in
+//! docs/scripts.md; the expectations are read and checked in [`crate::expect`].
 
-use crate::engine::{Engine, Micros};
-use crate::record::{call_text, transition_name, StepRecord};
-use petrel_nets::compiled::{CompiledProject, FunctionId, NetId, PlaceRef, ProgramId, Value};
+use crate::engine::{Engine, Micros, Refusal};
+use crate::expect::{check, holds, marking_text, Observed};
+pub use crate::expect::{Expectation, Item, Since};
+use crate::record::{Outcome, StepRecord};
+use petrel_nets::compiled::{
+    CompiledProject, EventId, FunctionId, NetId, ProgramId, StateFormula, Value,
+};
 use petrel_nets::diag::Diagnostics;
-use petrel_nets::model::{Action, Expr};
-use petrel_nets::semantics::StepOutcome;
+use petrel_nets::model::Action;
 use petrel_nets::source::FileId;
 
 /// A line of a script.
@@ -35,35 +45,13 @@ pub enum Line {
         /// The event and its parameters; `None` for `wait`.
         event: Option<(String, Vec<Value>)>,
     },
-    /// A check on what happened since the last timed line.
+    /// A check on what happened since the last timed line, or on the state.
     Expect {
         /// Negated (`expect not ...`).
         not: bool,
         /// What is expected.
         what: Expectation,
     },
-}
-
-/// What an `expect` line checks.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Expectation {
-    /// `NET.name` or `global.name`: a place marked, or a transition fired.
-    Name(String, String),
-    /// `active NET`.
-    Active(String),
-    /// `inactive NET`.
-    Inactive(String),
-    /// `call P.f(args)`; `None` arguments are `_`.
-    Call {
-        /// The program.
-        program: String,
-        /// The function.
-        function: String,
-        /// Expected arguments; `None` matches anything.
-        args: Vec<Option<Value>>,
-    },
-    /// `unused`: the last event fired nothing.
-    Unused,
 }
 
 /// A script with the line number of each line.
@@ -73,11 +61,25 @@ pub struct Script {
     pub lines: Vec<(usize, Line)>,
 }
 
+/// The last timed line read, for the expectations on its event's outcome.
+#[derive(Clone, Copy)]
+enum LastTimed {
+    /// None yet: only the start happened.
+    None,
+    /// A `wait` (no event) at this line.
+    Wait(usize),
+    /// A line with an event.
+    Event,
+    /// A line that did not read (already reported: no second error about it).
+    Unknown,
+}
+
 /// Reads a script; every problem is reported as (line, message).
 pub fn parse_script(text: &str, project: &CompiledProject) -> Result<Script, Vec<(usize, String)>> {
     let mut lines = Vec::new();
     let mut errors = Vec::new();
     let mut last_time = 0.0f64;
+    let mut last_timed = LastTimed::None;
     for (i, raw) in text.lines().enumerate() {
         let n = i + 1;
         let line = match raw.find('#') {
@@ -89,10 +91,22 @@ pub fn parse_script(text: &str, project: &CompiledProject) -> Result<Script, Vec
         if line.is_empty() {
             continue;
         }
-        let result = if let Some(rest) = line.strip_prefix("expect ") {
-            parse_expect(rest.trim(), project).map(|(not, what)| Line::Expect { not, what })
+        let expect = line
+            .strip_prefix("expect")
+            .filter(|r| r.is_empty() || r.starts_with(char::is_whitespace));
+        let result = if let Some(rest) = expect {
+            parse_expect(rest.trim(), project).and_then(|(not, what)| {
+                outcome_has_event(&what, last_timed)?;
+                Ok(Line::Expect { not, what })
+            })
         } else {
-            parse_timed(line, project, &mut last_time)
+            let timed = parse_timed(line, project, &mut last_time);
+            last_timed = match &timed {
+                Ok(Line::At { event: None, .. }) => LastTimed::Wait(n),
+                Ok(_) => LastTimed::Event,
+                Err(_) => LastTimed::Unknown,
+            };
+            timed
         };
         match result {
             Ok(l) => lines.push((n, l)),
@@ -103,6 +117,24 @@ pub fn parse_script(text: &str, project: &CompiledProject) -> Result<Script, Vec
         Ok(Script { lines })
     } else {
         Err(errors)
+    }
+}
+
+/// `expect processed`/`unused`/`refused` speak of the last timed line's event: there must be
+/// one, or the expectation could only fail.
+fn outcome_has_event(what: &Expectation, last: LastTimed) -> Result<(), String> {
+    let Expectation::Outcome(o) = what else {
+        return Ok(());
+    };
+    match last {
+        LastTimed::None => Err(format!(
+            "`expect {o}` checks the event of the last timed line, and there is none yet"
+        )),
+        LastTimed::Wait(w) => Err(format!(
+            "`expect {o}` checks the event of the last timed line, and line {w} is a `wait`: \
+             it sends no event"
+        )),
+        LastTimed::Event | LastTimed::Unknown => Ok(()),
     }
 }
 
@@ -208,98 +240,10 @@ fn refused_literals(d: &Diagnostics) -> Result<(), String> {
 }
 
 fn parse_expect(rest: &str, p: &CompiledProject) -> Result<(bool, Expectation), String> {
-    let (not, rest) = match rest.strip_prefix("not ") {
-        Some(r) => (true, r.trim()),
-        None => (false, rest),
-    };
-    if rest == "unused" {
-        return Ok((not, Expectation::Unused));
+    if rest.is_empty() {
+        return Err("`expect` alone: say what is expected (docs/scripts.md lists it)".into());
     }
-    if let Some(net) = rest.strip_prefix("active ") {
-        return known_net(p, net.trim()).map(|n| (not, Expectation::Active(n)));
-    }
-    if let Some(net) = rest.strip_prefix("inactive ") {
-        return known_net(p, net.trim()).map(|n| (not, Expectation::Inactive(n)));
-    }
-    if rest.starts_with("call ") {
-        let mut d = Diagnostics::new();
-        let parsed = petrel_nets::syntax::parse_action(FileId(0), rest, &mut d);
-        refused_literals(&d)?;
-        let Some(Action::Call {
-            program,
-            function,
-            args,
-            ..
-        }) = parsed
-        else {
-            return Err(format!(
-                "`{rest}` is not a call such as `call PROGRAM.function(1, _)`"
-            ));
-        };
-        let prog = p
-            .programs
-            .iter()
-            .find(|x| x.name == program.text)
-            .ok_or_else(|| format!("unknown program `{program}`"))?;
-        let func = prog
-            .functions
-            .iter()
-            .find(|f| f.name == function.text)
-            .ok_or_else(|| format!("program `{program}` has no function `{function}`"))?;
-        if func.params.len() != args.len() {
-            return Err(format!(
-                "`{program}.{function}` takes {} argument(s), {} given",
-                func.params.len(),
-                args.len()
-            ));
-        }
-        let mut expected = Vec::new();
-        for ((name, ty), a) in func.params.iter().zip(&args) {
-            if matches!(a, Expr::Var(n) if n.text == "_") {
-                expected.push(None);
-                continue;
-            }
-            match petrel_nets::check::literal(a, *ty) {
-                Some(v) => expected.push(Some(v)),
-                None => {
-                    return Err(format!(
-                        "argument `{name}` is {ty}; write a {ty} literal or `_`"
-                    ))
-                }
-            }
-        }
-        return Ok((
-            not,
-            Expectation::Call {
-                program: program.text,
-                function: function.text,
-                args: expected,
-            },
-        ));
-    }
-    let (net, name) = rest
-        .split_once('.')
-        .ok_or_else(|| format!("expected `NET.place`, `NET.transition`, `global.place`, `active NET`, `inactive NET`, `call P.f(...)` or `unused`, found `{rest}`"))?;
-    if net == "global" {
-        if !p.globals.iter().any(|g| g.name == name) {
-            return Err(format!("no global place `{name}`"));
-        }
-    } else {
-        let n = known_net(p, net)?;
-        let decl = &p.nets[p.net_id(&n).unwrap_or(0) as usize];
-        if !decl.places.iter().any(|x| x.name == name)
-            && !decl.transitions.iter().any(|x| x.name == name)
-        {
-            return Err(format!("net `{net}` has no place or transition `{name}`"));
-        }
-    }
-    Ok((not, Expectation::Name(net.to_string(), name.to_string())))
-}
-
-fn known_net(p: &CompiledProject, net: &str) -> Result<String, String> {
-    p.net_id(net)
-        .map(|_| net.to_string())
-        .ok_or_else(|| format!("unknown net `{net}`"))
+    crate::expect::parse_expect(rest, p)
 }
 
 /// What a run produced: JSON lines, and the first failed expectation.
@@ -311,6 +255,9 @@ pub struct RunOutcome {
 }
 
 /// Runs a script on a fresh engine. `emit_step` receives each JSON line as it is produced.
+///
+/// The run stops at the first failed expectation: an `expect` line that does not hold, or an
+/// `expect always`/`expect never` broken by a later step (reported with the `expect` line).
 pub fn run_script(
     project: &CompiledProject,
     script: &Script,
@@ -321,57 +268,35 @@ pub fn run_script(
         rec: StepRecord::new(project),
         steps: Vec::new(),
         emit_step,
-        since_fired: Vec::new(),
-        since_calls: Vec::new(),
-        last_unused: false,
+        line: None,
+        fired: Vec::new(),
+        calls: Vec::new(),
+        calls_from: 0,
+        emits: Vec::new(),
+        emits_from: 0,
+        outcome: None,
+        awaiting: false,
+        always: Vec::new(),
+        failure: None,
     };
     r.engine.start(0, &mut r.rec);
     r.collect();
-    r.record(None, "start");
+    r.record(None, "start", None);
+    // What the start queued (events emitted by immediate transitions, invariants already
+    // broken) happens at time 0, not at the first line's time.
+    r.process();
     for (n, line) in &script.lines {
+        if r.failure.is_some() {
+            break;
+        }
         match line {
-            Line::At { time, event } => {
-                r.since_fired.clear();
-                r.since_calls.clear();
-                r.last_unused = false;
-                let target = (time * 1e6).round() as Micros;
-                // Timers that expire before this line go first, each at its own time.
-                while let Some(d) = r.engine.next_deadline().filter(|&d| d <= target) {
-                    r.engine.advance_to(d);
-                    r.process();
-                }
-                r.engine.advance_to(target);
-                if let Some((name, params)) = event {
-                    if let Err(refusal) = r.engine.submit_named(name, params.clone()) {
-                        r.rec.actions.push(format!("refused: {refusal}"));
-                        r.record(Some((name.clone(), params.clone())), "refused");
-                        continue;
-                    }
-                }
-                r.process();
-            }
-            Line::Expect { not, what } => {
-                let (holds, expected, found) = check(
-                    project,
-                    &r.engine,
-                    what,
-                    &r.since_fired,
-                    &r.since_calls,
-                    r.last_unused,
-                );
-                if holds == *not {
-                    let neg = if *not { "not " } else { "" };
-                    return RunOutcome {
-                        steps: r.steps,
-                        failure: Some((*n, format!("expected {neg}{expected}\n  found: {found}"))),
-                    };
-                }
-            }
+            Line::At { time, event } => r.at(*n, *time, event.as_ref()),
+            Line::Expect { not, what } => r.expect(*n, *not, what),
         }
     }
     RunOutcome {
         steps: r.steps,
-        failure: None,
+        failure: r.failure,
     }
 }
 
@@ -380,170 +305,182 @@ struct Runner<'p, F: FnMut(&serde_json::Value)> {
     rec: StepRecord<'p>,
     steps: Vec<serde_json::Value>,
     emit_step: F,
-    /// What happened since the last timed line, for the expectations.
-    since_fired: Vec<(NetId, u32)>,
-    since_calls: Vec<(ProgramId, FunctionId, Vec<Value>)>,
-    last_unused: bool,
+    /// The last timed line, if any: the steps it causes carry its number.
+    line: Option<usize>,
+    /// Transitions fired since the last timed line.
+    fired: Vec<(NetId, u32)>,
+    /// Every call since the start, and where the last timed line's calls begin.
+    calls: Vec<(ProgramId, FunctionId, Vec<Value>)>,
+    calls_from: usize,
+    /// Every emission since the start, and where the last timed line's emissions begin.
+    emits: Vec<(EventId, Vec<Value>)>,
+    emits_from: usize,
+    /// The last timed line's event, what became of it, and why if it was refused.
+    outcome: Option<(String, Outcome, Option<String>)>,
+    /// The last timed line's event was queued and its step is the next one.
+    awaiting: bool,
+    /// `expect always`/`never` in force: (line, formula, text).
+    always: Vec<(usize, StateFormula, String)>,
+    /// The first failed expectation; the run stops there.
+    failure: Option<(usize, String)>,
 }
 
 impl<F: FnMut(&serde_json::Value)> Runner<'_, F> {
-    fn collect(&mut self) {
-        self.since_fired.extend(self.rec.fired.iter().copied());
-        self.since_calls.append(&mut self.rec.calls);
-    }
-
-    /// Processes the queue, one JSON line per step.
-    fn process(&mut self) {
-        while let Some(step) = self.engine.step(&mut self.rec) {
-            self.collect();
-            self.last_unused = step.outcome == StepOutcome::Unused;
-            let outcome = match step.outcome {
-                StepOutcome::Processed => "processed",
-                StepOutcome::Unused => "unused",
-                StepOutcome::RefusedAfterCatastrophic => "refused after a catastrophic event",
-            };
-            let taken = self.rec.taken.take();
-            self.record(taken, outcome);
+    /// A timed line: the timers due before `time` expire, each at its own time, then the
+    /// event (if any) is submitted and processed with whatever it causes.
+    fn at(&mut self, n: usize, time: f64, event: Option<&(String, Vec<Value>)>) {
+        self.line = Some(n);
+        self.fired.clear();
+        self.calls_from = self.calls.len();
+        self.emits_from = self.emits.len();
+        self.outcome = None;
+        let target = (time * 1e6).round() as Micros;
+        while let Some(d) = self.engine.next_deadline().filter(|&d| d <= target) {
+            self.engine.advance_to(d);
+            self.process();
+            if self.failure.is_some() {
+                return;
+            }
+        }
+        self.engine.advance_to(target);
+        self.process();
+        let Some((name, params)) = event else {
+            return;
+        };
+        if self.failure.is_some() {
+            return;
+        }
+        match self.engine.submit_named(name, params.clone()) {
+            Ok(()) => {
+                // The queue is empty (processed above): the next step is this event's.
+                self.awaiting = true;
+                self.process();
+            }
+            Err(refusal) => {
+                let reason = refusal.to_string();
+                self.outcome = Some((name.clone(), Outcome::Refused, Some(reason.clone())));
+                self.record(
+                    Some((name.clone(), params.clone())),
+                    Outcome::Refused.name(),
+                    Some(reason),
+                );
+            }
         }
     }
 
-    fn record(&mut self, event: Option<(String, Vec<Value>)>, outcome: &str) {
+    /// An `expect` line: checked now; `always`/`never` are kept and checked after each step.
+    fn expect(&mut self, n: usize, not: bool, what: &Expectation) {
+        let seen = Observed {
+            engine: &self.engine,
+            line: self.line,
+            fired: &self.fired,
+            calls: &self.calls,
+            calls_from: self.calls_from,
+            emits: &self.emits,
+            emits_from: self.emits_from,
+            outcome: self
+                .outcome
+                .as_ref()
+                .map(|(e, o, r)| (e.as_str(), *o, r.as_deref())),
+        };
+        if let Err(message) = check(what, not, &seen) {
+            self.failure = Some((n, message));
+            return;
+        }
+        if let Expectation::Always { formula, text } = what {
+            self.always.push((n, formula.clone(), text.clone()));
+        }
+    }
+
+    fn collect(&mut self) {
+        self.fired.extend(self.rec.fired.iter().copied());
+        self.calls.append(&mut self.rec.calls);
+        self.emits.append(&mut self.rec.emits);
+    }
+
+    /// Processes the queue, one JSON line per step, until it is empty or an expectation fails.
+    fn process(&mut self) {
+        while self.failure.is_none() {
+            let Some(step) = self.engine.step(&mut self.rec) else {
+                break;
+            };
+            self.collect();
+            let outcome = Outcome::of(step.outcome);
+            let name = &self.engine.project().events[step.event as usize].name;
+            let reason = (outcome == Outcome::Refused)
+                .then(|| Refusal::AfterCatastrophic(name.clone()).to_string());
+            if std::mem::take(&mut self.awaiting) {
+                self.outcome = Some((name.clone(), outcome, reason.clone()));
+            }
+            let taken = self.rec.taken.take();
+            self.record(taken, outcome.name(), reason);
+        }
+    }
+
+    /// Prints one step's JSON line, then checks the `always`/`never` expectations on the
+    /// state it left.
+    fn record(
+        &mut self,
+        event: Option<(String, Vec<Value>)>,
+        outcome: &str,
+        reason: Option<String>,
+    ) {
         let marking: serde_json::Map<String, serde_json::Value> = self
             .engine
             .marking()
             .into_iter()
             .map(|(n, places)| (n, places.into()))
             .collect();
+        let p = self.engine.project();
+        let timers: serde_json::Map<String, serde_json::Value> = self
+            .engine
+            .deadlines()
+            .iter()
+            .enumerate()
+            .filter_map(|(t, d)| d.map(|d| (p.timers[t].name.clone(), (d as f64 / 1e6).into())))
+            .collect();
         let fired = self.rec.fired_names();
         let (name, params) = match &event {
             Some((n, ps)) => (Some(n.as_str()), ps.iter().map(Value::to_json).collect()),
             None => (None, Vec::new()),
         };
+        let time = self.engine.now() as f64 / 1e6;
         let doc = serde_json::json!({
-            "time": self.engine.now() as f64 / 1e6,
+            "time": time,
+            "line": self.line,
             "event": name,
             "params": params,
             "outcome": outcome,
+            "reason": reason,
             "fired": fired,
             "actions": self.rec.actions,
+            "timers": timers,
             "marking": marking,
         });
         (self.emit_step)(&doc);
         self.steps.push(doc);
-        self.rec.fired.clear();
-        self.rec.actions.clear();
-    }
-}
-
-/// Whether an expectation holds, what it expects, and what was found.
-fn check(
-    p: &CompiledProject,
-    engine: &Engine,
-    what: &Expectation,
-    fired: &[(NetId, u32)],
-    calls: &[(ProgramId, FunctionId, Vec<Value>)],
-    last_unused: bool,
-) -> (bool, String, String) {
-    let marking_text = || {
-        engine
-            .marking()
-            .into_iter()
-            .map(|(n, pl)| format!("{n}{{{}}}", pl.join(", ")))
-            .collect::<Vec<_>>()
-            .join(" ")
-    };
-    match what {
-        Expectation::Name(net, name) if net == "global" => {
-            let g = p.globals.iter().position(|g| &g.name == name).unwrap_or(0) as u32;
-            (
-                engine.is_marked(0, PlaceRef::Global(g)),
-                format!("global place {name} marked"),
-                format!("marking {}", marking_text()),
-            )
+        self.rec.clear();
+        if self.failure.is_some() {
+            return;
         }
-        Expectation::Name(net, name) => {
-            let n = p.net_id(net).unwrap_or(0);
-            let decl = &p.nets[n as usize];
-            if let Some(i) = decl.places.iter().position(|x| &x.name == name) {
-                (
-                    engine.is_marked(n, PlaceRef::Local(i as u32)),
-                    format!("place {net}.{name} marked"),
-                    format!("marking {}", marking_text()),
-                )
-            } else {
-                let t = decl
-                    .transitions
-                    .iter()
-                    .position(|x| &x.name == name)
-                    .unwrap_or(0) as u32;
-                let names: Vec<String> = fired
-                    .iter()
-                    .map(|&(fn_, ft)| transition_name(p, fn_, ft))
-                    .collect();
-                (
-                    fired.contains(&(n, t)),
-                    format!("transition {net}.{name} fired since the last event"),
-                    if names.is_empty() {
-                        "nothing fired".to_string()
-                    } else {
-                        format!("fired {}", names.join(", "))
-                    },
-                )
-            }
-        }
-        Expectation::Active(net) | Expectation::Inactive(net) => {
-            let active = engine.is_active(p.net_id(net).unwrap_or(0));
-            let want_active = matches!(what, Expectation::Active(_));
-            (
-                active == want_active,
+        let broken = self
+            .always
+            .iter()
+            .find(|(_, f, _)| !holds(&self.engine, f))
+            .map(|(n, _, text)| (*n, text.clone()));
+        if let Some((n, text)) = broken {
+            let by = match (name, self.line) {
+                (Some(e), Some(l)) => format!("the step of `{e}` (timed line {l})"),
+                (Some(e), None) => format!("the step of `{e}`"),
+                (None, _) => "the start".to_string(),
+            };
+            self.failure = Some((
+                n,
                 format!(
-                    "net {net} {}",
-                    if want_active { "active" } else { "inactive" }
+                    "expected {text} (from line {n} on)\n  found: broken at {time} by {by}: marking {}",
+                    marking_text(&self.engine)
                 ),
-                format!("marking {}", marking_text()),
-            )
+            ));
         }
-        Expectation::Call {
-            program,
-            function,
-            args,
-        } => {
-            let shown: Vec<String> = calls
-                .iter()
-                .map(|(pr, f, a)| call_text(p, *pr, *f, a))
-                .collect();
-            let holds = calls.iter().any(|(pr, f, a)| {
-                let x = &p.programs[*pr as usize];
-                x.name == *program
-                    && x.functions[*f as usize].name == *function
-                    && a.len() == args.len()
-                    && a.iter()
-                        .zip(args)
-                        .all(|(v, e)| e.as_ref().is_none_or(|e| e == v))
-            });
-            let want: Vec<String> = args
-                .iter()
-                .map(|a| a.as_ref().map(Value::literal).unwrap_or_else(|| "_".into()))
-                .collect();
-            (
-                holds,
-                format!("call {program}.{function}({})", want.join(", ")),
-                if shown.is_empty() {
-                    "no call since the last event".to_string()
-                } else {
-                    format!("calls {}", shown.join(", "))
-                },
-            )
-        }
-        Expectation::Unused => (
-            last_unused,
-            "the last event unused".to_string(),
-            if last_unused {
-                "unused"
-            } else {
-                "it was processed"
-            }
-            .to_string(),
-        ),
     }
 }

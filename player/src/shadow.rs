@@ -7,6 +7,14 @@
 //! (events steer firings by their names; parameters only reach actions, which the shadow does
 //! not run) and compares the two markings. On a difference it raises the alarm, then takes the
 //! vehicle's marking again so that later alarms are about later steps.
+//!
+//! It follows reloads (`petrel reload`): the player answers every reload request to every
+//! listener, and publishes a snapshot of the new state after its answer. On an accepted reload
+//! the shadow reads the new version from the directory the answer names (the ground station
+//! must see the same files: the same computer, or the same path on a shared disk) and checks
+//! its content hash; then it follows the snapshot with the new version. When it cannot (no
+//! such directory, other files, a version that does not check), it raises the alarm and
+//! follows no more.
 
 use crate::engine::{Engine, NullSink};
 use crate::runtime::{PlayError, PlayOptions};
@@ -22,8 +30,10 @@ use tracing::{error, info, warn};
 pub struct ShadowReport {
     /// Vehicle steps followed.
     pub steps: u64,
-    /// Divergence alarms raised.
+    /// Divergence alarms raised (a reload the shadow cannot follow is one).
     pub alarms: u64,
+    /// Reloads of the vehicle's project followed.
+    pub reloads: u64,
 }
 
 /// The vehicle's marking as the shadow rebuilds it from the deltas.
@@ -68,6 +78,58 @@ fn shadow_marking(engine: &Engine) -> BTreeSet<String> {
     out
 }
 
+/// Takes the player's reload answers: an accepted reload (not a dry run) swaps the shadow's
+/// project for the new version, read from the directory the answer names; one it cannot read
+/// raises the alarm, and the shadow follows no more (`lost`). True when it swapped.
+fn follow_reloads<'p>(
+    answers: &petrel_ipc::ReloadAnswerSubscriber,
+    project: &mut &'p CompiledProject,
+    engine: &mut Engine<'p>,
+    lost: &mut bool,
+    report: &mut ShadowReport,
+) -> bool {
+    let mut swapped = false;
+    let mut accepted = Vec::new();
+    let drained = answers.drain(|r| match r {
+        Ok(rcv) if rcv.origin.as_str() == "player" && rcv.msg.accepted && !rcv.msg.dry_run => {
+            accepted.push(rcv.msg)
+        }
+        Ok(_) => {}
+        Err(e) => warn!(error = %e, "a reload answer could not be read"),
+    });
+    if let Err(e) = drained {
+        warn!(error = %e, "reload answers could not be read");
+    }
+    for a in accepted {
+        if *lost {
+            return swapped;
+        }
+        match crate::reload::load_candidate(std::path::Path::new(&a.dir), &a.source_hash, "") {
+            Ok(c) => {
+                let new = crate::reload::leak(c.project);
+                *project = new;
+                *engine = Engine::new(new);
+                engine.start(0, &mut NullSink);
+                report.reloads += 1;
+                swapped = true;
+                info!(hash = %a.source_hash, dir = %a.dir, "the vehicle reloaded its project: the shadow follows the new version");
+            }
+            Err(reasons) => {
+                *lost = true;
+                report.alarms += 1;
+                error!(hash = %a.source_hash, dir = %a.dir, ?reasons, "ALARM: the vehicle reloaded its project and the shadow cannot read the new version: it follows no more");
+                eprintln!(
+                    "ALARM the vehicle reloaded version {} from {}; the shadow cannot follow: {}",
+                    a.source_hash,
+                    a.dir,
+                    reasons.join("; ")
+                );
+            }
+        }
+    }
+    swapped
+}
+
 /// Runs the shadow until SIGINT/SIGTERM (or `run_for`).
 pub fn shadow(project: &CompiledProject, opts: &PlayOptions) -> Result<ShadowReport, PlayError> {
     let vehicle = Vehicle::new(&opts.vehicle).map_err(|e| PlayError::Vehicle(e.to_string()))?;
@@ -80,7 +142,12 @@ pub fn shadow(project: &CompiledProject, opts: &PlayOptions) -> Result<ShadowRep
     let beats = me
         .heartbeat_subscriber()
         .map_err(|e| PlayError::Setup(e.to_string()))?;
+    let answers = me
+        .reload_answer_subscriber()
+        .map_err(|e| PlayError::Setup(e.to_string()))?;
     let reactor = Reactor::new(opts.wait).map_err(|e| PlayError::Setup(e.to_string()))?;
+    let mut project: &CompiledProject = project;
+    let mut lost = false;
     let mut engine = Engine::new(project);
     engine.start(0, &mut NullSink);
     let mut mirror = Mirror::default();
@@ -135,6 +202,14 @@ pub fn shadow(project: &CompiledProject, opts: &PlayOptions) -> Result<ShadowRep
             break;
         }
         let drained = deltas.drain(|r| {
+            // A reload answered before this delta was published is in its buffer by now.
+            if follow_reloads(&answers, &mut project, &mut engine, &mut lost, &mut report) {
+                // Follow again from the snapshot the player publishes after its answer.
+                synced = false;
+            }
+            if lost {
+                return;
+            }
             let msg = match r {
                 Ok(rcv) if rcv.origin.as_str() == "player" => rcv.msg,
                 Ok(_) => return,

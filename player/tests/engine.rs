@@ -201,3 +201,69 @@ fn a_failed_expectation_names_its_line_and_what_was_found() {
         "expected call GUI.takeoff()\n  found: calls GUI.roll()"
     );
 }
+
+#[test]
+fn a_reloaded_engine_takes_over_the_queue_and_the_counters_and_the_accounting_holds() {
+    let old = compile("net A {\n    place p = 1\n    transition t on low: p -> p\n    transition u on mid: p -> p\n}\n");
+    // The new version no longer waits for `mid`, and does not declare `num` any more.
+    let manifest = MANIFEST.replace(
+        "num = { category = \"nominal\", params = [\"x: float\", \"n: int\"] }\n",
+        "",
+    );
+    let (_, new, d, _) = from_sources(
+        &manifest.replace(
+            "[programs.P]\nfunctions = { f = [\"x: float\", \"n: int\", \"label: text\"] }\n",
+            "",
+        ),
+        &[(
+            "a.pn",
+            "net A {\n    place p = 1\n    transition t on low: p -> p\n}\n",
+        )],
+    );
+    assert!(!d.has_errors(), "{d:?}");
+    let new = new.unwrap();
+    let mut e = Engine::new(&old);
+    e.start(0, &mut NullSink);
+    e.submit_named("low", vec![]).unwrap();
+    e.step(&mut NullSink).unwrap();
+    e.submit_named("mid", vec![]).unwrap();
+    e.submit_named("num", vec![Value::Float(1.0), Value::Int(2)])
+        .unwrap();
+    e.submit_named("low", vec![]).unwrap();
+    let stats = e.stats();
+    assert_eq!((stats.received, stats.processed, e.queued()), (4, 1, 3));
+    let queued = e.take_queue();
+    // Highest category first, then arrival.
+    let names: Vec<&str> = queued.iter().map(|q| q.0.as_str()).collect();
+    assert_eq!(names, ["mid", "num", "low"]);
+    let mut next = Engine::new(&new);
+    let refused = next
+        .adopt(
+            5,
+            e.state(),
+            &[None],
+            vec![Vec::new()],
+            stats,
+            queued,
+            &Default::default(),
+        )
+        .expect("same sizes");
+    assert_eq!(refused.len(), 1);
+    assert_eq!(refused[0].0, "num");
+    assert!(
+        matches!(refused[0].1, Refusal::Reloaded(_)),
+        "{:?}",
+        refused[0].1
+    );
+    let s = next.stats();
+    assert_eq!((s.received, s.refused, next.queued()), (4, 1, 2));
+    next.run_until_idle(&mut NullSink);
+    let s = next.stats();
+    // `mid` is unused in the new version, `low` processed.
+    assert_eq!((s.processed, s.unused), (2, 1));
+    assert_eq!(
+        s.received,
+        s.processed + s.unused + s.refused + next.queued() as u64
+    );
+    assert_eq!(next.now(), 5);
+}

@@ -1,5 +1,7 @@
 //! Helpers for Petrel's cross-crate and cross-process tests.
 
+pub mod web;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 

@@ -312,13 +312,14 @@ fn write_manifest(w: &mut Writer, m: &Manifest, layout: &Layout) {
         w.leaf("invariant", &[("name", i.name.as_str())], &i.text);
     }
     for e in &m.events {
-        w.open(
-            "event",
-            &[
-                ("name", e.name.as_str()),
-                ("category", e.category.keyword()),
-            ],
-        );
+        let mut attrs = vec![
+            ("name", e.name.as_str()),
+            ("category", e.category.keyword()),
+        ];
+        if e.internal {
+            attrs.push(("internal", "true"));
+        }
+        w.open("event", &attrs);
         if let Some(d) = &e.description {
             w.leaf("description", &[], d);
         }
@@ -333,6 +334,9 @@ fn write_manifest(w: &mut Writer, m: &Manifest, layout: &Layout) {
         for f in &p.functions {
             w.open("function", &[("name", f.name.as_str())]);
             write_params(w, &f.params);
+            for a in &f.answers {
+                w.empty("answer", &[("event", a.as_str())]);
+            }
             w.close("function");
         }
         w.close("program");
@@ -343,12 +347,21 @@ fn write_manifest(w: &mut Writer, m: &Manifest, layout: &Layout) {
             &[("name", t.name.as_str()), ("event", t.event.as_str())],
         );
     }
-    for f in &m.finals {
-        w.open("final", &[]);
-        for p in f {
-            w.empty("place", &[("name", p.as_str())]);
+    for (kind, markings) in [("final", &m.finals), ("goal", &m.goals)] {
+        for f in markings {
+            w.open(kind, &[]);
+            for p in f {
+                w.empty("place", &[("name", p.as_str())]);
+            }
+            w.close(kind);
         }
-        w.close("final");
+    }
+    if let Some(excluded) = &m.progress_excludes {
+        w.open("progress-excludes", &[]);
+        for c in excluded {
+            w.empty("category", &[("name", c.as_str())]);
+        }
+        w.close("progress-excludes");
     }
     w.close("manifest");
 }

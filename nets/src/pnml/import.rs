@@ -555,7 +555,7 @@ impl Rebuild<'_, '_> {
                 category,
                 params: self.params(e),
                 description: e.child("description").map(|d| d.text.clone()),
-                internal: false,
+                internal: self.flag(e, "internal"),
             });
         }
         for p in n.children("program") {
@@ -564,7 +564,10 @@ impl Rebuild<'_, '_> {
                 .map(|f| FunctionDecl {
                     name: self.name(f, "name"),
                     params: self.params(f),
-                    answers: Vec::new(),
+                    answers: f
+                        .children("answer")
+                        .map(|a| self.name(a, "event"))
+                        .collect(),
                 })
                 .collect();
             m.programs.push(ProgramDecl {
@@ -579,16 +582,31 @@ impl Rebuild<'_, '_> {
                 event: self.name(t, "event"),
             });
         }
-        for f in n.children("final") {
-            let places = f
-                .children("place")
-                .map(|p| Name {
-                    text: self.req(p, "name").to_string(),
-                    span: p.span,
-                })
-                .collect();
-            m.finals.push(places);
+        for kind in ["final", "goal"] {
+            for f in n.children(kind) {
+                let places = f
+                    .children("place")
+                    .map(|p| Name {
+                        text: self.req(p, "name").to_string(),
+                        span: p.span,
+                    })
+                    .collect();
+                if kind == "final" {
+                    m.finals.push(places);
+                } else {
+                    m.goals.push(places);
+                }
+            }
         }
+        // Absent: the default (catastrophic); present and empty: every category counts.
+        m.progress_excludes = n.child("progress-excludes").map(|x| {
+            x.children("category")
+                .map(|c| Name {
+                    text: self.req(c, "name").to_string(),
+                    span: c.span,
+                })
+                .collect()
+        });
         m
     }
 

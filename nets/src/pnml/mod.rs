@@ -82,9 +82,14 @@
 //!     <instance name="R1" net="ROBOT" args="&quot;r1&quot;, 0.5"/>
 //!     <invariant name="bottleneck">not (R1.inside and R2.inside)</invariant>
 //!     <event name="alarm" category="safety"><param name="why" type="text"/></event>
-//!     <program name="PLN"><function name="goto"><param name="x" type="float"/></function></program>
+//!     <event name="replan" category="mission" internal="true"/>  <!-- only the nets emit it -->
+//!     <program name="PLN">
+//!       <function name="goto"><param name="x" type="float"/><answer event="arrived"/></function>
+//!     </program>
 //!     <timer name="watchdog" event="timeout"/>
 //!     <final><place name="MISSION.landed"/></final>
+//!     <goal><place name="MISSION.loitering"/></goal>     <!-- [verify] goal -->
+//!     <progress-excludes><category name="catastrophic"/></progress-excludes>  <!-- if written -->
 //!   </manifest>
 //!   <netfile path="robot.pn">
 //!     <net name="ROBOT" blank-before="true">

@@ -26,10 +26,19 @@ pub(super) fn ends(p: &CompiledProject, l: &Layout, g: &Graph) -> Vec<bool> {
         .iter()
         .map(|s| {
             l.is_over(s)
+                || (g.alone && !l.is_active(s, 0))
                 || p.finals.iter().any(|f| holds_marking(l, s, f))
                 || p.goals.iter().any(|f| holds_marking(l, s, f))
         })
         .collect()
+}
+
+/// Whether a dead marking `s` is intended: a catastrophic event ended the mission, a final
+/// marking holds, or (alone, `--net`) the net is no longer active: it finished.
+pub(super) fn intended_end(p: &CompiledProject, l: &Layout, g: &Graph, s: &[u64]) -> bool {
+    l.is_over(s)
+        || (g.alone && !l.is_active(s, 0))
+        || p.finals.iter().any(|f| holds_marking(l, s, f))
 }
 
 /// The dead markings: states where the environment can deliver nothing.
@@ -44,13 +53,16 @@ pub(super) fn dead_markings(
         .map(|&i| {
             let s = &g.states[i as usize];
             let after_catastrophic = l.is_over(s);
-            let intended = after_catastrophic || p.finals.iter().any(|f| holds_marking(l, s, f));
+            let net_done = g.alone && !l.is_active(s, 0);
+            let intended = intended_end(p, l, g, s);
             (
                 DeadFinding {
                     marking: describe(s),
                     intended,
                     after_catastrophic,
-                    trace: g.trace(p, i),
+                    net_done,
+                    trace: g.trace(i),
+                    places: marked_places(p, l, s),
                 },
                 i,
             )
@@ -72,7 +84,7 @@ pub(super) fn invariants(
                 InvariantFinding {
                     invariant: inv.name.clone(),
                     marking: describe(&g.states[i]),
-                    trace: g.trace(p, i as u32),
+                    trace: g.trace(i as u32),
                 },
                 i as u32,
             ));
@@ -81,20 +93,46 @@ pub(super) fn invariants(
     out
 }
 
-/// The states from which an end is reachable along `keep` edges (backward breadth first from
-/// the ends).
-fn can_reach(n: usize, g: &Graph, targets: &[bool], keep: &dyn Fn(usize) -> bool) -> Vec<bool> {
-    let mut back: Vec<Vec<u32>> = vec![Vec::new(); n];
-    for (k, e) in g.edges.iter().enumerate() {
-        if keep(k) {
-            back[e.to as usize].push(e.from);
+/// The graph's edges reversed, as one flat list per target state (built once, walked by every
+/// backward search).
+pub(super) struct Reverse {
+    start: Vec<u32>,
+    /// (source state, edge index), grouped by target state.
+    from: Vec<(u32, u32)>,
+}
+
+impl Reverse {
+    pub fn new(g: &Graph) -> Reverse {
+        let n = g.states.len();
+        let mut start = vec![0u32; n + 1];
+        for e in &g.edges {
+            start[e.to as usize + 1] += 1;
         }
+        for k in 0..n {
+            start[k + 1] += start[k];
+        }
+        let mut next = start.clone();
+        let mut from = vec![(0u32, 0u32); g.edges.len()];
+        for (k, e) in g.edges.iter().enumerate() {
+            let slot = &mut next[e.to as usize];
+            from[*slot as usize] = (e.from, k as u32);
+            *slot += 1;
+        }
+        Reverse { start, from }
     }
+}
+
+/// The states from which a target is reachable along `keep` edges (backward breadth first from
+/// the targets).
+fn can_reach(rev: &Reverse, targets: &[bool], keep: &dyn Fn(usize) -> bool) -> Vec<bool> {
     let mut reach = targets.to_vec();
-    let mut queue: VecDeque<u32> = (0..n as u32).filter(|&i| reach[i as usize]).collect();
+    let mut queue: VecDeque<u32> = (0..reach.len() as u32)
+        .filter(|&i| reach[i as usize])
+        .collect();
     while let Some(j) = queue.pop_front() {
-        for &i in &back[j as usize] {
-            if !reach[i as usize] {
+        let (a, b) = (rev.start[j as usize], rev.start[j as usize + 1]);
+        for &(i, k) in &rev.from[a as usize..b as usize] {
+            if !reach[i as usize] && keep(k as usize) {
                 reach[i as usize] = true;
                 queue.push_back(i);
             }
@@ -105,13 +143,17 @@ fn can_reach(n: usize, g: &Graph, targets: &[bool], keep: &dyn Fn(usize) -> bool
 
 /// Progress: from every reachable state, an end stays reachable without the events of the
 /// excluded categories (AG EF end, over the stable states). The first state (in breadth-first
-/// order) that fails, and how many do.
+/// order) that fails, how many do, and the first state the mission stays in for good once it
+/// failed (a failing state in a bottom loop of the graph without the excluded events), with
+/// their indices.
 pub(super) fn progress(
     p: &CompiledProject,
+    l: &Layout,
     g: &Graph,
+    rev: &Reverse,
     ends: &[bool],
     describe: &dyn Fn(&[u64]) -> Vec<String>,
-) -> Option<(ProgressFinding, u32)> {
+) -> Option<(ProgressFinding, u32, u32, Vec<bool>)> {
     let n = g.states.len();
     if p.finals.is_empty() && p.goals.is_empty() {
         // No end declared: nothing to make progress towards.
@@ -121,27 +163,74 @@ pub(super) fn progress(
         let e = g.labels[g.edges[k].label as usize].event;
         e == NO_EVENT || !p.progress_excludes.contains(&p.events[e as usize].category)
     };
-    let reach = can_reach(n, g, ends, &allowed);
+    let reach = can_reach(rev, ends, &allowed);
     let failing: Vec<usize> = (0..n).filter(|&i| !reach[i]).collect();
     let &first = failing.first()?;
+    // Where the mission stays: a failing state whose loop (allowed edges only) has no way out.
+    // Every allowed successor of a failing state fails too, so such a loop exists below each.
+    let mut adj: Vec<Vec<(u32, EventId)>> = vec![Vec::new(); n];
+    for (k, e) in g.edges.iter().enumerate() {
+        if allowed(k) && !reach[e.from as usize] {
+            adj[e.from as usize].push((e.to, 0));
+        }
+    }
+    let comp = tarjan(n, &adj);
+    let mut has_exit = vec![false; n];
+    for (a, succ) in adj.iter().enumerate() {
+        if succ.iter().any(|&(b, _)| comp[b as usize] != comp[a]) {
+            has_exit[comp[a] as usize] = true;
+        }
+    }
+    let stays = failing
+        .iter()
+        .copied()
+        .find(|&i| !has_exit[comp[i] as usize])
+        .unwrap_or(first);
     Some((
         ProgressFinding {
             marking: describe(&g.states[first]),
-            trace: g.trace(p, first as u32),
+            trace: g.trace(first as u32),
             states: failing.len() as u64,
             excluded: p
                 .progress_excludes
                 .iter()
                 .map(|c| c.keyword().to_string())
                 .collect(),
+            stays_in: describe(&g.states[stays]),
+            stays_in_trace: g.trace(stays as u32),
+            places: marked_places(p, l, &g.states[stays]),
         },
         first as u32,
+        stays as u32,
+        reach,
     ))
+}
+
+/// The marked places of `s` (active nets only), as `NET.place` and `global.place`, to locate a
+/// finding in the text.
+pub(super) fn marked_places(p: &CompiledProject, l: &Layout, s: &[u64]) -> Vec<String> {
+    let mut out = Vec::new();
+    for (n, net) in p.nets.iter().enumerate() {
+        if !l.is_active(s, n as NetId) {
+            continue;
+        }
+        for (k, place) in net.places.iter().enumerate() {
+            if l.is_marked(s, n as NetId, PlaceRef::Local(k as u32)) {
+                out.push(format!("{}.{}", net.name, place.name));
+            }
+        }
+    }
+    for (k, gp) in p.globals.iter().enumerate() {
+        if l.is_marked(s, 0, PlaceRef::Global(k as u32)) {
+            out.push(format!("global.{}", gp.name));
+        }
+    }
+    out
 }
 
 /// Whether `s` is an end for net `n`: the project is over, or the places of `n` in some final
 /// (or goal) marking are all marked.
-fn end_for_net(p: &CompiledProject, l: &Layout, s: &[u64], n: NetId) -> bool {
+pub(super) fn end_for_net(p: &CompiledProject, l: &Layout, s: &[u64], n: NetId) -> bool {
     if l.is_over(s) {
         return true;
     }
@@ -155,16 +244,21 @@ fn end_for_net(p: &CompiledProject, l: &Layout, s: &[u64], n: NetId) -> bool {
     })
 }
 
+/// A stuck net's finding, the state it is stuck in, and the net.
+pub(super) type Stuck = (StuckFinding, u32, NetId);
+
 /// Stuck nets: an active net that, in some reachable state, can never fire again whatever the
 /// environment does (unless the state is an end for it). One finding per net, at the first
-/// state it is stuck in, with the resource cycle behind it when the nets stuck there wait on
-/// one another's global places.
+/// state it is stuck in (with that state and the net), with the resource cycle behind it when
+/// the nets stuck there wait on one another's global places; and, per net, the states from
+/// which it can still fire.
 pub(super) fn stuck_nets(
     p: &CompiledProject,
     l: &Layout,
     g: &Graph,
+    rev: &Reverse,
     describe: &dyn Fn(&[u64]) -> Vec<String>,
-) -> Vec<(StuckFinding, u32)> {
+) -> (Vec<Stuck>, Vec<Vec<bool>>) {
     let n = g.states.len();
     let mut out = Vec::new();
     // Rules of each net, and the edges where each net fires.
@@ -180,7 +274,7 @@ pub(super) fn stuck_nets(
             // A net with no transition never fires: it is a store of places, not stuck.
             vec![true; n]
         } else {
-            can_reach(n, g, fires, &|_| true)
+            can_reach(rev, fires, &|_| true)
         });
     }
     for net in 0..p.nets.len() {
@@ -197,14 +291,22 @@ pub(super) fn stuck_nets(
             StuckFinding {
                 net: p.nets[net].name.clone(),
                 marking: describe(s),
-                trace: g.trace(p, i as u32),
+                trace: g.trace(i as u32),
                 waits_for: waits_for(p, l, s, net as NetId),
                 resource_cycle: resource_cycle(p, l, s, net as NetId, &stuck_here),
+                places: marked_places(p, l, s)
+                    .into_iter()
+                    .filter(|q| {
+                        q.split_once('.')
+                            .is_some_and(|(owner, _)| owner == p.nets[net].name)
+                    })
+                    .collect(),
             },
             i as u32,
+            net as NetId,
         ));
     }
-    out
+    (out, can)
 }
 
 /// The global places a net's transitions miss in `s` (all their local inputs marked).
@@ -237,21 +339,49 @@ fn waits_for(p: &CompiledProject, l: &Layout, s: &[u64], n: NetId) -> Vec<String
         .collect()
 }
 
-/// Nets that would give global place `gl` back: a transition of theirs outputs it.
-fn releasers(p: &CompiledProject, gl: u32) -> Vec<NetId> {
-    (0..p.nets.len() as NetId)
-        .filter(|&n| {
-            p.nets[n as usize]
-                .transitions
-                .iter()
-                .any(|t| t.outputs.contains(&PlaceRef::Global(gl)))
-        })
-        .collect()
+/// Whether net `m` holds global place `gl` in `s`: from its marked local places, following its
+/// own transitions (their local places only), one of them gives `gl` back before any takes it.
+/// A net waiting to take `gl` does not hold it; a net that took it and goes on to give it back
+/// does.
+fn holds(p: &CompiledProject, l: &Layout, s: &[u64], m: NetId, gl: u32) -> bool {
+    let net = &p.nets[m as usize];
+    let mut reached: Vec<bool> = (0..net.places.len() as u32)
+        .map(|k| l.is_marked(s, m, PlaceRef::Local(k)))
+        .collect();
+    let mut used = vec![false; net.transitions.len()];
+    loop {
+        let mut grew = false;
+        for (k, t) in net.transitions.iter().enumerate() {
+            if used[k] || t.inputs.contains(&PlaceRef::Global(gl)) {
+                continue;
+            }
+            let from_reached = t.inputs.iter().any(|r| match r {
+                PlaceRef::Local(i) => reached[*i as usize],
+                PlaceRef::Global(_) => false,
+            });
+            if !from_reached {
+                continue;
+            }
+            if t.outputs.contains(&PlaceRef::Global(gl)) {
+                return true;
+            }
+            used[k] = true;
+            for r in &t.outputs {
+                if let PlaceRef::Local(i) = r {
+                    grew |= !std::mem::replace(&mut reached[*i as usize], true);
+                }
+            }
+        }
+        if !grew {
+            return false;
+        }
+    }
 }
 
-/// A cycle of nets stuck in `s`, each waiting for a global place the next would give back:
-/// `A waits for global.x, which B would give back; B waits for global.y, which A would give
-/// back`.
+/// A cycle of nets stuck in `s`, each waiting for a global place the next one holds (it took
+/// the place and would give it back, could it go on): `A waits for global.y, which B holds; B
+/// waits for global.x, which A holds`. A place nobody holds (taken and never given back) makes
+/// no cycle.
 fn resource_cycle(
     p: &CompiledProject,
     l: &Layout,
@@ -264,9 +394,10 @@ fn resource_cycle(
     let mut cur = start;
     while seen.insert(cur) {
         let next = missing_globals(p, l, s, cur).into_iter().find_map(|gl| {
-            releasers(p, gl)
-                .into_iter()
-                .find(|&m| m != cur && stuck_here.contains(&m))
+            stuck_here
+                .iter()
+                .copied()
+                .find(|&m| m != cur && holds(p, l, s, m, gl))
                 .map(|m| (gl, m))
         })?;
         path.push((cur, next.0));
@@ -277,7 +408,7 @@ fn resource_cycle(
                     .map(|(k, &(n, gl))| {
                         let holder = path.get(k + 1).map_or(start, |x| x.0);
                         format!(
-                            "{} waits for global.{}, which {} would give back",
+                            "{} waits for global.{}, which {} holds",
                             p.nets[n as usize].name,
                             p.globals[gl as usize].name,
                             p.nets[holder as usize].name
@@ -315,8 +446,10 @@ pub(super) fn components(g: &Graph) -> Components {
 type LoopInside = (HashSet<u32>, Vec<EventId>, u32, bool);
 
 /// Starvation: a loop of stable states the environment can keep the mission in forever, in
-/// which a net waits (it is active throughout and never fires) for a global place that the
-/// loop's own firings give back and take again: its transition could fire, and never does.
+/// which a net waits at a transition (active throughout, that transition's local inputs marked
+/// in every state of the loop, the transition never firing in it) that takes a global place
+/// the loop's own firings give back and take again: it could fire, and never does. Read arcs
+/// (an arbiter testing a place) wait for nothing.
 pub(super) fn starvation(
     p: &CompiledProject,
     l: &Layout,
@@ -345,44 +478,75 @@ pub(super) fn starvation(
     }
     let mut comps: Vec<(&u32, &LoopInside)> = inner.iter().collect();
     comps.sort_by_key(|(_, v)| v.2);
-    for (comp, (fired, events, sample, _)) in comps {
-        let states: Vec<usize> = (0..g.states.len())
-            .filter(|&i| c.comp[i] == *comp)
+    // The states of each loop, gathered once.
+    let mut members: HashMap<u32, Vec<usize>> = HashMap::new();
+    for (i, comp) in c.comp.iter().enumerate() {
+        if inner.contains_key(comp) {
+            members.entry(*comp).or_default().push(i);
+        }
+    }
+    for (comp, (fired, events, _, _)) in comps {
+        let states = &members[comp];
+        // Which places the loop's firings give back.
+        let released: HashSet<u32> = fired
+            .iter()
+            .flat_map(|&r| {
+                let rule = &l.rules[r as usize];
+                p.nets[rule.net as usize].transitions[rule.transition as usize]
+                    .outputs
+                    .iter()
+                    .filter_map(|x| match x {
+                        PlaceRef::Global(gl) => Some(*gl),
+                        PlaceRef::Local(_) => None,
+                    })
+            })
             .collect();
-        for net in 0..p.nets.len() as NetId {
-            let fires_in_loop = fired.iter().any(|&r| l.rules[r as usize].net == net);
-            if fires_in_loop || !states.iter().all(|&i| l.is_active(&g.states[i], net)) {
+        for (r, rule) in l.rules.iter().enumerate() {
+            let net = rule.net;
+            let t = &p.nets[net as usize].transitions[rule.transition as usize];
+            if fired.contains(&(r as u32)) || out.iter().any(|f| f.net == p.nets[net as usize].name)
+            {
                 continue;
             }
-            let s = &g.states[*sample as usize];
-            for gl in missing_globals(p, l, s, net) {
-                // The loop gives the place back somewhere (some firing in it outputs it).
-                let released_in_loop = fired.iter().any(|&r| {
-                    let rule = &l.rules[r as usize];
-                    p.nets[rule.net as usize].transitions[rule.transition as usize]
-                        .outputs
-                        .contains(&PlaceRef::Global(gl))
-                });
-                if !released_in_loop {
-                    continue;
-                }
-                let net_name = p.nets[net as usize].name.clone();
-                if out.iter().any(|f| f.net == net_name) {
-                    continue;
-                }
-                let mut names: Vec<String> = events
-                    .iter()
-                    .filter(|&&e| e != NO_EVENT)
-                    .map(|&e| p.events[e as usize].name.clone())
-                    .collect();
-                names.sort();
-                out.push(StarvationFinding {
-                    net: net_name,
-                    resource: format!("global.{}", p.globals[gl as usize].name),
-                    loop_events: names,
-                    trace: g.trace(p, *sample),
-                });
+            // The net waits at this transition throughout the loop: active, its local inputs
+            // marked in every state of it.
+            let waiting = states.iter().all(|&i| {
+                let s = &g.states[i];
+                l.is_active(s, net)
+                    && t.inputs.iter().all(|&x| match x {
+                        PlaceRef::Local(_) => l.is_marked(s, net, x),
+                        PlaceRef::Global(_) => true,
+                    })
+            });
+            if !waiting {
+                continue;
             }
+            // A place it takes (not merely reads), missing somewhere in the loop, and given back
+            // by the loop's firings: others keep taking it first.
+            let starved = t.inputs.iter().find_map(|&x| match x {
+                PlaceRef::Global(gl)
+                    if !t.outputs.contains(&x)
+                        && released.contains(&gl)
+                        && states.iter().any(|&i| !l.is_marked(&g.states[i], net, x)) =>
+                {
+                    Some(gl)
+                }
+                _ => None,
+            });
+            let Some(gl) = starved else { continue };
+            let mut names: Vec<String> = events
+                .iter()
+                .filter(|&&e| e != NO_EVENT)
+                .map(|&e| p.events[e as usize].name.clone())
+                .collect();
+            names.sort();
+            out.push(StarvationFinding {
+                net: p.nets[net as usize].name.clone(),
+                transition: format!("{}.{}", p.nets[net as usize].name, t.name),
+                resource: format!("global.{}", p.globals[gl as usize].name),
+                loop_events: names,
+                trace: g.trace(states[0] as u32),
+            });
         }
     }
     out

@@ -495,6 +495,14 @@ impl Env {
         self.set(s, c, if v == 0 { 1 } else { 3 });
     }
 
+    /// Every counter at "many": every answer and internal event free, for an exploration that
+    /// starts from a state whose outstanding calls and emissions are not known (a reload).
+    pub fn saturate(&self, s: &mut [u64]) {
+        for c in 0..self.names.len() as u32 {
+            self.set(s, c, 3);
+        }
+    }
+
     /// One answered: 1 to 0; many stays many.
     pub fn down(&self, s: &mut [u64], c: u32) {
         if self.get(s, c) == 1 {

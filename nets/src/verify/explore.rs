@@ -22,8 +22,9 @@ pub(super) enum Via {
     Start,
     /// From state `.0` by the step labelled `.1`.
     Step(u32, u32),
-    /// Single-net mode: from state `.0`, the environment set (true) or cleared global `.1`.
-    Global(u32, u32, bool),
+    /// Single-net mode: from state `.0`, the environment marked or emptied a place that other
+    /// nets change (the label `.1` says which).
+    Env(u32, u32),
 }
 
 /// One step the environment can make happen: a delivery, with the outcomes of the guards the
@@ -35,6 +36,21 @@ pub(super) struct Label {
     pub delivery: u32,
     pub choices: Vec<bool>,
     pub counter: Option<u32>,
+}
+
+/// A place the environment changes in single-net mode (`--net`): a global place other nets
+/// put a token in (`mark`) or take one from (`empty`), or a child's completion place (the
+/// child is not modelled: it may finish at any time).
+#[derive(Clone, Debug)]
+pub(super) struct FreePlace {
+    /// Its bit in the state.
+    pub bit: u32,
+    /// `global.place` or `NET.CHILD.done`.
+    pub name: String,
+    /// The environment may put a token in it when it is empty.
+    pub mark: bool,
+    /// The environment may take its token.
+    pub empty: bool,
 }
 
 /// The event of a label that is no event: the environment changed a global place (`--net`).
@@ -66,11 +82,14 @@ pub(super) struct Graph {
     pub ever_fired: Vec<bool>,
     pub ever_active: Vec<bool>,
     pub max_tokens_per_marking: u64,
+    /// One net verified alone (`--net`): its end is to be inactive (it finished, or
+    /// deactivated itself).
+    pub alone: bool,
 }
 
 impl Graph {
     /// The shortest trace to state `s`.
-    pub fn trace(&self, p: &CompiledProject, mut s: u32) -> Trace {
+    pub fn trace(&self, mut s: u32) -> Trace {
         let mut out = Vec::new();
         loop {
             match self.via[s as usize] {
@@ -79,13 +98,8 @@ impl Graph {
                     out.push(self.labels[l as usize].text.clone());
                     s = prev;
                 }
-                Via::Global(prev, g, set) => {
-                    let verb = if set {
-                        "environment marks"
-                    } else {
-                        "environment empties"
-                    };
-                    out.push(format!("{verb} global.{}", p.globals[g as usize].name));
+                Via::Env(prev, l) => {
+                    out.push(self.labels[l as usize].text.clone());
                     s = prev;
                 }
             }
@@ -105,7 +119,7 @@ impl Graph {
                     out.push(Some(l));
                     s = prev;
                 }
-                Via::Global(prev, ..) => {
+                Via::Env(prev, _) => {
                     out.push(None);
                     s = prev;
                 }
@@ -256,9 +270,10 @@ pub(super) fn explore(
     p: &CompiledProject,
     sem: &Semantics,
     env: &Env,
-    free_globals: &[u32],
+    free: &[FreePlace],
     opts: &mut VerifyOptions,
     started: Instant,
+    start: Option<&[u64]>,
 ) -> Result<Graph, VerifyError> {
     let l = &sem.layout;
     let mut scratch = Scratch::default();
@@ -295,8 +310,10 @@ pub(super) fn explore(
         ever_fired: vec![false; l.rules.len()],
         ever_active: vec![false; p.nets.len()],
         max_tokens_per_marking: 0,
+        alone: false,
     };
-    let mut label_ids: HashMap<(u32, Vec<bool>, Option<u32>), u32> = HashMap::new();
+    // Keyed by delivery, guard outcomes, counter, and whether the delivery went unused.
+    let mut label_ids: HashMap<(u32, Vec<bool>, Option<u32>, bool), u32> = HashMap::new();
     let mut fired_ids: HashMap<Vec<u32>, u32> = HashMap::new();
     let mut index: HashMap<State, u32> = HashMap::new();
     let mut unsafe_seen: HashMap<(u32, u32), ()> = HashMap::new();
@@ -329,8 +346,21 @@ pub(super) fn explore(
         }
     };
 
-    // The initial states: one per outcome of the guards the start cannot decide.
-    let mut prefixes: Vec<Vec<bool>> = vec![Vec::new()];
+    // The initial states: the given one (a reload's), or one per outcome of the guards the
+    // start cannot decide.
+    if let Some(from) = start {
+        let mut t = from.to_vec();
+        t.resize(env.words, 0);
+        env.saturate(&mut t);
+        index.insert(t.clone(), 0);
+        g.states.push(t);
+        g.via.push(Via::Start);
+    }
+    let mut prefixes: Vec<Vec<bool>> = if start.is_some() {
+        Vec::new()
+    } else {
+        vec![Vec::new()]
+    };
     let mut runs = 0usize;
     while let Some(prefix) = prefixes.pop() {
         runs += 1;
@@ -390,13 +420,62 @@ pub(super) fn explore(
                     &mut candidates,
                 );
                 if candidates.is_empty() {
+                    // No transition takes it here. A free event then changes nothing (the
+                    // player counts it unused), but a pending answer or emission is consumed
+                    // all the same: the player takes it from its queue, finds no candidate
+                    // and drops it (docs/semantics.md, "Processing one event", step 5). The
+                    // verifier must not let it wait for a consumer that may come later.
+                    for counter in counters.into_iter().flatten() {
+                        let t = run_step(
+                            sem,
+                            env,
+                            &mut rec,
+                            &mut scratch,
+                            &s,
+                            Some(d),
+                            &[],
+                            Some(counter),
+                        );
+                        if t == s {
+                            // A counter at "many" stays there: nothing happened.
+                            continue;
+                        }
+                        // The player still has this event to process: not a dead marking.
+                        any_enabled = true;
+                        let key = (di as u32, vec![], Some(counter), true);
+                        let lid = match label_ids.get(&key) {
+                            Some(&l) => l,
+                            None => {
+                                g.labels.push(Label {
+                                    text: format!("{} (unused)", d.label),
+                                    event: d.event,
+                                    delivery: di as u32,
+                                    choices: Vec::new(),
+                                    counter: Some(counter),
+                                });
+                                let l = (g.labels.len() - 1) as u32;
+                                label_ids.insert(key, l);
+                                l
+                            }
+                        };
+                        let fid = match fired_ids.get(&Vec::new()) {
+                            Some(&f) => f,
+                            None => {
+                                g.fired_sets.push(Vec::new());
+                                let f = (g.fired_sets.len() - 1) as u32;
+                                fired_ids.insert(Vec::new(), f);
+                                f
+                            }
+                        };
+                        successors.push((t, Via::Step(i, lid), Some((lid, fid))));
+                    }
                     continue;
                 }
                 any_enabled = true;
                 for (a, &ra) in candidates.iter().enumerate() {
                     for &rb in &candidates[a + 1..] {
                         if l.share_input(ra, rb) && conflict_seen.insert((ra, rb), ()).is_none() {
-                            let mut trace = g.trace(p, i);
+                            let mut trace = g.trace(i);
                             trace.push(d.label.clone());
                             g.conflicts.push(ConflictFinding {
                                 event: p.events[d.event as usize].name.clone(),
@@ -432,7 +511,7 @@ pub(super) fn explore(
                         let choices: Vec<bool> = (0..rec.oracle.used)
                             .map(|k| prefix.get(k).copied().unwrap_or(false))
                             .collect();
-                        let key = (di as u32, choices.clone(), counter);
+                        let key = (di as u32, choices.clone(), counter, false);
                         let lid = match label_ids.get(&key) {
                             Some(&l) => l,
                             None => {
@@ -473,7 +552,7 @@ pub(super) fn explore(
                         };
                         let text = g.labels[lid as usize].text.clone();
                         record(&mut g, &rec, &|g| {
-                            let mut t = g.trace(p, i);
+                            let mut t = g.trace(i);
                             t.push(text.clone());
                             t
                         });
@@ -482,26 +561,31 @@ pub(super) fn explore(
                 }
             }
         }
-        for &gl in free_globals {
+        for (k, f) in free.iter().enumerate() {
+            let set = !Layout::bit(&s, f.bit);
+            if (set && !f.mark) || (!set && !f.empty) {
+                continue;
+            }
+            // A state the environment can still change is not dead: whether the net can go on
+            // from it is the stuck-net check's question.
+            any_enabled = true;
             let mut t = s.clone();
-            let bit = l.global_base + gl;
-            let set = !Layout::bit(&t, bit);
-            t[(bit / 64) as usize] ^= 1 << (bit % 64);
+            t[(f.bit / 64) as usize] ^= 1 << (f.bit % 64);
             // The environment's change may enable immediate transitions.
             rec.reset();
             rec.params.clear();
             rec.oracle.prefix.clear();
             sem.fixpoint(&mut t, &mut rec, &mut scratch);
             env.apply(&mut t, &rec.requests);
-            record(&mut g, &rec, &|g| g.trace(p, i));
+            record(&mut g, &rec, &|g| g.trace(i));
             // An edge like the others, labelled with the environment's move (no event).
-            let key = (u32::MAX - gl, vec![set], None);
+            let key = (u32::MAX - k as u32, vec![set], None, false);
             let lid = *label_ids.entry(key).or_insert_with(|| {
                 g.labels.push(Label {
                     text: format!(
-                        "environment {} global.{}",
+                        "environment {} {}",
                         if set { "marks" } else { "empties" },
-                        p.globals[gl as usize].name
+                        f.name
                     ),
                     event: NO_EVENT,
                     delivery: u32::MAX,
@@ -517,7 +601,7 @@ pub(super) fn explore(
                 g.fired_sets.push(fired);
                 (g.fired_sets.len() - 1) as u32
             });
-            successors.push((t, Via::Global(i, gl, set), Some((lid, fid))));
+            successors.push((t, Via::Env(i, lid), Some((lid, fid))));
         }
         for (t, how, step) in successors {
             let j = match index.get(&t) {

@@ -5,7 +5,7 @@
 //! the rest replayed from the start with the same firing code, and if the finding still shows
 //! the event did not matter. What is left is printed with `...` where events were elided.
 
-use super::env::Env;
+use super::env::{Env, Gate};
 use super::explore::{run_step, Graph, Recorder, Via, NO_EVENT};
 use super::Trace;
 use crate::compiled::CompiledProject;
@@ -17,7 +17,6 @@ const MAX_MINIMIZED: usize = 64;
 
 /// Replays traces of one exploration.
 pub(super) struct Minimizer<'a> {
-    p: &'a CompiledProject,
     sem: &'a Semantics<'a>,
     env: &'a Env,
     g: &'a Graph,
@@ -39,7 +38,6 @@ impl<'a> Minimizer<'a> {
             })
             .collect();
         Minimizer {
-            p,
             sem,
             env,
             g,
@@ -48,14 +46,24 @@ impl<'a> Minimizer<'a> {
         }
     }
 
-    /// The state reached by replaying `steps` (labels) from `root`.
-    fn replay(&self, root: &State, steps: &[u32]) -> State {
+    /// The state reached by replaying `steps` (labels) from `root`; `None` if the environment
+    /// could not make one of the steps (an answer with no call outstanding, an internal event
+    /// nobody emitted).
+    fn replay(&self, root: &State, steps: &[u32]) -> Option<State> {
         let mut rec = self.rec.borrow_mut();
         let mut scratch = self.scratch.borrow_mut();
         let mut s = root.clone();
         for &l in steps {
             let label = &self.g.labels[l as usize];
             let d = &self.g.deliveries[label.delivery as usize];
+            let possible = match self.env.gate(&s, d.event, d.target) {
+                Gate::Free => label.counter.is_none(),
+                Gate::Closed => false,
+                Gate::Counters(open) => label.counter.is_some_and(|c| open.contains(&c)),
+            };
+            if !possible || self.sem.layout.is_over(&s) {
+                return None;
+            }
             s = run_step(
                 self.sem,
                 self.env,
@@ -67,13 +75,13 @@ impl<'a> Minimizer<'a> {
                 label.counter,
             );
         }
-        s
+        Some(s)
     }
 
     /// The trace to state `i`, with the events that `keep` does not need elided: an event is
     /// dropped when the state the rest of the trace leads to still satisfies `keep`.
     pub fn trace(&self, i: u32, keep: &dyn Fn(&[u64]) -> bool) -> Trace {
-        let full = self.g.trace(self.p, i);
+        let full = self.g.trace(i);
         let steps = self.g.steps(i);
         // The environment's own moves (single-net mode) are not replayed: keep the trace.
         if steps.len() < 2 || steps.len() > MAX_MINIMIZED || steps.iter().any(Option::is_none) {
@@ -87,7 +95,7 @@ impl<'a> Minimizer<'a> {
             return full;
         }
         let mut root = i;
-        while let Via::Step(prev, _) | Via::Global(prev, ..) = self.g.via[root as usize] {
+        while let Via::Step(prev, _) | Via::Env(prev, _) = self.g.via[root as usize] {
             root = prev;
         }
         let root = self.g.states[root as usize].clone();
@@ -101,7 +109,7 @@ impl<'a> Minimizer<'a> {
                 .filter(|(_, n)| **n)
                 .map(|(l, _)| *l)
                 .collect();
-            if !keep(&self.replay(&root, &rest)) {
+            if !self.replay(&root, &rest).is_some_and(|s| keep(&s)) {
                 needed[k] = true;
             }
         }

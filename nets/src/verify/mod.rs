@@ -21,7 +21,9 @@ mod explore;
 mod minimize;
 mod render;
 
-pub use render::{diagnostics, render_human, render_human_all, to_json};
+pub use render::{
+    diagnostics, diagnostics_all, render_human, render_human_all, render_summary, to_json,
+};
 
 use crate::compiled::{Action, CompiledProject, NetId, PlaceRef};
 use crate::semantics::{Semantics, State};
@@ -40,6 +42,9 @@ pub struct VerifyOptions {
     pub progress: Option<Box<dyn FnMut(u64, f64)>>,
     /// Keep every reachable stable state in [`Report::reachable`] (for cross-checks).
     pub keep_states: bool,
+    /// Skip what issue 13 added over the graph: progress, stuck nets, starvation and the
+    /// minimization of traces (to measure what they cost; `petrel verify` always runs them).
+    pub skip_liveness: bool,
 }
 
 /// Why a verification could not finish.
@@ -103,8 +108,13 @@ pub struct DeadFinding {
     pub intended: bool,
     /// A catastrophic event ended the mission there.
     pub after_catastrophic: bool,
+    /// The net verified alone (`--net`) is no longer active there: it finished (or deactivated
+    /// itself), its end.
+    pub net_done: bool,
     /// The shortest sequence of events that gets there.
     pub trace: Trace,
+    /// Its marked places, `NET.place` and `global.place` (where the finding is in the text).
+    pub places: Vec<String>,
 }
 
 /// A cycle of immediate transitions: the player would spin.
@@ -152,6 +162,14 @@ pub struct ProgressFinding {
     pub states: u64,
     /// The categories not counted on the way to an end.
     pub excluded: Vec<String>,
+    /// The first state (in breadth-first order) the mission then stays in for good: a loop of
+    /// failing states with no way out but the excluded events (where the missing transition
+    /// is).
+    pub stays_in: Vec<String>,
+    /// How to get there, the events that do not matter elided.
+    pub stays_in_trace: Trace,
+    /// The marked places of that state, `NET.place` and `global.place`.
+    pub places: Vec<String>,
 }
 
 /// An active net that, from some reachable state, can never fire again.
@@ -165,8 +183,10 @@ pub struct StuckFinding {
     pub trace: Trace,
     /// The global places its transitions lack there (their local inputs all marked).
     pub waits_for: Vec<String>,
-    /// The nets stuck with it, each waiting for a place the next would give back, if any.
+    /// The nets stuck with it, each waiting for a place the next one holds, if any.
     pub resource_cycle: Option<Vec<String>>,
+    /// Its marked places there, `NET.place` (where it is stuck in the text).
+    pub places: Vec<String>,
 }
 
 /// A loop the environment can keep the mission in forever, in which a net waits for a global
@@ -175,6 +195,8 @@ pub struct StuckFinding {
 pub struct StarvationFinding {
     /// The waiting net.
     pub net: String,
+    /// `NET.transition` it waits at: it takes the place, and never fires in the loop.
+    pub transition: String,
     /// The place it waits for.
     pub resource: String,
     /// The events of the loop.
@@ -222,6 +244,10 @@ pub struct Report {
     pub invariants: Vec<String>,
     /// Invariants broken, each with the shortest trace to a state that breaks it.
     pub invariant_violations: Vec<InvariantFinding>,
+    /// The project declares ends ([verify] final or goal): progress is checked.
+    pub declares_ends: bool,
+    /// The categories whose events progress does not count on.
+    pub progress_excludes: Vec<String>,
     /// States from which no end is reachable any more (when the project declares ends).
     pub no_progress: Option<ProgressFinding>,
     /// Nets that get stuck.
@@ -271,27 +297,67 @@ impl Report {
             + usize::from(self.no_progress.is_some())
             + self.stuck_nets.len()
     }
+
+    /// The number of warnings the diagnostics give: conflicts, starvation, transitions that
+    /// never fire, nets never activated, events no transition waits for.
+    pub fn warnings(&self) -> usize {
+        self.conflicts.len()
+            + self.starvation.len()
+            + self.never_fired.len()
+            + self.never_activated.len()
+            + self.unused_events.len()
+    }
 }
 
 /// Verifies a compiled project.
-pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Report, VerifyError> {
+pub fn verify(project: &CompiledProject, opts: VerifyOptions) -> Result<Report, VerifyError> {
+    verify_inner(project, opts, None)
+}
+
+/// Verifies `project` from `state` (a stable state of its [`crate::semantics::Layout`])
+/// instead of its initial state: what a reload checks before it swaps (docs/semantics.md).
+/// Programs' declared answers and internal events are free from there (the calls and
+/// emissions outstanding in `state` are not known). Traces start at `state`. Not with
+/// [`VerifyOptions::only_net`], which is refused as an unknown net.
+pub fn verify_from(
+    project: &CompiledProject,
+    state: &[u64],
+    mut opts: VerifyOptions,
+) -> Result<Report, VerifyError> {
+    if let Some(n) = opts.only_net.take() {
+        return Err(VerifyError::UnknownNet(format!(
+            "{n} (a verification from a state covers the whole project)"
+        )));
+    }
+    verify_inner(project, opts, Some(state))
+}
+
+fn verify_inner(
+    project: &CompiledProject,
+    mut opts: VerifyOptions,
+    start: Option<&[u64]>,
+) -> Result<Report, VerifyError> {
     let restricted;
-    let (p, free_globals) = match &opts.only_net {
-        None => (project, Vec::new()),
+    let (p, alone) = match &opts.only_net {
+        None => (project, None),
         Some(name) => {
             let id = project
                 .net_id(name)
                 .ok_or_else(|| VerifyError::UnknownNet(name.clone()))?;
-            let free = globals_written_by_others(project, id);
             restricted = only_net(project, id);
-            (&restricted, free)
+            (&restricted, Some(id))
         }
     };
     let started = Instant::now();
     let sem = Semantics::new(p);
     let l = &sem.layout;
+    let free = match alone {
+        Some(id) => free_places(project, id, p, l),
+        None => Vec::new(),
+    };
     let env = env::Env::new(p, l.words);
-    let g = explore::explore(p, &sem, &env, &free_globals, &mut opts, started)?;
+    let mut g = explore::explore(p, &sem, &env, &free, &mut opts, started, start)?;
+    g.alone = alone.is_some();
     let describe = |s: &[u64]| {
         let mut out = l.describe_state(p, s);
         out.extend(env.describe(s));
@@ -305,18 +371,75 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
         safe: g.unsafe_places.is_empty(),
         invariants: p.invariants.iter().map(|i| i.name.clone()).collect(),
         protocols: env.names.clone(),
+        declares_ends: !p.finals.is_empty() || !p.goals.is_empty(),
+        progress_excludes: p
+            .progress_excludes
+            .iter()
+            .map(|c| c.keyword().to_string())
+            .collect(),
         ..Report::default()
     };
     // Each finding at a state: its trace keeps the events that matter to it.
     let m = minimize::Minimizer::new(p, &sem, &env, &g);
-    let at = |i: u32, keep: &dyn Fn(&[u64]) -> bool| m.trace(i, keep);
+    let skip = opts.skip_liveness;
+    let at = |i: u32, keep: &dyn Fn(&[u64]) -> bool| {
+        if skip {
+            g.trace(i)
+        } else {
+            m.trace(i, keep)
+        }
+    };
+    // Which graph state a replayed state is (built only when a finding needs it).
+    let index: std::cell::OnceCell<HashMap<&[u64], u32>> = std::cell::OnceCell::new();
+    let index_of = |s: &[u64]| -> Option<u32> {
+        index
+            .get_or_init(|| {
+                g.states
+                    .iter()
+                    .enumerate()
+                    .map(|(k, st)| (st.as_slice(), k as u32))
+                    .collect()
+            })
+            .get(s)
+            .copied()
+    };
+    // The nets a finding at `target` is about: the active ones not at an end of theirs. An
+    // event matters when, without it, those nets would not be where they are.
+    let concerned = |target: &[u64]| -> Vec<NetId> {
+        (0..p.nets.len() as NetId)
+            .filter(|&n| l.is_active(target, n) && !analysis::end_for_net(p, l, target, n))
+            .collect()
+    };
+    let same_places = |s: &[u64], target: &[u64], nets: &[NetId]| {
+        nets.iter().all(|&n| {
+            l.is_active(s, n)
+                && (0..p.nets[n as usize].places.len() as u32).all(|k| {
+                    l.is_marked(s, n, PlaceRef::Local(k))
+                        == l.is_marked(target, n, PlaceRef::Local(k))
+                })
+        })
+    };
+    let dead: Vec<bool> = {
+        let mut v = vec![false; g.states.len()];
+        for &i in &g.dead {
+            v[i as usize] = true;
+        }
+        v
+    };
     report.dead_markings = analysis::dead_markings(p, l, &g, &describe)
         .into_iter()
         .map(|(mut f, i)| {
             // Hundreds of ends after a catastrophic event need no minimal trace each.
             if !f.after_catastrophic {
                 let target = g.states[i as usize].clone();
-                f.trace = at(i, &|s| s == target.as_slice());
+                let nets = concerned(&target);
+                let intended = f.intended;
+                // Still a dead marking of the same kind, the nets it is about where they are.
+                f.trace = at(i, &|s| {
+                    index_of(s).is_some_and(|k| dead[k as usize])
+                        && analysis::intended_end(p, l, &g, s) == intended
+                        && same_places(s, &target, &nets)
+                });
             }
             f
         })
@@ -335,21 +458,44 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
         })
         .collect();
     let ends = analysis::ends(p, l, &g);
-    report.no_progress = analysis::progress(p, &g, &ends, &describe).map(|(mut f, i)| {
-        let target = g.states[i as usize].clone();
-        f.trace = at(i, &|s| s == target.as_slice());
-        f
-    });
-    report.stuck_nets = analysis::stuck_nets(p, l, &g, &describe)
-        .into_iter()
-        .map(|(mut f, i)| {
-            let target = g.states[i as usize].clone();
-            f.trace = at(i, &|s| s == target.as_slice());
-            f
-        })
-        .collect();
+    if !opts.skip_liveness {
+        let rev = analysis::Reverse::new(&g);
+        report.no_progress = analysis::progress(p, l, &g, &rev, &ends, &describe).map(
+            |(mut f, first, stays, reach)| {
+                // Any state from which no end is reachable will do for the first trace; for the
+                // state the mission stays in, the nets not at an end must be where they are.
+                f.trace = at(first, &|s| index_of(s).is_some_and(|k| !reach[k as usize]));
+                let target = g.states[stays as usize].clone();
+                let nets = concerned(&target);
+                f.stays_in_trace = at(stays, &|s| {
+                    index_of(s).is_some_and(|k| !reach[k as usize])
+                        && same_places(s, &target, &nets)
+                });
+                f
+            },
+        );
+        let (stuck, can) = analysis::stuck_nets(p, l, &g, &rev, &describe);
+        report.stuck_nets = stuck
+            .into_iter()
+            // A net stuck in a dead marking with nothing to wait for: the dead marking says it all.
+            .filter(|(f, i, _)| {
+                !dead[*i as usize] || !f.waits_for.is_empty() || f.resource_cycle.is_some()
+            })
+            .map(|(mut f, i, net)| {
+                // Any state where this net is active and can never fire again.
+                f.trace = at(i, &|s| {
+                    l.is_active(s, net)
+                        && index_of(s).is_some_and(|k| !can[net as usize][k as usize])
+                        && !analysis::end_for_net(p, l, s, net)
+                });
+                f
+            })
+            .collect();
+    }
     let components = analysis::components(&g);
-    report.starvation = analysis::starvation(p, l, &g, &components);
+    if !opts.skip_liveness {
+        report.starvation = analysis::starvation(p, l, &g, &components);
+    }
     report.event_loops = analysis::event_loops(p, &g, &components);
     report.unsafe_places = g.unsafe_places.clone();
     report.livelocks = g.livelocks.clone();
@@ -410,27 +556,66 @@ pub fn verify(project: &CompiledProject, mut opts: VerifyOptions) -> Result<Repo
     Ok(report)
 }
 
-/// The global places a net other than `id` changes (takes a token from, or puts one in): the
-/// ones the environment changes when `id` is verified alone.
-fn globals_written_by_others(p: &CompiledProject, id: NetId) -> Vec<u32> {
+/// What the environment changes when net `id` of `project` is verified alone (`restricted`,
+/// laid out by `l`): the global places this net uses that other nets change (marked if another
+/// net puts a token in, emptied if another takes it; read arcs change nothing), and the
+/// completion places of its children (a child, not modelled, may finish at any time). A global
+/// place no other net changes keeps the value the net gives it.
+fn free_places(
+    project: &CompiledProject,
+    id: NetId,
+    restricted: &CompiledProject,
+    l: &crate::semantics::Layout,
+) -> Vec<explore::FreePlace> {
+    let me = &project.nets[id as usize];
+    let uses = |g: u32| {
+        let r = PlaceRef::Global(g);
+        me.transitions
+            .iter()
+            .any(|t| t.inputs.contains(&r) || t.outputs.contains(&r) || t.empty.contains(&r))
+            || restricted
+                .finals
+                .iter()
+                .chain(&restricted.goals)
+                .any(|f| f.iter().any(|&(_, x)| x == r))
+    };
     let mut out = Vec::new();
-    for (n, net) in p.nets.iter().enumerate() {
-        if n as NetId == id {
+    for (g, gp) in project.globals.iter().enumerate() {
+        let g = g as u32;
+        if !uses(g) {
             continue;
         }
-        for t in &net.transitions {
-            for r in t.inputs.iter().chain(&t.outputs) {
-                if let PlaceRef::Global(g) = r {
-                    // Read arcs (in and out) change nothing.
-                    let read = t.inputs.contains(r) && t.outputs.contains(r);
-                    if !read && !out.contains(g) {
-                        out.push(*g);
-                    }
-                }
+        let (mut puts, mut takes) = (false, false);
+        for (n, net) in project.nets.iter().enumerate() {
+            if n as NetId == id {
+                continue;
+            }
+            for t in &net.transitions {
+                let r = PlaceRef::Global(g);
+                let (i, o) = (t.inputs.contains(&r), t.outputs.contains(&r));
+                puts |= o && !i;
+                takes |= i && !o;
             }
         }
+        if puts || takes {
+            out.push(explore::FreePlace {
+                bit: l.place_bit(0, PlaceRef::Global(g)),
+                name: format!("global.{}", gp.name),
+                mark: puts,
+                empty: takes,
+            });
+        }
     }
-    out.sort_unstable();
+    for &c in &me.children {
+        if let Some((_, place)) = project.nets[c as usize].parent {
+            out.push(explore::FreePlace {
+                bit: l.place_bit(0, PlaceRef::Local(place)),
+                name: format!("{}.{}", me.name, me.places[place as usize].name),
+                mark: true,
+                empty: false,
+            });
+        }
+    }
     out
 }
 
@@ -455,9 +640,21 @@ fn only_net(p: &CompiledProject, id: NetId) -> CompiledProject {
             }
         }
     }
-    let keep = |f: &Vec<(NetId, PlaceRef)>| {
-        f.iter()
-            .all(|&(n, r)| n == id || matches!(r, PlaceRef::Global(_)))
+    // A final marking (or goal) speaks of this net through its places: those, and the global
+    // places, are this net's end.
+    let mine = |list: &Vec<Vec<(NetId, PlaceRef)>>| -> Vec<Vec<(NetId, PlaceRef)>> {
+        list.iter()
+            .filter(|f| {
+                f.iter()
+                    .any(|&(n, r)| n == id && matches!(r, PlaceRef::Local(_)))
+            })
+            .map(|f| {
+                f.iter()
+                    .filter(|&&(n, r)| n == id || matches!(r, PlaceRef::Global(_)))
+                    .map(|&(_, r)| (0, r))
+                    .collect()
+            })
+            .collect()
     };
     CompiledProject {
         name: format!("{} (net {} alone)", p.name, net.name),
@@ -467,18 +664,8 @@ fn only_net(p: &CompiledProject, id: NetId) -> CompiledProject {
         programs: p.programs.clone(),
         timers: p.timers.clone(),
         start: vec![0],
-        finals: p
-            .finals
-            .iter()
-            .filter(|f| keep(f))
-            .map(|f| f.iter().map(|&(_, r)| (0, r)).collect())
-            .collect(),
-        goals: p
-            .goals
-            .iter()
-            .filter(|f| keep(f))
-            .map(|f| f.iter().map(|&(_, r)| (0, r)).collect())
-            .collect(),
+        finals: mine(&p.finals),
+        goals: mine(&p.goals),
         progress_excludes: p.progress_excludes.clone(),
         // The invariants speak of the whole project.
         invariants: Vec::new(),

@@ -24,23 +24,39 @@ fn marking_text(m: &[String]) -> String {
     }
 }
 
-/// The report for people: every error, and the expected findings grouped with counts (the
-/// details are in [`render_human_all`] and [`to_json`]).
+/// The report for people, on its own: a summary with every error and warning on one line, and
+/// the expected findings grouped with counts (the details are in [`render_human_all`] and
+/// [`to_json`]).
 pub fn render_human(project_name: &str, r: &Report) -> String {
-    render(project_name, r, false)
+    render(project_name, r, false, true)
 }
 
-/// The report for people with every finding listed (`petrel verify --all`).
+/// [`render_human`] with every finding listed (intended ends, loops, conflicts).
 pub fn render_human_all(project_name: &str, r: &Report) -> String {
-    render(project_name, r, true)
+    render(project_name, r, true, true)
 }
 
-fn render(project_name: &str, r: &Report, all: bool) -> String {
+/// The summary `petrel verify` prints after the findings' diagnostics ([`diagnostics`]): the
+/// counts of each kind, errors and warnings named by their code rather than repeated, and the
+/// expected findings grouped (every one with `all`).
+pub fn render_summary(project_name: &str, r: &Report, all: bool) -> String {
+    render(project_name, r, all, false)
+}
+
+fn render(project_name: &str, r: &Report, all: bool, details: bool) -> String {
     let mut o = String::new();
     let limit = |n: usize| if all { n } else { n.min(SHOWN) };
     let more = |o: &mut String, n: usize, what: &str| {
         if !all && n > SHOWN {
             let _ = writeln!(o, "  ... and {} more {what} (--all lists them)", n - SHOWN);
+        }
+    };
+    // An error or warning: its line in the stand-alone report, its code in the summary.
+    let item = |o: &mut String, code: &str, severity: &str, text: String| {
+        if details {
+            let _ = writeln!(o, "  {severity}: {text}");
+        } else {
+            let _ = writeln!(o, "  {severity}[{code}]: {text}");
         }
     };
     let _ = writeln!(
@@ -50,11 +66,11 @@ fn render(project_name: &str, r: &Report, all: bool) -> String {
     );
     let _ = writeln!(
         o,
-        "max tokens in a place: {}, max tokens in a marking: {}",
-        r.max_tokens_in_place, r.max_tokens_per_marking
+        "marked places: at most {} in one state; no place ever holds two tokens",
+        r.max_tokens_per_marking
     );
     if r.safe {
-        let _ = writeln!(o, "safe: yes, no place can receive a second token");
+        let _ = writeln!(o, "safe: yes, no firing asks for a second token in a place");
     } else {
         let _ = writeln!(
             o,
@@ -62,12 +78,16 @@ fn render(project_name: &str, r: &Report, all: bool) -> String {
             r.unsafe_places.len()
         );
         for u in &r.unsafe_places {
-            let _ = writeln!(
-                o,
-                "  error: {} would put a second token in {}, {}",
-                u.transition,
-                u.place,
-                trace_text(&u.trace)
+            item(
+                &mut o,
+                "E0601",
+                "error",
+                format!(
+                    "{} would put a second token in {}, {}",
+                    u.transition,
+                    u.place,
+                    trace_text(&u.trace)
+                ),
             );
         }
     }
@@ -89,18 +109,34 @@ fn render(project_name: &str, r: &Report, all: bool) -> String {
         r.dead_markings.len() - unintended.len(),
         unintended.len()
     );
-    for d in &unintended {
-        let _ = writeln!(
-            o,
-            "  error: dead marking: {}, {}",
-            marking_text(&d.marking),
-            trace_text(&d.trace)
+    for d in unintended.iter().take(if details {
+        unintended.len()
+    } else {
+        limit(unintended.len())
+    }) {
+        item(
+            &mut o,
+            "E0602",
+            "error",
+            format!(
+                "dead marking: {}, {}",
+                marking_text(&d.marking),
+                trace_text(&d.trace)
+            ),
         );
     }
+    if !details {
+        more(&mut o, unintended.len(), "dead markings");
+    }
     for d in finals.iter().take(limit(finals.len())) {
+        let what = if d.net_done {
+            "end of the net (it finished)"
+        } else {
+            "intended final marking"
+        };
         let _ = writeln!(
             o,
-            "  intended final marking: {}, {}",
+            "  {what}: {}, {}",
             marking_text(&d.marking),
             trace_text(&d.trace)
         );
@@ -124,35 +160,44 @@ fn render(project_name: &str, r: &Report, all: bool) -> String {
         }
     }
     match &r.no_progress {
+        None if r.declares_ends => {
+            let _ = writeln!(
+                o,
+                "progress: a declared end stays reachable from every state{}",
+                excluded_text(&r.progress_excludes)
+            );
+        }
         None => {
             let _ = writeln!(
                 o,
-                "progress: an end of the mission stays reachable from every state"
+                "progress: not checked (no [verify] final or goal declared)"
             );
         }
         Some(f) => {
             let _ = writeln!(
                 o,
-                "progress: NO, from {} state(s) no end of the mission can be reached{}:",
+                "progress: NO, from {} state(s) no declared end can be reached{}:",
                 f.states,
-                if f.excluded.is_empty() {
-                    String::new()
-                } else {
-                    format!(" without {} events", f.excluded.join(" or "))
-                }
+                excluded_text(&f.excluded)
             );
-            let _ = writeln!(
-                o,
-                "  error: the mission cannot finish from {}, {}",
-                marking_text(&f.marking),
-                trace_text(&f.trace)
+            item(
+                &mut o,
+                "E0605",
+                "error",
+                format!(
+                    "the mission cannot finish from {}, {}; it stays in {}, {}",
+                    marking_text(&f.marking),
+                    trace_text(&f.trace),
+                    marking_text(&f.stays_in),
+                    trace_text(&f.stays_in_trace)
+                ),
             );
         }
     }
     let _ = writeln!(o, "stuck nets: {}", r.stuck_nets.len());
     for s in &r.stuck_nets {
         let mut line = format!(
-            "  error: net {} can never fire again from {}, {}",
+            "net {} can never fire again from {}, {}",
             s.net,
             marking_text(&s.marking),
             trace_text(&s.trace)
@@ -162,15 +207,19 @@ fn render(project_name: &str, r: &Report, all: bool) -> String {
         } else if !s.waits_for.is_empty() {
             let _ = write!(line, "; it waits for {}", s.waits_for.join(", "));
         }
-        let _ = writeln!(o, "{line}");
+        item(&mut o, "E0606", "error", line);
     }
     let _ = writeln!(o, "loops of immediate transitions: {}", r.livelocks.len());
     for l in &r.livelocks {
-        let _ = writeln!(
-            o,
-            "  error: immediate transitions loop forever: {}, {}",
-            l.transitions.join(" → "),
-            trace_text(&l.trace)
+        item(
+            &mut o,
+            "E0603",
+            "error",
+            format!(
+                "immediate transitions loop forever: {}, {}",
+                l.transitions.join(" → "),
+                trace_text(&l.trace)
+            ),
         );
     }
     if !r.invariants.is_empty() {
@@ -181,27 +230,33 @@ fn render(project_name: &str, r: &Report, all: bool) -> String {
             r.invariant_violations.len()
         );
         for v in &r.invariant_violations {
-            let _ = writeln!(
-                o,
-                "  error: invariant `{}` is broken in {}, {}",
-                v.invariant,
-                marking_text(&v.marking),
-                trace_text(&v.trace)
+            item(
+                &mut o,
+                "E0604",
+                "error",
+                format!(
+                    "invariant `{}` is broken in {}, {}",
+                    v.invariant,
+                    marking_text(&v.marking),
+                    trace_text(&v.trace)
+                ),
             );
         }
     }
-    if !r.starvation.is_empty() {
-        let _ = writeln!(o, "starvation: {}", r.starvation.len());
-        for s in &r.starvation {
-            let _ = writeln!(
-                o,
-                "  warning: net {} can wait forever for {} while the loop on {{{}}} takes and gives it back, {}",
-                s.net,
+    let _ = writeln!(o, "starvation: {}", r.starvation.len());
+    for s in &r.starvation {
+        item(
+            &mut o,
+            "W0606",
+            "warning",
+            format!(
+                "{} can wait forever for {} while the loop on {{{}}} takes and gives it back, {}",
+                s.transition,
                 s.resource,
                 s.loop_events.join(", "),
                 trace_text(&s.trace)
-            );
-        }
+            ),
+        );
     }
     let _ = writeln!(
         o,
@@ -221,13 +276,17 @@ fn render(project_name: &str, r: &Report, all: bool) -> String {
     more(&mut o, r.event_loops.len(), "loops");
     let _ = writeln!(o, "conflicts: {}", r.conflicts.len());
     for c in r.conflicts.iter().take(limit(r.conflicts.len())) {
-        let _ = writeln!(
-            o,
-            "  warning: on {}, {} fires and {} does not (written order), {}",
-            c.event,
-            c.winner,
-            c.loser,
-            trace_text(&c.trace)
+        item(
+            &mut o,
+            "W0601",
+            "warning",
+            format!(
+                "on {}, {} fires and {} does not (written order), {}",
+                c.event,
+                c.winner,
+                c.loser,
+                trace_text(&c.trace)
+            ),
         );
     }
     more(&mut o, r.conflicts.len(), "conflicts");
@@ -249,13 +308,23 @@ fn render(project_name: &str, r: &Report, all: bool) -> String {
             r.protocols.join(", ")
         );
     }
-    let errors = r.errors();
-    if errors == 0 {
+    let (errors, warnings) = (r.errors(), r.warnings());
+    if errors == 0 && warnings == 0 {
         let _ = writeln!(o, "result: verified, no error");
+    } else if errors == 0 {
+        let _ = writeln!(o, "result: verified, no error, {warnings} warning(s)");
     } else {
-        let _ = writeln!(o, "result: {errors} error(s)");
+        let _ = writeln!(o, "result: {errors} error(s), {warnings} warning(s)");
     }
     o
+}
+
+fn excluded_text(excluded: &[String]) -> String {
+    if excluded.is_empty() {
+        String::new()
+    } else {
+        format!(" without {} events", excluded.join(" or "))
+    }
 }
 
 /// The report for tools.
@@ -263,15 +332,31 @@ pub fn to_json(r: &Report) -> serde_json::Value {
     serde_json::to_value(r).unwrap_or(serde_json::Value::Null)
 }
 
-/// The findings as diagnostics on the project's text, for `petrel check` and `petrel verify`:
-/// errors for unsafe places, unintended dead markings, livelocks, broken invariants, a mission
-/// that cannot finish and stuck nets; warnings for conflicts, starvation, transitions that
-/// never fire, nets never activated and events nobody waits for. Each is located at the
+/// The findings as diagnostics on the project's text, grouped (what `petrel check` and
+/// `petrel verify` print with file, line and caret): errors for unsafe places, unintended dead
+/// markings (one diagnostic for all of them, the first in full), livelocks, broken invariants,
+/// a mission that cannot finish and stuck nets; warnings for conflicts, starvation, transitions
+/// that never fire, nets never activated and events nobody waits for. Each is located at the
 /// transition, net, place or declaration concerned (an instance's at its template's text).
 pub fn diagnostics(project: &crate::model::Project, r: &Report) -> crate::diag::Diagnostics {
+    diagnostics_with(project, r, false)
+}
+
+/// [`diagnostics`] with every finding apart (`petrel verify --all`): one diagnostic per dead
+/// marking.
+pub fn diagnostics_all(project: &crate::model::Project, r: &Report) -> crate::diag::Diagnostics {
+    diagnostics_with(project, r, true)
+}
+
+fn diagnostics_with(
+    project: &crate::model::Project,
+    r: &Report,
+    all: bool,
+) -> crate::diag::Diagnostics {
     use crate::diag::{Diagnostic, Diagnostics};
+    use crate::source::Span;
     let mut d = Diagnostics::new();
-    let at = |span: Option<crate::source::Span>, diag: Diagnostic| Diagnostic { span, ..diag };
+    let at = |span: Option<Span>, diag: Diagnostic| Diagnostic { span, ..diag };
     // An instance's findings point at its template's text.
     let decl_of = |net: &str| {
         let template = r.templates.get(net).map(String::as_str).unwrap_or(net);
@@ -285,6 +370,43 @@ pub fn diagnostics(project: &crate::model::Project, r: &Report) -> crate::diag::
             .map(|x| x.name.span)
     };
     let net_span = |net: &str| decl_of(net).map(|n| n.name.span);
+    // `NET.place` (a completion place `NET.CHILD.done` at its net) or `global.place`.
+    let place_span = |qualified: &str| -> Option<Span> {
+        let (net, place) = qualified.split_once('.')?;
+        if net == "global" {
+            return project
+                .manifest
+                .globals
+                .iter()
+                .find(|g| g.name.text == place)
+                .map(|g| g.name.span);
+        }
+        let decl = decl_of(net)?;
+        decl.places()
+            .find(|x| x.name.text == place)
+            .map(|x| x.name.span)
+            .or(Some(decl.name.span))
+    };
+    // A state's places: the first local one is where the finding is; the others explain it.
+    let on_places = |diag: Diagnostic, places: &[String], first_label: &str| {
+        let mut located: Vec<(Span, &String)> = places
+            .iter()
+            .filter_map(|q| place_span(q).map(|s| (s, q)))
+            .collect();
+        // A net's place before a global one: the net is where the mission is.
+        located.sort_by_key(|(_, q)| q.starts_with("global."));
+        let mut it = located.into_iter();
+        let Some((first, _)) = it.next() else {
+            return diag;
+        };
+        let mut diag = at(Some(first), diag).label(first_label.to_string());
+        for (span, q) in it {
+            if span != first {
+                diag = diag.related(span, format!("{q} is marked too"));
+            }
+        }
+        diag
+    };
     for v in &r.invariant_violations {
         let span = project
             .manifest
@@ -315,14 +437,26 @@ pub fn diagnostics(project: &crate::model::Project, r: &Report) -> crate::diag::
             .help("the player refuses such a firing: make sure the place is empty when this transition fires (an extra input, or an emptiness test `not PLACE`)"),
         ));
     }
-    for x in r.dead_markings.iter().filter(|x| !x.intended) {
-        d.push(
-            Diagnostic::global(
-                "E0602",
-                format!("dead marking {}: {}", trace_text(&x.trace), marking_text(&x.marking)),
-            )
-            .help("no event can move the mission on from there: add a transition out of it, or declare it a planned end in the manifest's [verify] final"),
+    let dead: Vec<_> = r.dead_markings.iter().filter(|x| !x.intended).collect();
+    let shown = if all { dead.len() } else { dead.len().min(1) };
+    for x in &dead[..shown] {
+        let mut message = format!(
+            "dead marking {}: {}",
+            trace_text(&x.trace),
+            marking_text(&x.marking)
         );
+        if !all && dead.len() > 1 {
+            message = format!(
+                "{} dead markings; the first {message} (--all lists them)",
+                dead.len()
+            );
+        }
+        d.push(on_places(
+            Diagnostic::global("E0602", message)
+                .help("no event can move the mission on from there: add a transition out of it, or declare it a planned end in the manifest's [verify] final"),
+            &x.places,
+            "marked in the dead marking",
+        ));
     }
     for l in &r.livelocks {
         d.push(at(
@@ -340,22 +474,28 @@ pub fn diagnostics(project: &crate::model::Project, r: &Report) -> crate::diag::
         ));
     }
     if let Some(f) = &r.no_progress {
-        d.push(
+        let without = if f.excluded.is_empty() {
+            String::new()
+        } else {
+            format!(" without {} events", f.excluded.join(" or "))
+        };
+        d.push(on_places(
             Diagnostic::global(
                 "E0605",
                 format!(
-                    "the mission cannot finish from {} reachable state(s); the first: {}, {}",
+                    "the mission cannot finish{without} from {} reachable state(s); the first: {}, {}",
                     f.states,
                     marking_text(&f.marking),
                     trace_text(&f.trace)
                 ),
             )
-            .help(if f.excluded.is_empty() {
-                "no declared end ([verify] final or goal) can be reached from there: look for the transition the mission lacks to go on".to_string()
-            } else {
-                format!("no declared end ([verify] final or goal) can be reached from there without {} events: look for the transition the mission lacks to go on", f.excluded.join(" or "))
-            }),
-        );
+            .help(format!(
+                "no declared end ([verify] final or goal) can be reached{without} once the mission is in {}: look for the transition it lacks to go on from there",
+                marking_text(&f.stays_in)
+            )),
+            &f.places,
+            &format!("the mission stays here {}", trace_text(&f.stays_in_trace)),
+        ));
     }
     for s in &r.stuck_nets {
         let mut msg = format!(
@@ -366,26 +506,34 @@ pub fn diagnostics(project: &crate::model::Project, r: &Report) -> crate::diag::
         if let Some(cycle) = &s.resource_cycle {
             let _ = write!(msg, "; a resource cycle: {}", cycle.join("; "));
         }
-        d.push(at(
+        let mut diag = at(
             net_span(&s.net),
             Diagnostic::error("E0606", Default::default(), msg)
                 .label(format!("stuck {}", trace_text(&s.trace)))
-                .help(if s.waits_for.is_empty() {
+                .help(if s.resource_cycle.is_some() {
+                    "each net holds a place another waits for: take the places in one order everywhere, or take them together in one transition".to_string()
+                } else if s.waits_for.is_empty() {
                     "whatever events come, no transition of this net is enabled again: add the way out, or declare the state a planned end of this net in [verify] final".to_string()
                 } else {
-                    format!("it waits for {} that nothing gives back: take the places in one order everywhere, or give them back on every path", s.waits_for.join(", "))
+                    format!("it waits for {}, which nothing gives back from there: give it back on every path", s.waits_for.join(", "))
                 }),
-        ));
+        );
+        for q in &s.places {
+            if let Some(span) = place_span(q) {
+                diag = diag.related(span, format!("{q} stays marked"));
+            }
+        }
+        d.push(diag);
     }
     for s in &r.starvation {
         d.push(at(
-            net_span(&s.net),
+            transition_span(&s.transition).or_else(|| net_span(&s.net)),
             Diagnostic::warning(
                 "W0606",
                 Default::default(),
                 format!(
-                    "net {} can wait forever for {} while the loop on {{{}}} takes and gives it back",
-                    s.net,
+                    "{} can wait forever for {} while the loop on {{{}}} takes and gives it back",
+                    s.transition,
                     s.resource,
                     s.loop_events.join(", ")
                 ),

@@ -1,0 +1,386 @@
+//! The web server: the page and its assets, the drawing, the JSON API and the event stream.
+//!
+//! | route                  | what                                                          |
+//! |------------------------|---------------------------------------------------------------|
+//! | `GET /`                | the page (`assets/index.html`, `monitor.js`, `monitor.css`)   |
+//! | `GET /api/model`       | the project as the page needs it, the mode, whether it may send |
+//! | `GET /api/nets.svg`    | the nets, laid out by Graphviz                                |
+//! | `GET /api/tree.svg`    | the tree of nets                                              |
+//! | `GET /api/events`      | live: Server-Sent Events (a snapshot, then steps and status)  |
+//! | `GET /api/marking`     | live: the current marking as JSON                             |
+//! | `GET /api/replay`      | replay: the journal's timeline                                |
+//! | `POST /api/send`       | `--operator` only, with the token: `{"event": "name(args)"}`  |
+//!
+//! Every error is JSON, `{"error": "..."}`, with 400 (a request that cannot mean anything),
+//! 403 (read-only monitor, missing or wrong token), 404 (no such route, or not in this mode)
+//! or 502 (the player did not take the event).
+
+use super::layout::Drawing;
+use super::live::{self, Live};
+use super::names::Names;
+use super::operator;
+use crate::common::Outcome;
+use axum::extract::{RawQuery, State};
+use axum::http::{header, HeaderMap, StatusCode};
+use axum::response::sse::{Event, KeepAlive, Sse};
+use axum::response::{IntoResponse, Response};
+use axum::routing::{get, post};
+use axum::Router;
+use futures_util::stream::{Stream, StreamExt};
+use petrel_nets::compiled::CompiledProject;
+use serde_json::{json, Value as Json};
+use std::convert::Infallible;
+use std::net::SocketAddr;
+use std::sync::{mpsc, Arc, Mutex};
+use std::time::Duration;
+
+const INDEX_HTML: &str = include_str!("assets/index.html");
+const MONITOR_JS: &str = include_str!("assets/monitor.js");
+const MONITOR_CSS: &str = include_str!("assets/monitor.css");
+
+/// What the monitor shows.
+pub enum Mode {
+    /// A running vehicle; `operator`: the page may send events.
+    Live {
+        /// The vehicle followed.
+        vehicle: Box<petrel_ipc::Vehicle>,
+        /// Started with `--operator`.
+        operator: bool,
+    },
+    /// A recorded mission: its timeline.
+    Replay(Json),
+}
+
+/// The server's state, shared by every request.
+struct App {
+    project: Arc<CompiledProject>,
+    drawing: Drawing,
+    model: Json,
+    live: Option<Arc<Live>>,
+    replay: Option<Json>,
+    /// The operator's token and the queue of the thread that sends, with `--operator`.
+    operator: Option<(String, Mutex<mpsc::Sender<operator::Request>>)>,
+}
+
+/// A JSON error response.
+fn error(status: StatusCode, message: impl Into<String>) -> Response {
+    (status, axum::Json(json!({ "error": message.into() }))).into_response()
+}
+
+/// Serves the monitor on `listen` until Ctrl-C or `run_for`.
+pub fn serve(
+    project: CompiledProject,
+    names: Names,
+    drawing: Drawing,
+    mode: Mode,
+    listen: SocketAddr,
+    run_for: Option<Duration>,
+) -> Outcome {
+    let project = Arc::new(project);
+    let names = Arc::new(names);
+    let mut model = names.model.clone();
+    let (live, replay, operator, vehicle) = match mode {
+        Mode::Live { vehicle, operator } => {
+            model["mode"] = json!("live");
+            model["vehicle"] = json!(vehicle.name());
+            model["operator"] = json!(operator);
+            let op = if operator {
+                let token = match operator::new_token() {
+                    Ok(t) => t,
+                    Err(e) => return Outcome::Usage(e),
+                };
+                let (tx, rx) = mpsc::channel();
+                let v = (*vehicle).clone();
+                std::thread::spawn(move || operator::serve(v, rx));
+                Some((token, Mutex::new(tx)))
+            } else {
+                None
+            };
+            (Some(Live::new()), None, op, Some(*vehicle))
+        }
+        Mode::Replay(t) => {
+            model["mode"] = json!("replay");
+            model["operator"] = json!(false);
+            (None, Some(t), None, None)
+        }
+    };
+    let token = operator.as_ref().map(|(t, _)| t.clone());
+    let app = Arc::new(App {
+        project: project.clone(),
+        drawing,
+        model,
+        live: live.clone(),
+        replay,
+        operator,
+    });
+    let follower = match (&live, vehicle) {
+        (Some(live), Some(vehicle)) => {
+            let (live, project, names) = (live.clone(), project.clone(), names.clone());
+            Some(std::thread::spawn(move || {
+                if let Err(e) = live::follow(&project, &names, &vehicle, &live) {
+                    tracing::error!(error = %e, "the monitor cannot follow the vehicle");
+                    live.fail(format!("the monitor cannot follow the vehicle: {e}"));
+                }
+            }))
+        }
+        _ => None,
+    };
+    let runtime = match tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+    {
+        Ok(r) => r,
+        Err(e) => return Outcome::Usage(format!("cannot start the web server: {e}")),
+    };
+    let outcome = runtime.block_on(async move {
+        let listener = match tokio::net::TcpListener::bind(listen).await {
+            Ok(l) => l,
+            Err(e) => return Outcome::Usage(format!("cannot listen on {listen}: {e}")),
+        };
+        let addr = listener.local_addr().unwrap_or(listen);
+        crate::common::out(&format!("petrel monitor: listening on http://{addr}/\n"));
+        if let Some(t) = &token {
+            crate::common::out(&format!(
+                "operator token: {t}\nopen http://{addr}/?token={t} to send events from the page\n"
+            ));
+        }
+        let router = Router::new()
+            .route("/", get(index))
+            .route("/monitor.js", get(script))
+            .route("/monitor.css", get(style))
+            .route("/api/model", get(model_route))
+            .route("/api/nets.svg", get(nets_svg))
+            .route("/api/tree.svg", get(tree_svg))
+            .route("/api/events", get(events))
+            .route("/api/marking", get(marking))
+            .route("/api/replay", get(replay_route))
+            .route("/api/send", post(send))
+            .fallback(not_found)
+            .method_not_allowed_fallback(not_allowed)
+            .with_state(app);
+        let shutdown = async move {
+            match run_for {
+                Some(d) => {
+                    tokio::select! {
+                        _ = tokio::time::sleep(d) => {}
+                        _ = tokio::signal::ctrl_c() => {}
+                        _ = terminate() => {}
+                    }
+                }
+                None => {
+                    tokio::select! {
+                        _ = tokio::signal::ctrl_c() => {}
+                        _ = terminate() => {}
+                    }
+                }
+            }
+        };
+        match axum::serve(listener, router)
+            .with_graceful_shutdown(shutdown)
+            .await
+        {
+            Ok(()) => Outcome::Clean,
+            Err(e) => Outcome::Usage(format!("the web server failed: {e}")),
+        }
+    });
+    // Open event streams would hold the graceful shutdown forever: the runtime's end drops them.
+    runtime.shutdown_timeout(Duration::from_millis(200));
+    if let Some(live) = &live {
+        live.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+    if let Some(f) = follower {
+        let _ = f.join();
+    }
+    outcome
+}
+
+/// SIGTERM, as `petrel up` and test harnesses stop processes.
+async fn terminate() {
+    match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+        Ok(mut s) => {
+            s.recv().await;
+        }
+        Err(_) => std::future::pending::<()>().await,
+    }
+}
+
+async fn index() -> Response {
+    (
+        [(header::CONTENT_TYPE, "text/html; charset=utf-8")],
+        INDEX_HTML,
+    )
+        .into_response()
+}
+
+async fn script() -> Response {
+    (
+        [(header::CONTENT_TYPE, "text/javascript; charset=utf-8")],
+        MONITOR_JS,
+    )
+        .into_response()
+}
+
+async fn style() -> Response {
+    (
+        [(header::CONTENT_TYPE, "text/css; charset=utf-8")],
+        MONITOR_CSS,
+    )
+        .into_response()
+}
+
+async fn model_route(State(app): State<Arc<App>>) -> Response {
+    axum::Json(app.model.clone()).into_response()
+}
+
+async fn nets_svg(State(app): State<Arc<App>>) -> Response {
+    (
+        [(header::CONTENT_TYPE, "image/svg+xml")],
+        app.drawing.nets.clone(),
+    )
+        .into_response()
+}
+
+async fn tree_svg(State(app): State<Arc<App>>) -> Response {
+    (
+        [(header::CONTENT_TYPE, "image/svg+xml")],
+        app.drawing.tree.clone(),
+    )
+        .into_response()
+}
+
+async fn not_found(uri: axum::http::Uri) -> Response {
+    error(
+        StatusCode::NOT_FOUND,
+        format!("no such page: {}", uri.path()),
+    )
+}
+
+async fn not_allowed(method: axum::http::Method, uri: axum::http::Uri) -> Response {
+    error(
+        StatusCode::METHOD_NOT_ALLOWED,
+        format!("{method} is not allowed on {}", uri.path()),
+    )
+}
+
+async fn marking(State(app): State<Arc<App>>) -> Response {
+    match &app.live {
+        Some(live) => axum::Json(live.marking()).into_response(),
+        None => error(
+            StatusCode::NOT_FOUND,
+            "this monitor replays a journal: its marking is in /api/replay",
+        ),
+    }
+}
+
+async fn replay_route(State(app): State<Arc<App>>) -> Response {
+    match &app.replay {
+        Some(t) => axum::Json(t.clone()).into_response(),
+        None => error(
+            StatusCode::NOT_FOUND,
+            "this monitor follows a live vehicle: start it with --journal DIR to replay one",
+        ),
+    }
+}
+
+/// The live stream: what a page starts from, then every change; a page that fell behind by
+/// more than the channel holds gets the latest marking, with how much it skipped.
+async fn events(State(app): State<Arc<App>>) -> Response {
+    let Some(live) = app.live.clone() else {
+        return error(
+            StatusCode::NOT_FOUND,
+            "this monitor replays a journal: there is no live stream",
+        );
+    };
+    let s: std::pin::Pin<Box<dyn Stream<Item = Result<Event, Infallible>> + Send>> =
+        Box::pin(live::page_stream(live).map(|m| Ok(Event::default().data(&*m))));
+    Sse::new(s).keep_alive(KeepAlive::default()).into_response()
+}
+
+/// Sends an operator event: `--operator` only, with the token (header `X-Petrel-Token` or
+/// query `token`), a body `{"event": "name(args)"}` read as `petrel send` reads its argument.
+async fn send(
+    State(app): State<Arc<App>>,
+    RawQuery(query): RawQuery,
+    headers: HeaderMap,
+    body: axum::body::Bytes,
+) -> Response {
+    let Some((token, queue)) = &app.operator else {
+        return error(
+            StatusCode::FORBIDDEN,
+            "this monitor is read-only: start it with --operator to send events",
+        );
+    };
+    let given = headers
+        .get("x-petrel-token")
+        .and_then(|v| v.to_str().ok())
+        .map(str::to_string)
+        .or_else(|| query_token(query.as_deref().unwrap_or("")));
+    match given {
+        None => {
+            return error(
+                StatusCode::FORBIDDEN,
+                "sending events needs the operator token (header X-Petrel-Token or ?token=) that petrel monitor printed",
+            )
+        }
+        Some(g) if !operator::same_token(&g, token) => {
+            return error(StatusCode::FORBIDDEN, "wrong operator token")
+        }
+        Some(_) => {}
+    }
+    let doc: Json = match serde_json::from_slice(&body) {
+        Ok(d) => d,
+        Err(e) => {
+            return error(
+                StatusCode::BAD_REQUEST,
+                format!("the body is not JSON ({e}): send {{\"event\": \"name(args)\"}}"),
+            )
+        }
+    };
+    let Some(text) = doc.get("event").and_then(Json::as_str) else {
+        return error(
+            StatusCode::BAD_REQUEST,
+            "the body has no `event` text: send {\"event\": \"name(args)\"}",
+        );
+    };
+    let (name, params) = match crate::common::operator_event(text, &app.project) {
+        Ok(e) => e,
+        Err(e) => return error(StatusCode::BAD_REQUEST, e),
+    };
+    let (reply, verdict) = tokio::sync::oneshot::channel();
+    let queued = queue
+        .lock()
+        .map(|q| {
+            q.send(operator::Request {
+                name,
+                params,
+                reply,
+            })
+            .is_ok()
+        })
+        .unwrap_or(false);
+    if !queued {
+        return error(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            "the monitor's sending thread has stopped",
+        );
+    }
+    match verdict.await {
+        Ok(Ok(v)) if v["taken"] == true => axum::Json(v).into_response(),
+        Ok(Ok(v)) => (StatusCode::BAD_GATEWAY, axum::Json(v)).into_response(),
+        Ok(Err(e)) => error(StatusCode::BAD_GATEWAY, e),
+        Err(_) => error(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            "the monitor's sending thread has stopped",
+        ),
+    }
+}
+
+/// The `token` of a query string (tokens are hexadecimal: nothing to decode).
+fn query_token(query: &str) -> Option<String> {
+    query
+        .split('&')
+        .filter_map(|kv| kv.split_once('='))
+        .find(|(k, _)| *k == "token")
+        .map(|(_, v)| v.to_string())
+}
