@@ -14,7 +14,6 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 echo "== building (release): petrel, examples/echo, petrel-bench" >&2
-cargo build --release --locked -q -p petrel-cli --bin petrel
-cargo build --release --locked -q -p petrel-programs --example echo
-cargo build --release --locked -q -p petrel-bench
+cargo build --release --locked -q -p petrel-cli -p petrel-programs -p petrel-bench \
+    --bin petrel --bin petrel-bench --example echo
 exec target/release/petrel-bench run "$@"

@@ -202,13 +202,15 @@ pub fn all(s: &crate::measure::Settings) -> Vec<Res<Footprint>> {
     let journal = tempfile::tempdir();
     let uav = s.repo.join("missions/uav");
     let auv = s.repo.join("missions/auv");
+    let redermor = s.repo.join("missions/redermor");
     let jdir = |name: &str| {
         journal
             .as_ref()
             .map(|d| d.path().join(name).display().to_string())
             .unwrap_or_else(|_| format!("/nonexistent/{name}"))
     };
-    let players: Vec<(&str, &Path)> = vec![("UAV", uav.as_path()), ("AUV", auv.as_path())];
+    let players: Vec<(&str, &Path)> =
+        vec![("UAV", uav.as_path()), ("Redermor", redermor.as_path())];
     for (name, dir) in players {
         let v = vehicle_name("fp");
         let j = jdir(&v);

@@ -148,8 +148,11 @@ pub fn ratio(a: f64, b: f64) -> String {
         let r = a / b;
         if r >= 10.0 {
             format!("{r:.0}x")
-        } else {
+        } else if r >= 0.1 {
             format!("{r:.1}x")
+        } else {
+            // A figure far below its baseline still says how far.
+            format!("{r:.3}x")
         }
     } else {
         "-".to_owned()

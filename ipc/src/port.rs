@@ -93,13 +93,14 @@ pub const EVENTS: ServiceSpec = ServiceSpec {
     safe_overflow: false,
 };
 
-/// Calls from the player to one program (one service per program): a program may fall 512
+/// Calls from the player to one program (one service per program): a program may fall 128
 /// calls behind before the player's calls to it are refused (each refusal becomes
-/// `call_failed`). The player pays about 1 MB per program for it (see [`EVENTS`]). No
-/// history: a restarted program never receives stale calls.
+/// `call_failed`). The player pays about 0.3 MB per program for it (see [`EVENTS`]; at 4,096
+/// the five programs of Redermor cost it about 40 MB). No history: a restarted program never
+/// receives stale calls.
 pub const CALLS: ServiceSpec = ServiceSpec {
     kind: MsgKind::Call,
-    subscriber_buffer: 512,
+    subscriber_buffer: 128,
     history: 0,
     max_publishers: 4,
     max_subscribers: 1,
@@ -109,13 +110,13 @@ pub const CALLS: ServiceSpec = ServiceSpec {
     safe_overflow: false,
 };
 
-/// Marking deltas to monitors. A monitor that falls 256 steps behind is refused further
+/// Marking deltas to monitors. A monitor that falls 128 steps behind is refused further
 /// deltas (counted by the player, seen as a gap by the monitor) until it catches up, and must
-/// wait for a snapshot. Eight monitors of 256 deltas cost the player about 4 MB (see
+/// wait for a snapshot. Eight monitors of 128 deltas cost the player about 2 MB (see
 /// [`EVENTS`]).
 pub const MARKING: ServiceSpec = ServiceSpec {
     kind: MsgKind::Marking,
-    subscriber_buffer: 256,
+    subscriber_buffer: 128,
     history: 0,
     max_publishers: 2,
     max_subscribers: 8,
