@@ -17,15 +17,12 @@ pub fn status_kb(pid: u32, key: &str) -> Option<u64> {
         .and_then(|v| v.split_whitespace().next()?.parse().ok())
 }
 
-/// Where a process's resident memory is, from /proc/PID/smaps: kB per kind of mapping, and the
-/// largest shared-memory files.
+/// Where a process's resident memory is, from /proc/PID/smaps: kB per kind of mapping.
 #[derive(Clone, Debug, Default)]
 pub struct Breakdown {
     /// kB per kind: "shared memory (iceoryx2)", "heap and anonymous", "binary", "libraries",
     /// "stack", "other".
     pub kinds: BTreeMap<String, u64>,
-    /// Shared-memory files by resident kB, largest first (name, resident kB, mapped kB).
-    pub shm: Vec<(String, u64, u64)>,
 }
 
 /// Reads /proc/PID/smaps.
@@ -33,8 +30,7 @@ pub fn breakdown(pid: u32) -> Option<Breakdown> {
     let text = std::fs::read_to_string(format!("/proc/{pid}/smaps")).ok()?;
     let exe = std::fs::read_link(format!("/proc/{pid}/exe")).ok();
     let mut b = Breakdown::default();
-    let mut current: Option<(String, String, u64)> = None; // kind, path, mapped kB
-    let mut shm: BTreeMap<String, (u64, u64)> = BTreeMap::new();
+    let mut current: Option<String> = None; // the kind of the mapping being read
     for line in text.lines() {
         let first = line.split_whitespace().next().unwrap_or("");
         if first.contains('-') && first.chars().all(|c| c.is_ascii_hexdigit() || c == '-') {
@@ -56,26 +52,14 @@ pub fn breakdown(pid: u32) -> Option<Breakdown> {
             } else {
                 "other"
             };
-            current = Some((kind.to_owned(), path, 0));
-        } else if let Some(v) = line.strip_prefix("Size:") {
-            if let Some(c) = current.as_mut() {
-                c.2 = v.split_whitespace().next()?.parse().ok()?;
-            }
+            current = Some(kind.to_owned());
         } else if let Some(v) = line.strip_prefix("Rss:") {
             let kb: u64 = v.split_whitespace().next()?.parse().ok()?;
-            if let Some((kind, path, size)) = &current {
+            if let Some(kind) = &current {
                 *b.kinds.entry(kind.clone()).or_default() += kb;
-                if kind.starts_with("shared") {
-                    let name = path.rsplit('/').next().unwrap_or(path).to_owned();
-                    let e = shm.entry(name).or_default();
-                    e.0 += kb;
-                    e.1 += size;
-                }
             }
         }
     }
-    b.shm = shm.into_iter().map(|(n, (r, s))| (n, r, s)).collect();
-    b.shm.sort_by(|a, b| b.1.cmp(&a.1).then(b.2.cmp(&a.2)));
     Some(b)
 }
 

@@ -380,28 +380,6 @@ impl Report {
                 prev = Some(*kb);
             }
         }
-        // The player's largest shared-memory mappings: where its memory goes.
-        if let Some(f) = self
-            .footprint
-            .iter()
-            .filter_map(|f| f.as_ref().ok())
-            .find(|f| f.what.starts_with("player, UAV"))
-        {
-            if let Some(b) = &f.breakdown {
-                let _ = writeln!(
-                    o,
-                    "\nThe UAV player's largest shared-memory mappings (resident / mapped, MB; iceoryx2 names its files by a hash of the service):\n\n| file | resident MB | mapped MB |\n|---|---:|---:|"
-                );
-                for (name, r, m) in b.shm.iter().take(8) {
-                    let _ = writeln!(
-                        o,
-                        "| `{name}` | {:.2} | {:.2} |",
-                        *r as f64 / 1024.0,
-                        *m as f64 / 1024.0
-                    );
-                }
-            }
-        }
         o.push('\n');
     }
 
