@@ -23,6 +23,9 @@ echo "== cargo fmt --check"
 cargo fmt --all -- --check
 echo "== cargo clippy"
 cargo clippy --workspace --all-targets --locked -- -D warnings
+# cargo test also runs the latency suite in its short mode (bench/tests/short.rs: a few hundred
+# rounds of every part but the VM's, its report and plots written to a temporary folder, no time
+# asserted), so that scripts/bench.sh cannot rot.
 echo "== cargo test"
 log=$(mktemp)
 trap 'rm -f "$log"' EXIT

@@ -70,25 +70,37 @@ pub struct ServiceSpec {
     pub safe_overflow: bool,
 }
 
-/// Events into the player: a burst of 16,384 events from one sender fits in the player's
-/// buffer; one player receives (a second one is refused).
+/// Events into the player: a burst of 2,048 events from one sender fits in the player's
+/// buffer (200 ms of a 10 kHz stream while the player does not read); one player receives (a
+/// second one is refused).
+///
+/// **What a buffer costs.** A sender holds `max_subscribers x (subscriber_buffer + 2) + 2`
+/// samples, and iceoryx2 0.10 keeps, in the sender's own memory, a reference counter per
+/// sample for each of the 255 segments a power-of-two publisher may grow to: about 2 KiB of
+/// resident memory per sample, whatever the body's size. 16,384 events cost every program
+/// 33 MB; 2,048 cost it 4 MB (docs/benchmarks.md, "Footprint").
 pub const EVENTS: ServiceSpec = ServiceSpec {
     kind: MsgKind::Event,
-    subscriber_buffer: 16_384,
+    subscriber_buffer: 2_048,
     history: 0,
-    max_publishers: 32,
+    // 50 programs, the data server and operator tools at once (the scale benchmark): a
+    // sender slot costs the service a few bytes, a sender's samples are its own.
+    max_publishers: 128,
     max_subscribers: 1,
-    max_nodes: 64,
+    max_nodes: 160,
     initial_slice_len: 512,
     max_body_len: 64 * 1024,
     safe_overflow: false,
 };
 
-/// Calls from the player to one program (one service per program). No history: a restarted
-/// program never receives stale calls.
+/// Calls from the player to one program (one service per program): a program may fall 128
+/// calls behind before the player's calls to it are refused (each refusal becomes
+/// `call_failed`). The player pays about 0.3 MB per program for it (see [`EVENTS`]; at 4,096
+/// the five programs of Redermor cost it about 40 MB). No history: a restarted program never
+/// receives stale calls.
 pub const CALLS: ServiceSpec = ServiceSpec {
     kind: MsgKind::Call,
-    subscriber_buffer: 4_096,
+    subscriber_buffer: 128,
     history: 0,
     max_publishers: 4,
     max_subscribers: 1,
@@ -98,12 +110,13 @@ pub const CALLS: ServiceSpec = ServiceSpec {
     safe_overflow: false,
 };
 
-/// Marking deltas to monitors. A monitor that falls 1,024 steps behind is refused further
+/// Marking deltas to monitors. A monitor that falls 128 steps behind is refused further
 /// deltas (counted by the player, seen as a gap by the monitor) until it catches up, and must
-/// wait for a snapshot.
+/// wait for a snapshot. Eight monitors of 128 deltas cost the player about 2 MB (see
+/// [`EVENTS`]).
 pub const MARKING: ServiceSpec = ServiceSpec {
     kind: MsgKind::Marking,
-    subscriber_buffer: 1_024,
+    subscriber_buffer: 128,
     history: 0,
     max_publishers: 2,
     max_subscribers: 8,

@@ -1,0 +1,512 @@
+//! `petrel-bench`: Petrel's latency suite, one command and one report (`scripts/bench.sh`).
+//!
+//! `petrel-bench run` measures, in one go on the machine at hand: the transport round trip
+//! (program -> player -> program) per wait strategy beside raw iceoryx2, Unix-socket and TCP
+//! ping-pongs; the vehicle path through the CAN data server on the in-memory bus and on vcan0
+//! in the VM bench beside a bare echo; the same round trips under load; the processes'
+//! footprint; and the round trip with 1, 10 and 50 programs. It writes docs/benchmarks.md's
+//! latency section and CDF plots in docs/bench/. `petrel-bench role ...` are the processes a
+//! measurement starts (this binary again); `petrel-bench vcan` is what runs inside the VM.
+
+mod footprint;
+mod measure;
+mod project;
+mod report;
+mod roles;
+mod stats;
+mod vehicle;
+
+use std::path::PathBuf;
+use std::process::{Command, ExitCode};
+use std::time::Duration;
+
+use clap::{Parser, Subcommand};
+use petrel_ipc::WaitStrategy;
+
+use measure::{Load, Settings};
+use report::Report;
+
+#[derive(Parser)]
+#[command(name = "petrel-bench", about = "Petrel's latency benchmark suite")]
+struct Cli {
+    #[command(subcommand)]
+    command: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Measure, and write the report (docs/benchmarks.md's section, docs/bench/*.svg).
+    Run(RunArgs),
+    /// The vcan measurements, where vcan0 exists (the VM): printed for `run` to read.
+    Vcan {
+        #[arg(long, default_value = "vcan0")]
+        iface: String,
+        #[arg(long)]
+        rounds: usize,
+        #[arg(long)]
+        warmup: usize,
+        #[arg(long)]
+        max_secs: u64,
+    },
+    /// A process of a measurement (this binary run again).
+    #[command(hide = true)]
+    Role {
+        #[command(subcommand)]
+        role: RoleCmd,
+    },
+}
+
+#[derive(clap::Args)]
+struct RunArgs {
+    /// A few hundred rounds each (the test suite's mode): nothing is written unless --doc or
+    /// --svg is given.
+    #[arg(long)]
+    short: bool,
+    /// Only these parts (comma-separated: transport, vehicle, load, footprint, scale): printed,
+    /// nothing written unless --doc or --svg is given.
+    #[arg(long, value_delimiter = ',')]
+    only: Vec<String>,
+    /// The Markdown file whose latency section is rewritten.
+    #[arg(long)]
+    doc: Option<PathBuf>,
+    /// Where the SVG plots go.
+    #[arg(long)]
+    svg: Option<PathBuf>,
+    /// Skip the vcan part (it boots a qemu VM).
+    #[arg(long)]
+    no_vm: bool,
+    /// The repository (missions/, scripts/vcan-vm.sh); default: the one this was built from.
+    #[arg(long)]
+    repo: Option<PathBuf>,
+}
+
+#[derive(Subcommand)]
+enum RoleCmd {
+    Player {
+        #[arg(long)]
+        dir: PathBuf,
+        #[arg(long)]
+        vehicle: String,
+        #[arg(long, default_value = "block")]
+        wait: WaitStrategy,
+        #[arg(long)]
+        journal: Option<PathBuf>,
+    },
+    Program {
+        #[arg(long)]
+        vehicle: String,
+        #[arg(long)]
+        name: String,
+        #[arg(long)]
+        event: String,
+        #[arg(long)]
+        wait: WaitStrategy,
+        #[arg(long)]
+        warmup: usize,
+        #[arg(long)]
+        rounds: usize,
+        #[arg(long)]
+        max_secs: f64,
+        #[arg(long)]
+        gate: Option<PathBuf>,
+        #[arg(long)]
+        out: PathBuf,
+    },
+    IoxPong {
+        #[arg(long)]
+        name: String,
+        #[arg(long)]
+        prefix: String,
+        #[arg(long)]
+        mode: String,
+        #[arg(long)]
+        len: usize,
+    },
+    SockPong {
+        #[arg(long)]
+        uds: Option<PathBuf>,
+        #[arg(long)]
+        tcp: Option<String>,
+        #[arg(long)]
+        len: usize,
+    },
+    Emitter {
+        #[arg(long)]
+        vehicle: String,
+        #[arg(long)]
+        rate: f64,
+    },
+    StatusReader {
+        #[arg(long)]
+        vehicle: String,
+    },
+    Busy,
+    Idle {
+        #[arg(long)]
+        iox: bool,
+    },
+    Bridge {
+        #[arg(long)]
+        dir: PathBuf,
+        #[arg(long)]
+        vehicle: String,
+        #[arg(long)]
+        iface: String,
+        #[arg(long)]
+        wait: WaitStrategy,
+    },
+    CanEcho {
+        #[arg(long)]
+        iface: String,
+    },
+    Ports,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Cmd::Run(a) => run(a),
+        Cmd::Vcan {
+            iface,
+            rounds,
+            warmup,
+            max_secs,
+        } => {
+            let s = Settings {
+                rounds,
+                warmup,
+                max: Duration::from_secs(max_secs),
+                scale_secs: 0.0,
+                scale: Vec::new(),
+                petrel: None,
+                echo: None,
+                repo: PathBuf::new(),
+            };
+            vehicle::vcan_all(&s, &iface)
+        }
+        Cmd::Role { role } => run_role(role),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("petrel-bench: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run_role(role: RoleCmd) -> roles::Res<()> {
+    use std::os::unix::net::UnixStream;
+    match role {
+        RoleCmd::Player {
+            dir,
+            vehicle,
+            wait,
+            journal,
+        } => roles::player(&dir, &vehicle, wait, journal),
+        RoleCmd::Program {
+            vehicle,
+            name,
+            event,
+            wait,
+            warmup,
+            rounds,
+            max_secs,
+            gate,
+            out,
+        } => {
+            let max = Duration::try_from_secs_f64(max_secs).map_err(|e| e.to_string())?;
+            let m = roles::petrel_round_trips(&roles::RoundTrips {
+                vehicle,
+                program: name,
+                event,
+                wait,
+                warmup,
+                rounds,
+                max,
+                gate,
+            })?;
+            std::fs::write(&out, m.latencies.to_text())
+                .map_err(|e| format!("{}: {e}", out.display()))
+        }
+        RoleCmd::IoxPong {
+            name,
+            prefix,
+            mode,
+            len,
+        } => roles::iox_pong(&name, &prefix, mode == "waitset", len),
+        RoleCmd::SockPong { uds, tcp, len } => match (uds, tcp) {
+            (Some(path), None) => {
+                let s =
+                    UnixStream::connect(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+                roles::sock_pong(s, len)
+            }
+            (None, Some(addr)) => {
+                let s = std::net::TcpStream::connect(&addr).map_err(|e| format!("{addr}: {e}"))?;
+                s.set_nodelay(true).map_err(|e| e.to_string())?;
+                roles::sock_pong(s, len)
+            }
+            _ => Err("sock-pong needs --uds or --tcp".to_owned()),
+        },
+        RoleCmd::Emitter { vehicle, rate } => roles::emitter(&vehicle, rate),
+        RoleCmd::StatusReader { vehicle } => roles::status_reader(&vehicle),
+        RoleCmd::Busy => roles::busy(),
+        RoleCmd::Idle { iox } => roles::idle(iox),
+        RoleCmd::Bridge {
+            dir,
+            vehicle,
+            iface,
+            wait,
+        } => vehicle::bridge_role(&dir, &vehicle, &iface, wait),
+        RoleCmd::CanEcho { iface } => vehicle::can_echo_role(&iface),
+        RoleCmd::Ports => roles::ports(),
+    }
+}
+
+fn sh(cmd: &str, args: &[&str]) -> String {
+    Command::new(cmd)
+        .args(args)
+        .output()
+        .ok()
+        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_owned())
+        .unwrap_or_default()
+}
+
+fn loadavg() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .map(|t| t.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+        .unwrap_or_else(|_| "?".to_owned())
+}
+
+fn cpu_model() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|t| {
+            t.lines()
+                .find_map(|l| l.strip_prefix("model name"))
+                .map(|m| m.trim_start_matches([' ', '\t', ':']).to_owned())
+        })
+        .unwrap_or_else(|| "?".to_owned())
+}
+
+fn next_to_me(rel: &str) -> Option<PathBuf> {
+    let me = std::env::current_exe().ok()?;
+    let p = me.parent()?.join(rel);
+    p.exists().then_some(p)
+}
+
+fn run(a: RunArgs) -> roles::Res<()> {
+    let repo = a.repo.clone().unwrap_or_else(|| {
+        PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .parent()
+            .map(PathBuf::from)
+            .unwrap_or_default()
+    });
+    let s = Settings {
+        rounds: if a.short { 300 } else { 20_000 },
+        warmup: if a.short { 50 } else { 1_000 },
+        max: Duration::from_secs(if a.short { 10 } else { 20 }),
+        scale_secs: if a.short { 0.5 } else { 5.0 },
+        scale: vec![1, 10, 50],
+        petrel: next_to_me("petrel"),
+        echo: next_to_me("examples/echo"),
+        repo: repo.clone(),
+    };
+    let want = |part: &str| a.only.is_empty() || a.only.iter().any(|o| o == part);
+    for o in &a.only {
+        if !["transport", "vehicle", "load", "footprint", "scale"].contains(&o.as_str()) {
+            return Err(format!(
+                "--only: unknown part `{o}` (transport, vehicle, load, footprint, scale)"
+            ));
+        }
+    }
+    let started = std::time::Instant::now();
+    let load_start = loadavg();
+    let mut r = Report {
+        scale_wait: "block".to_owned(),
+        vehicle_vcan: Err("not run (--only)".to_owned()),
+        ..Report::default()
+    };
+    let say = |what: &str| eprintln!("[{:>5.0} s] {what}", started.elapsed().as_secs_f64());
+
+    if want("transport") || want("load") {
+        say("transport");
+        r.transport.push((
+            report::IOX_BUSY.to_owned(),
+            measure::iox_rt(&s, false, Load::Idle),
+        ));
+        r.transport.push((
+            report::IOX_WAITSET.to_owned(),
+            measure::iox_rt(&s, true, Load::Idle),
+        ));
+        r.transport
+            .push((report::UDS.to_owned(), measure::uds_rt(&s, Load::Idle)));
+        r.transport
+            .push((report::TCP.to_owned(), measure::tcp_rt(&s, Load::Idle)));
+        for wait in measure::strategies() {
+            say(&format!("transport: Petrel, {wait}"));
+            r.transport.push((
+                report::petrel_name(&wait.to_string()),
+                measure::petrel_rt(&s, wait, Load::Idle).map(|(l, _)| l),
+            ));
+        }
+    }
+    if want("vehicle") {
+        say("vehicle path: memory bus");
+        r.vehicle_mem
+            .push(("bare echo".to_owned(), vehicle::memory_baseline(&s)));
+        for wait in measure::strategies() {
+            r.vehicle_mem.push((
+                report::petrel_name(&wait.to_string()),
+                vehicle::memory_path(&s, wait),
+            ));
+        }
+        r.vehicle_vcan = if a.no_vm {
+            Err("skipped (--no-vm)".to_owned())
+        } else if a.short {
+            Err(
+                "skipped in the short mode (scripts/test.sh runs the vcan tests in the VM)"
+                    .to_owned(),
+            )
+        } else {
+            say("vehicle path: vcan0 in the VM");
+            vcan_in_vm(&s, &repo)
+        };
+    }
+    if want("load") {
+        for load in [Load::Events, Load::Cpu] {
+            say(&format!("under load: {load:?}"));
+            if load == Load::Cpu {
+                r.load.push((
+                    load,
+                    report::UDS.to_owned(),
+                    measure::uds_rt(&s, load).map(|x| (x, Vec::new())),
+                ));
+            }
+            for wait in measure::strategies() {
+                r.load.push((
+                    load,
+                    report::petrel_name(&wait.to_string()),
+                    measure::petrel_rt(&s, wait, load),
+                ));
+            }
+        }
+    }
+    if want("footprint") {
+        say("footprint");
+        r.footprint = footprint::all(&s);
+        r.ports = footprint::ports();
+    }
+    if want("scale") {
+        for &n in &s.scale {
+            say(&format!("scale: {n} programs"));
+            r.scale.push(measure::scale(&s, n, WaitStrategy::Block));
+        }
+    }
+    let build = if cfg!(debug_assertions) {
+        "debug build"
+    } else {
+        "release build"
+    };
+    r.header =
+        format!(
+        "{} ({}, {:.0} s), {build}. Machine: {} CPUs ({}), {}. **The machine is shared with other \
+         builds and helpers while this runs** (load average {} at the start, {} at the end): \
+         absolute figures move by tens of percent between runs, and the tails (p99.9, max) carry \
+         other processes' scheduling; the ratios within one run are what count.",
+        sh("date", &["-u", "+%Y-%m-%d %H:%M UTC"]),
+        if a.short { "`scripts/bench.sh --short`" } else { "`scripts/bench.sh`" },
+        started.elapsed().as_secs_f64(),
+        measure::cpus(),
+        cpu_model(),
+        sh("uname", &["-sr"]),
+        load_start,
+        loadavg()
+    );
+    let svg_rel = "docs/bench";
+    let md = r.markdown(&s, svg_rel);
+    println!("{md}");
+    let write_doc = a
+        .doc
+        .clone()
+        .or_else(|| (a.only.is_empty() && !a.short).then(|| repo.join("docs/benchmarks.md")));
+    let write_svg = a
+        .svg
+        .clone()
+        .or_else(|| (a.only.is_empty() && !a.short).then(|| repo.join(svg_rel)));
+    if let Some(dir) = write_svg {
+        for f in r.plots(&dir)? {
+            eprintln!("wrote {f}");
+        }
+    }
+    if let Some(doc) = write_doc {
+        let old = std::fs::read_to_string(&doc).unwrap_or_default();
+        std::fs::write(&doc, report::splice(&old, &md))
+            .map_err(|e| format!("{}: {e}", doc.display()))?;
+        eprintln!("wrote {}", doc.display());
+    }
+    // Anything that failed fails the run (after the report, which says what).
+    let failures = count_failures(&r);
+    if failures > 0 {
+        return Err(format!("{failures} measurement(s) failed: see the report"));
+    }
+    Ok(())
+}
+
+fn count_failures(r: &Report) -> usize {
+    r.transport.iter().filter(|(_, x)| x.is_err()).count()
+        + r.vehicle_mem.iter().filter(|(_, x)| x.is_err()).count()
+        + r.load.iter().filter(|(_, _, x)| x.is_err()).count()
+        + r.footprint.iter().filter(|x| x.is_err()).count()
+        + r.scale.iter().filter(|x| x.is_err()).count()
+        + usize::from(!r.footprint.is_empty() && r.ports.is_err())
+}
+
+/// Runs `petrel-bench vcan` inside the VM bench and reads its histograms.
+fn vcan_in_vm(s: &Settings, repo: &std::path::Path) -> Result<Vec<report::Series>, String> {
+    let me = std::env::current_exe().map_err(|e| e.to_string())?;
+    let script = repo.join("scripts/vcan-vm.sh");
+    // The emulated CPUs are slow: fewer rounds, a longer limit.
+    let rounds = (s.rounds / 10).max(200).to_string();
+    let warmup = (s.warmup / 10).max(20).to_string();
+    let out = Command::new(&script)
+        .env("VCAN_VM_QUIET", "1")
+        .args([
+            "run",
+            "--timeout",
+            "400",
+            "--",
+            &me.display().to_string(),
+            "vcan",
+            "--rounds",
+            &rounds,
+            "--warmup",
+            &warmup,
+            "--max-secs",
+            "60",
+        ])
+        .output()
+        .map_err(|e| format!("cannot run {}: {e}", script.display()))?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    let series = vehicle::parse_vcan(&text);
+    if series.is_empty() {
+        let err = String::from_utf8_lossy(&out.stderr);
+        let tail: Vec<&str> = err.lines().rev().take(5).collect();
+        return Err(format!(
+            "the VM run gave no figures ({}; {})",
+            out.status,
+            tail.into_iter().rev().collect::<Vec<_>>().join(" / ")
+        ));
+    }
+    Ok(series
+        .into_iter()
+        .map(|(n, r)| {
+            let name = if n == "echo" {
+                "bare SocketCAN echo".to_owned()
+            } else {
+                report::petrel_name(&n)
+            };
+            (name, r)
+        })
+        .collect())
+}
