@@ -383,11 +383,13 @@ fn events_sent_while_a_reload_is_verified_are_all_accounted() {
     ]);
     let vehicle = unique_vehicle("reloadacc");
     let player = Player::start(old.path(), &vehicle);
+    // 2,000 events: fewer than the player's event buffer holds (2,048, ipc/src/port.rs), so
+    // that none is refused while a verification holds the player's loop, whatever the timing.
     let sender = Command::new(petrel_tests::petrel_bin())
         .arg("send")
         .arg(old.path())
         .arg("ping")
-        .args(["--vehicle", &vehicle, "--count", "3000", "--timeout", "60"])
+        .args(["--vehicle", &vehicle, "--count", "2000", "--timeout", "60"])
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -407,21 +409,21 @@ fn events_sent_while_a_reload_is_verified_are_all_accounted() {
     let o = sender.wait_with_output().expect("petrel send ends");
     assert!(o.status.success(), "{}", text(&o));
     assert!(
-        text(&o).contains("3000 taken and on record, 0 refused"),
+        text(&o).contains("2000 taken and on record, 0 refused"),
         "{}",
         text(&o)
     );
-    let s = player.wait_for(10.0, |s| s["stats"]["processed"] == 3000);
+    let s = player.wait_for(10.0, |s| s["stats"]["processed"] == 2000);
     let st = &s["stats"];
     assert_eq!(st["reloads"], accepted, "{s}");
     let n = |k: &str| st[k].as_u64().unwrap_or(u64::MAX);
-    assert_eq!(n("received"), 3000, "{s}");
+    assert_eq!(n("received"), 2000, "{s}");
     assert_eq!(
         n("received"),
         n("processed") + n("unused") + n("refused") + n("queued"),
         "{s}"
     );
-    assert_eq!(n("processed"), 3000, "{s}");
+    assert_eq!(n("processed"), 2000, "{s}");
     assert!(player.stop().success());
 }
 
