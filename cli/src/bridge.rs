@@ -18,6 +18,19 @@ pub struct BridgeArgs {
     /// On the memory bus: the simulated vehicle's hull leaks once it is this deep (metres).
     #[arg(long, value_name = "METRES", value_parser = crate::common::finite)]
     sim_leak_at: Option<f64>,
+    /// On the memory bus: the simulated vehicle, `auv` (the default) or `redermor` (the
+    /// Redermor simulator of `petrel-redermor`, which needs --sim-mission).
+    #[arg(long, value_name = "VEHICLE", default_value = "auv")]
+    sim: String,
+    /// `--sim redermor`: the mission file (where the vehicle starts, the seabed).
+    #[arg(long, value_name = "FILE")]
+    sim_mission: Option<PathBuf>,
+    /// `--sim redermor`: the scenario file (current, faults at their times).
+    #[arg(long, value_name = "FILE")]
+    sim_scenario: Option<PathBuf>,
+    /// `--sim redermor`: how many times faster than the wall clock the vehicle's time runs.
+    #[arg(long, value_name = "FACTOR", default_value_t = 1.0, value_parser = crate::common::finite)]
+    sim_speed: f64,
     /// Record every frame in and out to this candump -L log.
     #[arg(long)]
     record: Option<PathBuf>,
@@ -102,7 +115,12 @@ pub fn bridge(a: BridgeArgs) -> Outcome {
         Ok(v) => v,
         Err(o) => return o,
     };
+    let plant = match redermor_plant(&a.sim, a.sim_mission, a.sim_scenario, a.sim_speed) {
+        Ok(p) => p,
+        Err(e) => return Outcome::Usage(e),
+    };
     let opts = ServeOptions {
+        plant,
         bus: a.bus,
         record: a.record,
         wait: strategy,
@@ -116,5 +134,51 @@ pub fn bridge(a: BridgeArgs) -> Outcome {
             Outcome::Clean
         }
         Err(e) => Outcome::Usage(e.to_string()),
+    }
+}
+
+/// The simulated vehicle `--sim` names, with its files read and checked now (an error names
+/// the file and the field).
+fn redermor_plant(
+    sim: &str,
+    mission: Option<PathBuf>,
+    scenario: Option<PathBuf>,
+    speed: f64,
+) -> Result<Option<petrel_can_bridge::serve::PlantFactory>, String> {
+    use petrel_redermor::mission::Mission;
+    use petrel_redermor::sensors::Scenario;
+    use petrel_redermor_live::plant::RedermorPlant;
+    match sim {
+        "auv" => {
+            if mission.is_some() || scenario.is_some() {
+                return Err("--sim-mission and --sim-scenario go with --sim redermor".into());
+            }
+            Ok(None)
+        }
+        "redermor" => {
+            let Some(mission_path) = mission else {
+                return Err("--sim redermor needs --sim-mission FILE".into());
+            };
+            if speed <= 0.0 {
+                return Err(format!("--sim-speed {speed}: a factor above 0"));
+            }
+            let read = |p: &PathBuf| {
+                std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))
+            };
+            let mission = Mission::from_toml(&read(&mission_path)?)
+                .map_err(|e| format!("{}: {e}", mission_path.display()))?;
+            let scenario = match scenario {
+                Some(p) => {
+                    Scenario::from_toml(&read(&p)?).map_err(|e| format!("{}: {e}", p.display()))?
+                }
+                None => Scenario::default(),
+            };
+            Ok(Some(Box::new(move |dbc| {
+                Ok(Box::new(RedermorPlant::new(dbc, &mission, &scenario, speed)) as _)
+            })))
+        }
+        other => Err(format!(
+            "--sim {other}: the simulated vehicles are auv and redermor"
+        )),
     }
 }
