@@ -31,6 +31,10 @@ pub struct BridgeArgs {
     /// `--sim redermor`: how many times faster than the wall clock the vehicle's time runs.
     #[arg(long, value_name = "FACTOR", default_value_t = 1.0, value_parser = crate::common::finite)]
     sim_speed: f64,
+    /// `--sim redermor`: write the vehicle's true track here (CSV, one line a second of its
+    /// time), for `petrel plot` and the tests.
+    #[arg(long, value_name = "FILE")]
+    sim_trace: Option<PathBuf>,
     /// Record every frame in and out to this candump -L log.
     #[arg(long)]
     record: Option<PathBuf>,
@@ -115,7 +119,13 @@ pub fn bridge(a: BridgeArgs) -> Outcome {
         Ok(v) => v,
         Err(o) => return o,
     };
-    let plant = match redermor_plant(&a.sim, a.sim_mission, a.sim_scenario, a.sim_speed) {
+    let plant = match redermor_plant(
+        &a.sim,
+        a.sim_mission,
+        a.sim_scenario,
+        a.sim_speed,
+        a.sim_trace,
+    ) {
         Ok(p) => p,
         Err(e) => return Outcome::Usage(e),
     };
@@ -144,14 +154,17 @@ fn redermor_plant(
     mission: Option<PathBuf>,
     scenario: Option<PathBuf>,
     speed: f64,
+    trace: Option<PathBuf>,
 ) -> Result<Option<petrel_can_bridge::serve::PlantFactory>, String> {
     use petrel_redermor::mission::Mission;
     use petrel_redermor::sensors::Scenario;
     use petrel_redermor_live::plant::RedermorPlant;
     match sim {
         "auv" => {
-            if mission.is_some() || scenario.is_some() {
-                return Err("--sim-mission and --sim-scenario go with --sim redermor".into());
+            if mission.is_some() || scenario.is_some() || trace.is_some() {
+                return Err(
+                    "--sim-mission, --sim-scenario and --sim-trace go with --sim redermor".into(),
+                );
             }
             Ok(None)
         }
@@ -173,8 +186,19 @@ fn redermor_plant(
                 }
                 None => Scenario::default(),
             };
+            let trace: Option<Box<dyn std::io::Write + Send>> = match trace {
+                Some(p) => Some(Box::new(std::io::BufWriter::new(
+                    std::fs::File::create(&p)
+                        .map_err(|e| format!("cannot create {}: {e}", p.display()))?,
+                ))),
+                None => None,
+            };
             Ok(Some(Box::new(move |dbc| {
-                Ok(Box::new(RedermorPlant::new(dbc, &mission, &scenario, speed)) as _)
+                let plant = RedermorPlant::new(dbc, &mission, &scenario, speed);
+                Ok(Box::new(match trace {
+                    Some(t) => plant.with_trace(t),
+                    None => plant,
+                }) as _)
             })))
         }
         other => Err(format!(

@@ -2,7 +2,10 @@
 //! sensors at their rates, the scenario's faults) under the supervisor's frames, and sends its
 //! readings as the bench's messages.
 //!
-//! The simulated time runs `speed` times faster than the bus's clock, in steps of 100 ms, so a
+//! The vehicle waits at the surface, its time at 0 and its sensors repeating their first
+//! readings, until the supervisor first enables the thrusters (the mission's start): the
+//! scenario's times count from then. The simulated time then runs `speed` times faster than
+//! the bus's clock, in steps of 100 ms, so a
 //! mission of an hour flies in minutes; the readings of one wall-clock tick are sent once each
 //! (the newest of every sensor), with the bench's time. The thrusters obey the last
 //! `ThrusterCmd` and `DepthCmd` while the supervisor's heartbeat is fresh on the bus's clock
@@ -42,7 +45,15 @@ pub struct RedermorPlant {
     /// A bus-off happened: the vehicle falls silent (the data server's own bus is not
     /// touched: it is the server's).
     silent: bool,
+    trace: Option<Box<dyn std::io::Write + Send>>,
+    next_trace_us: u64,
+    /// What the sensors say before the start.
+    idle_frames: Vec<Frame>,
 }
+
+/// The header of the trace [`RedermorPlant::with_trace`] writes: one line a second of the
+/// vehicle's time, its true state.
+pub const TRACE_HEADER: &str = "time_s,x,y,depth,heading_deg,rpm_left,rpm_right";
 
 impl std::fmt::Debug for RedermorPlant {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -66,6 +77,43 @@ impl RedermorPlant {
             last_heartbeat_us: None,
             samples: Vec::new(),
             silent: false,
+            trace: None,
+            next_trace_us: 0,
+            idle_frames: Vec::new(),
+        }
+    }
+
+    /// Writes the vehicle's true track to `out` (CSV, [`TRACE_HEADER`]), for the plots and
+    /// the tests: where the vehicle really went, which no program knows.
+    pub fn with_trace(mut self, mut out: Box<dyn std::io::Write + Send>) -> Self {
+        // A trace that cannot be written is dropped: the vehicle flies on.
+        self.trace = writeln!(out, "{TRACE_HEADER}").is_ok().then_some(out);
+        self
+    }
+
+    fn record(&mut self) {
+        let Some(out) = &mut self.trace else {
+            return;
+        };
+        let t = self.sim.time_us();
+        if t < self.next_trace_us {
+            return;
+        }
+        self.next_trace_us = t + 1_000_000;
+        let s = self.sim.vehicle().state();
+        let line = writeln!(
+            out,
+            "{:.1},{:.2},{:.2},{:.2},{:.1},{:.0},{:.0}",
+            t as f64 / 1e6,
+            s.position.x,
+            s.position.y,
+            s.depth,
+            s.heading.to_degrees().rem_euclid(360.0),
+            s.rpm[0],
+            s.rpm[1]
+        );
+        if line.and_then(|()| out.flush()).is_err() {
+            self.trace = None;
         }
     }
 
@@ -107,6 +155,9 @@ impl Plant for RedermorPlant {
                     self.commands.rpm_right = v;
                 }
                 self.commands.enable = value("enable").is_some_and(|e| e != 0.0);
+                if self.commands.enable && self.start_us.is_none() {
+                    self.start_us = Some(time_us);
+                }
             }
             "DepthCmd" => {
                 if let Some(v) = value("target") {
@@ -119,7 +170,15 @@ impl Plant for RedermorPlant {
     }
 
     fn step(&mut self, time_us: u64) -> Vec<Frame> {
-        let start = *self.start_us.get_or_insert(time_us);
+        let Some(start) = self.start_us else {
+            // Not started: the first readings, again, so that nobody finds a sensor silent.
+            if self.idle_frames.is_empty() {
+                self.sim.step(0, None, &mut self.samples);
+                let samples = std::mem::take(&mut self.samples);
+                self.idle_frames = self.frames(&samples);
+            }
+            return self.idle_frames.clone();
+        };
         let target = (time_us.saturating_sub(start) as f64 * self.speed) as u64;
         let fed = self
             .last_heartbeat_us
@@ -134,14 +193,29 @@ impl Plant for RedermorPlant {
                 }
             }
             steps += 1;
+            self.record();
         }
         if self.silent {
             return Vec::new();
         }
+        let samples = std::mem::take(&mut self.samples);
+        let frames = self.frames(&samples);
+        self.samples = samples;
+        frames
+    }
+
+    fn period(&self) -> Duration {
+        Duration::from_millis(20)
+    }
+}
+
+impl RedermorPlant {
+    /// The frames of the newest reading of each sensor in `samples`, after the bench's time.
+    fn frames(&self, samples: &[Sample]) -> Vec<Frame> {
         let mut frames = Vec::new();
         // The newest reading of each sensor: the programs read latest values.
         let mut newest: Vec<&Sample> = Vec::new();
-        for s in self.samples.iter().rev() {
+        for s in samples.iter().rev() {
             if !newest
                 .iter()
                 .any(|n| n.reading.sensor() == s.reading.sensor())
@@ -161,9 +235,5 @@ impl Plant for RedermorPlant {
             }
         }
         frames
-    }
-
-    fn period(&self) -> Duration {
-        Duration::from_millis(20)
     }
 }

@@ -339,6 +339,9 @@ impl Pln {
 /// Within this of the next leg's heading, a course change is over (radians: 5°).
 pub const HEADING_TOLERANCE: f64 = 5.0 * std::f64::consts::PI / 180.0;
 
+/// The speed through the water during a course change (m/s).
+pub const TURN_SPEED: f64 = 0.2;
+
 /// Above this depth (m) the vehicle is at the surface.
 pub const SURFACE_DEPTH: f64 = 0.5;
 
@@ -519,7 +522,7 @@ impl Nav {
     }
 
     /// One control step on the CAN data server's latest signals: the answers that fell due,
-    /// and the thruster commands (`None` when the vehicle's time has not moved).
+    /// and the thruster commands.
     pub fn tick(&mut self, values: &[(String, f64, u64)]) -> (Vec<Answer>, Option<Commands>) {
         let samples = self.tracker.update(values);
         let gps_fix = samples
@@ -530,11 +533,10 @@ impl Nav {
         }
         let now = self.tracker.time_us();
         self.gdd.advance(now);
-        if now <= self.last_time_us {
-            return (Vec::new(), None);
-        }
-        let dt = (now - self.last_time_us) as f64 / 1e6;
-        self.last_time_us = now;
+        // The vehicle's time stands still until the thrusters are first enabled (the bench
+        // starts then): the step still runs, with no time passing, so that they are.
+        let dt = now.saturating_sub(self.last_time_us) as f64 / 1e6;
+        self.last_time_us = self.last_time_us.max(now);
         let nav = *self.gdd.state();
         let mut out = Vec::new();
         let cruise = self.mission.vehicle.cruise_speed;
@@ -550,9 +552,11 @@ impl Nav {
         } else {
             match self.order.clone() {
                 Some(Order::ChangeCourse { heading, depth }) => {
+                    // A gyration nearly on the spot (differential thrust): the next leg then
+                    // starts at its waypoint, not a turning circle away.
                     setpoint = Some(Setpoint {
                         heading,
-                        speed: cruise * 0.5,
+                        speed: TURN_SPEED,
                         depth,
                     });
                     if geom::wrap_pi(heading - nav.heading).abs() < HEADING_TOLERANCE {
