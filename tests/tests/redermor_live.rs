@@ -207,6 +207,35 @@ fn scenario_1_nominal_two_areas_surveyed_then_the_end_area() {
     let last = f.trace.last().expect("a trace");
     assert!(in_end_area(last), "ends at {last:?}");
     assert!(last.depth < 0.5, "at the surface: {last:?}");
+
+    // `petrel plot` draws the run: the map with the planned routes (one polyline for each
+    // trajectory and sequence PLN gave) and the track, and the depth plot.
+    let mission = bench().join("mission.toml");
+    let o = Command::new(petrel_bin())
+        .arg("plot")
+        .arg(&f.logs)
+        .arg("--mission")
+        .arg(&mission)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let map = std::fs::read_to_string(f.logs.join("map.svg")).unwrap();
+    let depth = std::fs::read_to_string(f.logs.join("depth.svg")).unwrap();
+    assert!(map.starts_with("<svg") && depth.starts_with("<svg"));
+    assert!(
+        map.contains("surfaced") && map.contains("areas_done"),
+        "events on the map"
+    );
+    // Without a trace, a clear refusal naming the file.
+    let o = Command::new(petrel_bin())
+        .arg("plot")
+        .arg(f.logs.join("journal"))
+        .arg("--mission")
+        .arg(&mission)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("trace.csv"));
 }
 
 #[test]
