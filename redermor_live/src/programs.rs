@@ -765,3 +765,104 @@ impl Evt {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn bench() -> Mission {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../missions/redermor/bench/mission.toml"
+        );
+        Mission::from_toml(&std::fs::read_to_string(path).unwrap()).unwrap()
+    }
+
+    fn call(pln: &mut Pln, function: &str, args: Vec<Value>) -> Answer {
+        pln.handle(&Call::new("PLN", function, args))
+            .unwrap()
+            .expect("an answer")
+    }
+
+    #[test]
+    fn pln_hands_out_every_area_once_then_areas_done() {
+        let mut pln = Pln::new(&bench());
+        let here = Value::FloatList(vec![0.0, 0.0]);
+        let a = call(
+            &mut pln,
+            "itinerary",
+            vec![here.clone(), Value::Bool(false)],
+        );
+        assert_eq!(a.event, "itinerary_planned");
+        assert_eq!(a.params[0], Value::Int(2));
+        let mut areas = Vec::new();
+        for _ in 0..2 {
+            let a = call(&mut pln, "next_area", vec![]);
+            assert_eq!(a.event, "next_area");
+            areas.push(a.params[0].clone());
+        }
+        areas.sort_by_key(|v| format!("{v:?}"));
+        assert_eq!(areas, vec![Value::Int(0), Value::Int(1)]);
+        assert_eq!(call(&mut pln, "next_area", vec![]).event, "areas_done");
+        // The alarm's replan drops the areas left: straight to the end.
+        let a = call(&mut pln, "itinerary", vec![here, Value::Bool(true)]);
+        assert_eq!(a.params[0], Value::Int(0));
+        assert_eq!(call(&mut pln, "next_area", vec![]).event, "areas_done");
+    }
+
+    #[test]
+    fn pln_trajectory_goes_round_the_buoy_field() {
+        let mut pln = Pln::new(&bench());
+        let from = Value::FloatList(vec![0.0, 0.0]);
+        let a = call(&mut pln, "trajectory", vec![Value::Int(0), from]);
+        assert_eq!(a.event, "trajectory_planned");
+        let t = call(&mut pln, "get_trajectory", vec![]);
+        let Value::FloatList(w) = &t.params[0] else {
+            panic!("{t:?}")
+        };
+        assert_eq!((w[0], w[1]), (0.0, 0.0), "starts where the vehicle is");
+        // Alpha is due north, behind the buoy field: the route bends round it.
+        assert!(w.len() >= 6, "{w:?}");
+        let unknown = call(
+            &mut pln,
+            "trajectory",
+            vec![Value::Int(7), Value::FloatList(vec![0.0, 0.0])],
+        );
+        assert_eq!(unknown.event, "planning_failed");
+    }
+
+    #[test]
+    fn request_schedules_are_read_and_bad_lines_named() {
+        let r = parse_requests("# operator\n230 inspect 50 240\n40 return\n").unwrap();
+        assert_eq!(r.len(), 2);
+        assert_eq!(r[0], (40_000_000, OperatorRequest::ReturnToEnd));
+        let e = parse_requests("10 return\nsoon return\n").unwrap_err();
+        assert_eq!(e.line, 2);
+        let e = parse_requests("5 dance\n").unwrap_err();
+        assert!(e.to_string().starts_with("line 1: unknown request"), "{e}");
+    }
+
+    #[test]
+    fn nav_answers_the_state_and_a_route_of_one_point_at_once() {
+        let mut nav = Nav::new(&bench());
+        let a = nav
+            .handle(&Call::new("GDD", "vehicle_state", vec![]))
+            .unwrap();
+        assert_eq!(a[0].event, "vehicle_state");
+        assert_eq!(a[0].params[0], Value::FloatList(vec![0.0, 0.0]));
+        let one = vec![
+            Value::FloatList(vec![0.0, 0.0]),
+            Value::Float(4.0),
+            Value::Float(0.0),
+        ];
+        let a = nav
+            .handle(&Call::new("GUI", "compute_course", one))
+            .unwrap();
+        assert_eq!(a[0].params[0], Value::Int(0));
+        let a = nav.handle(&Call::new("GUI", "follow_leg", vec![])).unwrap();
+        assert_eq!(a[0].event, "route_done");
+        // Disengaged, the pilot keeps the thrusters off.
+        let (_, commands) = nav.tick(&[]);
+        assert!(!commands.unwrap().enable);
+    }
+}
