@@ -143,3 +143,16 @@ echo "== the bus, recorded by the data server: target/$dive-bus.log ($(wc -l <"t
 "$petrel" bridge "$auv" --replay "target/$dive-bus.log"
 echo "== the flight recorder: target/journal/$dive"
 "$petrel" replay "target/journal/$dive"
+
+# Redermor (issue 14), scenario 1 flown live: `petrel up` brings up the player, the CAN data
+# server on the in-memory bus with the Redermor simulator (20 times the wall clock) and the
+# programs PLN, NAV (GDD, GUI, IDC) and EVT, until the vehicle is stopped at the surface in the
+# end area; then `petrel plot` draws the run (Figure 9).
+cargo build --release --quiet -p petrel-redermor-live --bin redermor-program
+run="target/redermor-run"
+rm -rf "$run"
+echo "== petrel up $red: scenario 1 (nominal), live"
+RUST_LOG=${RUST_LOG:-warn} "$petrel" up "$red" --vehicle "rdm$$" --logs "$run" --timeout 300
+"$petrel" plot "$run" --mission "$red/bench/mission.toml"
+echo "== Redermor scenario 1: journal $run/journal (petrel replay $run/journal), logs $run/*.log, bus $run/bus.log, track $run/trace.csv, plots $run/map.svg and $run/depth.svg"
+"$petrel" replay "$run/journal"

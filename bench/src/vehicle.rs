@@ -291,6 +291,7 @@ pub fn bridge_role(dir: &Path, vehicle: &str, iface: &str, wait: WaitStrategy) -
         record: None,
         wait,
         sim_faults: Default::default(),
+        plant: None,
     };
     petrel_can_bridge::serve::serve(&v, config, dbc, opts).map_err(|e| e.to_string())?;
     Ok(())

@@ -12,7 +12,7 @@ use crate::config::CanConfig;
 use crate::dbc::Dbc;
 use crate::replay::{replay_counted, Pacing, Replayed};
 use crate::runtime::{run, RunReport, RuntimeError, RuntimeOptions};
-use crate::sim::SimFaults;
+use crate::sim::{Plant, SimFaults};
 use petrel_ipc::{Vehicle, WaitStrategy};
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
@@ -28,7 +28,13 @@ pub struct ServeOptions {
     pub wait: WaitStrategy,
     /// Faults the simulated vehicle of the memory bus shows.
     pub sim_faults: SimFaults,
+    /// The simulated vehicle of the memory bus, made from the DBC; `None`: the AUV of
+    /// [`crate::sim`] with `sim_faults`.
+    pub plant: Option<PlantFactory>,
 }
+
+/// Makes the memory bus's simulated vehicle from the project's DBC, or says why it cannot.
+pub type PlantFactory = Box<dyn FnOnce(Arc<Dbc>) -> Result<Box<dyn Plant>, String>>;
 
 /// Why the server could not run.
 #[derive(Debug)]
@@ -100,7 +106,12 @@ pub fn serve(
             .endpoint("mem0")
             .map_err(|e| ServeError::Bus(format!("cannot make a memory bus: {e}")))?;
         let sim_stop = Arc::new(AtomicBool::new(false));
-        let sim = crate::sim::spawn(&hub, dbc, opts.sim_faults, sim_stop.clone())
+        let plant: Box<dyn Plant> = match opts.plant {
+            Some(make) => make(dbc)
+                .map_err(|e| ServeError::Bus(format!("cannot make the simulated vehicle: {e}")))?,
+            None => Box::new(crate::sim::AuvPlant::new(dbc, opts.sim_faults)),
+        };
+        let sim = crate::sim::spawn_plant(&hub, plant, sim_stop.clone())
             .map_err(|e| ServeError::Bus(format!("cannot start the simulated vehicle: {e}")))?;
         let result = run(core, move || Ok(bus), clock, vehicle, run_opts, &stop);
         sim_stop.store(true, std::sync::atomic::Ordering::Relaxed);

@@ -174,6 +174,32 @@ impl AuvPlant {
     }
 }
 
+/// A simulated vehicle on a bus, sans-I/O: frames in, frames out, time given. The AUV of this
+/// module is one; the Redermor simulator (crate `petrel-redermor-live`) is another, which
+/// `petrel bridge --sim redermor` serves in its place.
+pub trait Plant: Send {
+    /// Takes a frame seen on the bus at `time_us` (the bus's clock).
+    fn on_frame(&mut self, time_us: u64, frame: &Frame);
+
+    /// Advances the vehicle to `time_us` and returns the frames its sensors send.
+    fn step(&mut self, time_us: u64) -> Vec<Frame>;
+
+    /// How often [`Plant::step`] is to be called.
+    fn period(&self) -> Duration {
+        Duration::from_millis(100)
+    }
+}
+
+impl Plant for AuvPlant {
+    fn on_frame(&mut self, time_us: u64, frame: &Frame) {
+        AuvPlant::on_frame(self, time_us, frame);
+    }
+
+    fn step(&mut self, time_us: u64) -> Vec<Frame> {
+        AuvPlant::step(self, time_us)
+    }
+}
+
 /// Runs a simulated AUV on `hub`, ticking every 100 ms on the hub's clock, until `stop` is set
 /// (or the process ends).
 pub fn spawn(
@@ -182,10 +208,20 @@ pub fn spawn(
     faults: SimFaults,
     stop: Arc<AtomicBool>,
 ) -> std::io::Result<std::thread::JoinHandle<()>> {
-    let mut node = hub.endpoint("auv-sim")?;
+    spawn_plant(hub, Box::new(AuvPlant::new(dbc, faults)), stop)
+}
+
+/// Runs `plant` on `hub`, stepping it every [`Plant::period`] on the hub's clock, until `stop`
+/// is set (or the process ends).
+pub fn spawn_plant(
+    hub: &MemoryHub,
+    mut plant: Box<dyn Plant>,
+    stop: Arc<AtomicBool>,
+) -> std::io::Result<std::thread::JoinHandle<()>> {
+    let mut node = hub.endpoint("sim")?;
     let clock = hub.clock();
     Ok(std::thread::spawn(move || {
-        let mut plant = AuvPlant::new(dbc, faults);
+        let period = plant.period();
         while !stop.load(Ordering::Relaxed) {
             while let Ok(Some(tf)) = node.recv() {
                 plant.on_frame(tf.time_us, &tf.frame);
@@ -194,7 +230,7 @@ pub fn spawn(
                 // A full bus only delays the next sample: the plant speaks again next tick.
                 let _ = node.send(&frame);
             }
-            std::thread::sleep(Duration::from_millis(100));
+            std::thread::sleep(period);
         }
     }))
 }

@@ -18,6 +18,23 @@ pub struct BridgeArgs {
     /// On the memory bus: the simulated vehicle's hull leaks once it is this deep (metres).
     #[arg(long, value_name = "METRES", value_parser = crate::common::finite)]
     sim_leak_at: Option<f64>,
+    /// On the memory bus: the simulated vehicle, `auv` (the default) or `redermor` (the
+    /// Redermor simulator of `petrel-redermor`, which needs --sim-mission).
+    #[arg(long, value_name = "VEHICLE", default_value = "auv")]
+    sim: String,
+    /// `--sim redermor`: the mission file (where the vehicle starts, the seabed).
+    #[arg(long, value_name = "FILE")]
+    sim_mission: Option<PathBuf>,
+    /// `--sim redermor`: the scenario file (current, faults at their times).
+    #[arg(long, value_name = "FILE")]
+    sim_scenario: Option<PathBuf>,
+    /// `--sim redermor`: how many times faster than the wall clock the vehicle's time runs.
+    #[arg(long, value_name = "FACTOR", default_value_t = 1.0, value_parser = crate::common::finite)]
+    sim_speed: f64,
+    /// `--sim redermor`: write the vehicle's true track here (CSV, one line a second of its
+    /// time), for `petrel plot` and the tests.
+    #[arg(long, value_name = "FILE")]
+    sim_trace: Option<PathBuf>,
     /// Record every frame in and out to this candump -L log.
     #[arg(long)]
     record: Option<PathBuf>,
@@ -102,7 +119,18 @@ pub fn bridge(a: BridgeArgs) -> Outcome {
         Ok(v) => v,
         Err(o) => return o,
     };
+    let plant = match redermor_plant(
+        &a.sim,
+        a.sim_mission,
+        a.sim_scenario,
+        a.sim_speed,
+        a.sim_trace,
+    ) {
+        Ok(p) => p,
+        Err(e) => return Outcome::Usage(e),
+    };
     let opts = ServeOptions {
+        plant,
         bus: a.bus,
         record: a.record,
         wait: strategy,
@@ -116,5 +144,65 @@ pub fn bridge(a: BridgeArgs) -> Outcome {
             Outcome::Clean
         }
         Err(e) => Outcome::Usage(e.to_string()),
+    }
+}
+
+/// The simulated vehicle `--sim` names, with its files read and checked now (an error names
+/// the file and the field).
+fn redermor_plant(
+    sim: &str,
+    mission: Option<PathBuf>,
+    scenario: Option<PathBuf>,
+    speed: f64,
+    trace: Option<PathBuf>,
+) -> Result<Option<petrel_can_bridge::serve::PlantFactory>, String> {
+    use petrel_redermor::mission::Mission;
+    use petrel_redermor::sensors::Scenario;
+    use petrel_redermor_live::plant::RedermorPlant;
+    match sim {
+        "auv" => {
+            if mission.is_some() || scenario.is_some() || trace.is_some() {
+                return Err(
+                    "--sim-mission, --sim-scenario and --sim-trace go with --sim redermor".into(),
+                );
+            }
+            Ok(None)
+        }
+        "redermor" => {
+            let Some(mission_path) = mission else {
+                return Err("--sim redermor needs --sim-mission FILE".into());
+            };
+            if speed <= 0.0 {
+                return Err(format!("--sim-speed {speed}: a factor above 0"));
+            }
+            let read = |p: &PathBuf| {
+                std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))
+            };
+            let mission = Mission::from_toml(&read(&mission_path)?)
+                .map_err(|e| format!("{}: {e}", mission_path.display()))?;
+            let scenario = match scenario {
+                Some(p) => {
+                    Scenario::from_toml(&read(&p)?).map_err(|e| format!("{}: {e}", p.display()))?
+                }
+                None => Scenario::default(),
+            };
+            let trace: Option<Box<dyn std::io::Write + Send>> = match trace {
+                Some(p) => Some(Box::new(std::io::BufWriter::new(
+                    std::fs::File::create(&p)
+                        .map_err(|e| format!("cannot create {}: {e}", p.display()))?,
+                ))),
+                None => None,
+            };
+            Ok(Some(Box::new(move |dbc| {
+                let plant = RedermorPlant::new(dbc, &mission, &scenario, speed);
+                Ok(Box::new(match trace {
+                    Some(t) => plant.with_trace(t),
+                    None => plant,
+                }) as _)
+            })))
+        }
+        other => Err(format!(
+            "--sim {other}: the simulated vehicles are auv and redermor"
+        )),
     }
 }

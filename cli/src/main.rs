@@ -14,6 +14,7 @@ mod common;
 mod gateway;
 mod gen;
 mod monitor;
+mod plot;
 mod project;
 mod recorder;
 mod reload;
@@ -53,6 +54,9 @@ enum Command {
     /// The CAN data server: frames from the vehicle bus become events for the player (by the
     /// rules of the project's can.toml), calls to the commands program become frames.
     Bridge(bridge::BridgeArgs),
+    /// The pictures of a Redermor run (Figure 9): map.svg (areas, forbidden zones, planned
+    /// routes, the vehicle's track, events) and depth.svg, from a `petrel up` run directory.
+    Plot(plot::PlotArgs),
     /// Bring a vehicle up from the project's vehicle.toml: start the player, the data server
     /// and the programs in order, show their status, make the timed sends, restart what fails
     /// (by policy), and stop everything on Ctrl-C, at the mission's end, at --until or at
@@ -135,6 +139,7 @@ fn main() -> ExitCode {
         Command::Replay(a) => recorder::replay(a),
         Command::Journal { command } => recorder::journal(command),
         Command::Bridge(a) => bridge::bridge(a),
+        Command::Plot(a) => plot::plot(a),
         Command::Up(a) => up::up(a),
         Command::Gateway(a) => gateway::gateway(a),
         Command::Exec(a) => up::exec(a),
