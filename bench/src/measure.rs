@@ -133,10 +133,20 @@ impl Kid {
 
     /// Sends SIGTERM and waits for the end (SIGKILL after `grace`).
     pub fn terminate(mut self, grace: Duration) -> Res<()> {
+        // This binary's roles stop at the end of their standard input and remove their
+        // files; a signal first would end them before that (their shared-memory files were
+        // left behind). Other programs get SIGTERM after a moment.
+        drop(self.stdin.take());
+        let until = Instant::now() + Duration::from_millis(500);
+        while Instant::now() < until {
+            if let Ok(Some(_)) = self.child.try_wait() {
+                return Ok(());
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
         let _ = Command::new("kill")
             .args(["-TERM", &self.child.id().to_string()])
             .status();
-        drop(self.stdin.take());
         self.wait(grace)
     }
 
