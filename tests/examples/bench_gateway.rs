@@ -137,12 +137,17 @@ fn main() {
         tp_remote / tp_near
     );
     println!();
-    println!("memory after the runs, KiB (/proc/PID/status: resident, its peak, and of it: heap and");
+    println!(
+        "memory after the runs, KiB (/proc/PID/status: resident, its peak, and of it: heap and"
+    );
     println!("stacks, the executable's mapped pages, shared memory):");
     println!("| process | VmRSS | VmHWM | RssAnon | RssFile | RssShmem |");
     println!("|---|---:|---:|---:|---:|---:|");
     for (name, m) in mem {
-        println!("| {name} | {} | {} | {} | {} | {} |", m[0], m[1], m[2], m[3], m[4]);
+        println!(
+            "| {name} | {} | {} | {} | {} | {} |",
+            m[0], m[1], m[2], m[3], m[4]
+        );
     }
 
     drop(remote);
