@@ -145,6 +145,8 @@ struct Mirror {
     calls_in: Option<CallReceiver>,
     events: Option<EventSender>,
     heartbeat: Option<HeartbeatPublisher>,
+    /// The largest heartbeat body `heartbeat` may send.
+    heartbeat_capacity: usize,
     marking: Option<MarkingPublisher>,
     calls_out: BTreeMap<String, CallSender>,
     participant: Participant,
@@ -519,9 +521,15 @@ impl Gateway {
             Route::Own | Route::NotMine | Route::Beacon => {}
             Route::Foreign(why) => tracing::warn!("link message refused: {why}"),
             Route::Deliver => {
-                // A mirror may be needed before the message is delivered (a beacon that
-                // listed it came just before).
-                self.sync_mirrors();
+                // A stand-in may be needed before the message is delivered (a beacon that
+                // listed it came just before): make them match only when it is missing.
+                let needed = match msg.kind {
+                    LinkKind::Heartbeat | LinkKind::Marking => "player",
+                    _ => msg.origin.as_str(),
+                };
+                if !self.mirrors.contains_key(needed) {
+                    self.sync_mirrors();
+                }
                 let name = msg.kind.name();
                 match self.deliver(&msg) {
                     Ok(()) => self.core.counters.of(name).delivered += 1,
@@ -584,13 +592,19 @@ impl Gateway {
                     return Err("the player is not mirrored here (its computer is not up)".into());
                 };
                 if matches!(msg.kind, LinkKind::Heartbeat) {
-                    if m.heartbeat.is_none() {
+                    // Sized from the player's heartbeats as they come (twice the largest seen),
+                    // as the player sizes its own from the project: a publisher sized for the
+                    // largest body possible takes long to set up and holds memory for nothing.
+                    if m.heartbeat.is_none() || msg.body.len() > m.heartbeat_capacity {
+                        m.heartbeat = None;
+                        let capacity = (msg.body.len() * 2).clamp(64 * 1024, wire::MAX_BODY_LEN);
                         let s = m
                             .participant
-                            .heartbeat_publisher_sized(wire::MAX_BODY_LEN)
+                            .heartbeat_publisher_sized(capacity)
                             .map_err(|e| e.to_string())?;
                         self.ids.0.insert(s.sender_id());
                         m.heartbeat = Some(s);
+                        m.heartbeat_capacity = capacity;
                     }
                     m.heartbeat.as_ref().map(|s| s.send_encoded(&msg.body))
                 } else {
@@ -703,6 +717,7 @@ impl Gateway {
                     calls_in,
                     events: None,
                     heartbeat: None,
+                    heartbeat_capacity: 0,
                     marking: None,
                     calls_out: BTreeMap::new(),
                     participant,
