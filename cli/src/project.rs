@@ -111,12 +111,23 @@ pub struct VerifyArgs {
     /// but progress, stuck nets, starvation and loops are checked whatever the project.
     #[arg(long)]
     no_reduction: bool,
+    /// A PNML file only: decide deadlocks alone, with stubborn sets (a partial-order reduction
+    /// that reaches every dead marking through fewer markings); bounds and safety are then not
+    /// decided.
+    #[arg(long)]
+    deadlocks: bool,
 }
 
 /// Verifies a project (or one of its nets), or explores a PNML file as a P/T net.
 pub fn verify(a: VerifyArgs) -> Outcome {
     if a.dir.is_file() {
-        return verify_pnml(&a.dir, a.format, a.max_states);
+        return verify_pnml(&a.dir, a.format, a.max_states, a.deadlocks);
+    }
+    if a.deadlocks {
+        return Outcome::Usage(format!(
+            "--deadlocks explores a PNML file's P/T net; {} is a project (its verification reduces by itself: see --no-reduction)",
+            a.dir.display()
+        ));
     }
     let checked = match require_clean(&a.dir, Scope::default(), "verify") {
         Ok(c) => c,
@@ -201,7 +212,7 @@ pub fn verify(a: VerifyArgs) -> Outcome {
     }
 }
 
-fn verify_pnml(file: &Path, format: Format, max_states: Option<u64>) -> Outcome {
+fn verify_pnml(file: &Path, format: Format, max_states: Option<u64>, deadlocks: bool) -> Outcome {
     use petrel_nets::reach;
     let text = match std::fs::read_to_string(file) {
         Ok(t) => t,
@@ -229,6 +240,7 @@ fn verify_pnml(file: &Path, format: Format, max_states: Option<u64>) -> Outcome 
     for net in &nets {
         let opts = reach::ExploreOptions {
             max_states,
+            deadlocks_only: deadlocks,
             progress: interactive.then(|| {
                 Box::new(|p: reach::Progress| {
                     eprint!(

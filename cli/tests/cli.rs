@@ -815,3 +815,44 @@ fn the_example_of_docs_scripts_md_runs_on_the_uav() {
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     assert!(stderr(&o).contains("expectations met"), "{}", stderr(&o));
 }
+
+#[test]
+fn verify_deadlocks_reduces_a_pnml_net_and_refuses_a_project() {
+    let philo = repo()
+        .join("nets/tests/data/mcc/Philosophers-PT-000010.pnml")
+        .display()
+        .to_string();
+    let full = petrel(&["verify", &philo, "--format", "json"]);
+    let reduced = petrel(&["verify", &philo, "--deadlocks", "--format", "json"]);
+    let full: serde_json::Value = serde_json::from_slice(&full.stdout).expect("JSON");
+    let doc: serde_json::Value = serde_json::from_slice(&reduced.stdout).expect("JSON");
+    // The philosophers' two deadlocks (all left forks, all right forks), fewer markings.
+    assert_eq!(doc["reduced"], true);
+    assert_eq!(doc["deadlock"], true);
+    assert_eq!(doc["dead_markings"], full["dead_markings"]);
+    assert_eq!(full["states"], 59049);
+    assert!(doc["states"].as_u64().unwrap() < 59049, "{doc}");
+    assert!(doc["safe"].is_null(), "safety is not decided: {doc}");
+    assert_eq!(
+        reduced.status.code(),
+        Some(1),
+        "a deadlock fails the verification"
+    );
+
+    let o = petrel(&["verify", &philo, "--deadlocks"]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("deadlocks only"), "{text}");
+    assert!(
+        text.contains("a witness, not necessarily the shortest"),
+        "{text}"
+    );
+
+    let project = repo().join("missions/uav").display().to_string();
+    let o = petrel(&["verify", &project, "--deadlocks"]);
+    assert_eq!(o.status.code(), Some(2), "a usage error");
+    assert!(
+        stderr(&o).contains("--deadlocks explores a PNML file"),
+        "{}",
+        stderr(&o)
+    );
+}

@@ -17,6 +17,13 @@ fuzz_target!(|data: &[u8]| {
             ..Default::default()
         };
         let _ = petrel_nets::reach::explore(net, opts);
+        // The stubborn-set reduction on the same net (`petrel verify FILE.pnml --deadlocks`).
+        let opts = petrel_nets::reach::ExploreOptions {
+            max_states: Some(200),
+            deadlocks_only: true,
+            ..Default::default()
+        };
+        let _ = petrel_nets::reach::explore(net, opts);
     }
     let mut d = Diagnostics::new();
     if let Some(p) = petrel_nets::pnml::import_pnml(id, &text, &mut d) {

@@ -2,7 +2,7 @@
 //! `--human`): the stand-in for `petrel verify FILE.pnml --format json` used by
 //! `scripts/bench-verify.sh` until the CLI calls [`petrel_nets::reach`] itself.
 //!
-//! Usage: `explore FILE.pnml [--human] [--no-traces] [--max-states N] [--progress]`.
+//! Usage: `explore FILE.pnml [--human] [--no-traces] [--deadlocks] [--max-states N] [--progress]`.
 //! Exit codes: 0 explored, 1 exploration stopped (state limit, unbounded net...), 2 bad usage or
 //! unreadable PNML.
 
@@ -23,6 +23,7 @@ fn main() -> ExitCode {
         match a.as_str() {
             "--human" => human = true,
             "--no-traces" => opts.keep_traces = false,
+            "--deadlocks" => opts.deadlocks_only = true,
             "--progress" => {
                 opts.progress = Some(Box::new(|p| {
                     eprintln!(
@@ -79,6 +80,6 @@ fn main() -> ExitCode {
 }
 
 fn usage(msg: &str) -> ExitCode {
-    eprintln!("error: {msg}\nusage: explore FILE.pnml [--human] [--no-traces] [--max-states N] [--progress]");
+    eprintln!("error: {msg}\nusage: explore FILE.pnml [--human] [--no-traces] [--deadlocks] [--max-states N] [--progress]");
     ExitCode::from(2)
 }

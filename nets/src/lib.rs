@@ -23,5 +23,6 @@ pub mod reach;
 pub mod reload;
 pub mod semantics;
 pub mod source;
+mod stubborn;
 pub mod syntax;
 pub mod verify;

@@ -45,6 +45,7 @@
 #![deny(missing_docs)]
 
 use crate::pt::{PtNet, PtNode};
+use crate::stubborn::Stubborn;
 use std::fmt;
 use std::fmt::Write as _;
 use std::time::Instant;
@@ -67,15 +68,22 @@ pub struct ExploreOptions {
     /// same but the traces are `None`. The count representation keeps parents regardless: it
     /// needs them to prove a net unbounded.
     pub keep_traces: bool,
+    /// Decide deadlocks alone, firing in each marking only the enabled transitions of a stubborn
+    /// set (partial-order reduction, see [`crate::stubborn`]'s conditions): every dead marking
+    /// is still reached, usually through far fewer markings. The report's sizes are then the
+    /// reduced graph's, its bounds are not decided ([`PtReport::reduced`]), and its trace to a
+    /// deadlock is a witness, not necessarily the shortest.
+    pub deadlocks_only: bool,
 }
 
 impl Default for ExploreOptions {
-    /// No state limit, no progress callback, traces kept.
+    /// No state limit, no progress callback, traces kept, the full graph.
     fn default() -> Self {
         ExploreOptions {
             max_states: None,
             progress: None,
             keep_traces: true,
+            deadlocks_only: false,
         }
     }
 }
@@ -89,6 +97,7 @@ impl fmt::Debug for ExploreOptions {
                 &self.progress.as_ref().map(|_| "FnMut(Progress)"),
             )
             .field("keep_traces", &self.keep_traces)
+            .field("deadlocks_only", &self.deadlocks_only)
             .finish()
     }
 }
@@ -189,6 +198,11 @@ pub struct PtReport {
     pub store_bytes: u64,
     /// How the final run stored markings.
     pub representation: Representation,
+    /// True when the exploration was reduced ([`ExploreOptions::deadlocks_only`]): `deadlock`,
+    /// `dead_markings` and a found `first_unsafe` hold for the full graph; `states`, `edges` and
+    /// the token maxima are the reduced graph's; `safe` means only that no marking explored had
+    /// two tokens in a place; `first_deadlock` is a witness, not necessarily the shortest.
+    pub reduced: bool,
 }
 
 /// Proof that a net is unbounded: `prefix` reaches a marking M, and `pump` fired from M reaches a
@@ -296,6 +310,7 @@ pub fn explore(net: &PtNet, mut opts: ExploreOptions) -> Result<PtReport, Explor
             .unwrap_or(u64::MAX)
             .min(u64::from(MAX_STORE_STATES)),
         keep_traces: opts.keep_traces,
+        deadlocks_only: opts.deadlocks_only,
         progress: opts.progress.as_deref_mut(),
         start,
         last: start,
@@ -364,11 +379,26 @@ pub fn render_human(net: &PtNet, r: &PtReport) -> String {
         net.transitions.len(),
         net.arcs.len()
     );
-    let _ = writeln!(out, "reachable markings:      {}", r.states);
-    let _ = writeln!(out, "edges (firings):         {}", r.edges);
-    let _ = writeln!(out, "max tokens in a place:   {}", r.max_tokens_in_place);
-    let _ = writeln!(out, "max tokens in a marking: {}", r.max_tokens_per_marking);
-    let _ = writeln!(out, "safe (1-bounded):        {}", yes_no(r.safe));
+    if r.reduced {
+        // Sizes and maxima of the reduced graph would read as the net's: say what they are.
+        let _ = writeln!(
+            out,
+            "markings explored:       {} (deadlocks only: stubborn sets, the full graph is larger)",
+            r.states
+        );
+        let _ = writeln!(out, "edges (firings):         {}", r.edges);
+        let safe = match (&r.first_unsafe, r.safe) {
+            (Some(_), _) | (None, false) => "no",
+            (None, true) => "not decided (no explored marking has two tokens in a place)",
+        };
+        let _ = writeln!(out, "safe (1-bounded):        {safe}");
+    } else {
+        let _ = writeln!(out, "reachable markings:      {}", r.states);
+        let _ = writeln!(out, "edges (firings):         {}", r.edges);
+        let _ = writeln!(out, "max tokens in a place:   {}", r.max_tokens_in_place);
+        let _ = writeln!(out, "max tokens in a marking: {}", r.max_tokens_per_marking);
+        let _ = writeln!(out, "safe (1-bounded):        {}", yes_no(r.safe));
+    }
     if let Some(u) = &r.first_unsafe {
         let _ = write!(
             out,
@@ -396,7 +426,12 @@ pub fn render_human(net: &PtNet, r: &PtReport) -> String {
     if let Some(t) = &r.first_deadlock {
         let _ = writeln!(
             out,
-            "  shortest way to a deadlock: {}",
+            "  {} to a deadlock: {}",
+            if r.reduced {
+                "a way (a witness, not necessarily the shortest)"
+            } else {
+                "shortest way"
+            },
             describe_trace(net, t)
         );
     }
@@ -413,9 +448,17 @@ pub fn render_human(net: &PtNet, r: &PtReport) -> String {
 /// The report as JSON for tools: `states`, `edges`, `max_tokens_in_place`,
 /// `max_tokens_per_marking`, `safe`, `deadlock`, `dead_markings`, `seconds`, `store_bytes`,
 /// `representation`, `first_deadlock` (a trace or null) and `first_unsafe` (`{place, tokens,
-/// trace}` or null), where a trace is a list of `{index, id, name}` transitions.
+/// trace}` or null), where a trace is a list of `{index, id, name}` transitions; `reduced`
+/// (deadlocks only): then `safe` is null unless an unsafe marking was found, and the sizes and
+/// maxima are the reduced graph's.
 pub fn to_json(net: &PtNet, r: &PtReport) -> serde_json::Value {
+    let safe = if r.reduced && r.safe && r.first_unsafe.is_none() {
+        serde_json::Value::Null
+    } else {
+        serde_json::Value::Bool(r.safe)
+    };
     serde_json::json!({
+        "reduced": r.reduced,
         "net": net.name,
         "places": net.places.len(),
         "transitions": net.transitions.len(),
@@ -424,7 +467,7 @@ pub fn to_json(net: &PtNet, r: &PtReport) -> serde_json::Value {
         "edges": r.edges,
         "max_tokens_in_place": r.max_tokens_in_place,
         "max_tokens_per_marking": r.max_tokens_per_marking,
-        "safe": r.safe,
+        "safe": safe,
         "deadlock": r.deadlock,
         "dead_markings": r.dead_markings,
         "first_deadlock": r.first_deadlock.as_ref().map(|t| trace_json(net, t)),
@@ -593,9 +636,9 @@ const INDEX_SAMPLE: usize = 4096;
 
 /// The net reduced to what firing needs: arcs summed per (transition, place, direction), weight-0
 /// arcs dropped, per-transition lists sorted by place.
-struct Compiled {
-    places: usize,
-    transitions: usize,
+pub(crate) struct Compiled {
+    pub(crate) places: usize,
+    pub(crate) transitions: usize,
     initial: Vec<u64>,
     /// `pre[pre_start[t]..pre_start[t + 1]]`: `(place, weight)` taken by transition `t`.
     pre_start: Vec<usize>,
@@ -672,11 +715,13 @@ impl Compiled {
         })
     }
 
-    fn pre(&self, t: usize) -> &[(usize, u64)] {
+    /// `(place, weight)` taken by transition `t`.
+    pub(crate) fn pre(&self, t: usize) -> &[(usize, u64)] {
         &self.pre[self.pre_start[t]..self.pre_start[t + 1]]
     }
 
-    fn post(&self, t: usize) -> &[(usize, u64)] {
+    /// `(place, weight)` produced by transition `t`.
+    pub(crate) fn post(&self, t: usize) -> &[(usize, u64)] {
         &self.post[self.post_start[t]..self.post_start[t + 1]]
     }
 }
@@ -686,6 +731,7 @@ struct Ctl<'a> {
     /// The effective state limit: the user's or the store's.
     limit: u64,
     keep_traces: bool,
+    deadlocks_only: bool,
     progress: Option<&'a mut (dyn FnMut(Progress) + 'static)>,
     start: Instant,
     last: Instant,
@@ -740,6 +786,7 @@ fn empty_report(representation: Representation) -> PtReport {
         seconds: 0.0,
         store_bytes: 0,
         representation,
+        reduced: false,
     }
 }
 
@@ -1175,6 +1222,7 @@ fn run_bits<const N: usize>(
     let mut first_dead: Option<usize> = None;
     let mut max_total = 0u64;
     let mut reindexed = false;
+    let mut stubborn = ctl.deadlocks_only.then(|| Stubborn::new(c));
 
     while i < n {
         if !reindexed && n >= INDEX_SAMPLE {
@@ -1221,6 +1269,11 @@ fn run_bits<const N: usize>(
         if enabled.is_empty() {
             dead += 1;
             first_dead.get_or_insert(i);
+        }
+        if let Some(sb) = stubborn.as_mut() {
+            sb.reduce(c, &mut enabled, |p| {
+                cur.get(p / 64).map_or(0, |&word| word >> (p % 64) & 1)
+            });
         }
         edges += enabled.len() as u64;
 
@@ -1279,6 +1332,7 @@ fn run_bits<const N: usize>(
         seconds: 0.0,
         store_bytes: store_bytes(&arena, &parents, &table) as u64,
         representation: Representation::Bits,
+        reduced: stubborn.is_some(),
     }))
 }
 
@@ -1518,6 +1572,7 @@ fn run_counts<C: Count>(c: &Compiled, ctl: &mut Ctl) -> Result<Option<PtReport>,
     let mut edges = 0u64;
     let mut dead = 0u64;
     let mut first_dead: Option<usize> = None;
+    let mut stubborn = ctl.deadlocks_only.then(|| Stubborn::new(c));
 
     while i < n {
         cur.copy_from_slice(&arena[i * stride..][..stride]);
@@ -1539,6 +1594,9 @@ fn run_counts<C: Count>(c: &Compiled, ctl: &mut Ctl) -> Result<Option<PtReport>,
         if enabled.is_empty() {
             dead += 1;
             first_dead.get_or_insert(i);
+        }
+        if let Some(sb) = stubborn.as_mut() {
+            sb.reduce(c, &mut enabled, |p| cur.get(p).map_or(0, |&x| x.into()));
         }
         edges += enabled.len() as u64;
 
@@ -1639,6 +1697,7 @@ fn run_counts<C: Count>(c: &Compiled, ctl: &mut Ctl) -> Result<Option<PtReport>,
         seconds: 0.0,
         store_bytes: store_bytes(&arena, &parents, &table) as u64,
         representation: Representation::Counts { bits: C::BITS },
+        reduced: stubborn.is_some(),
     }))
 }
 

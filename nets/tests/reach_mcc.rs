@@ -828,3 +828,188 @@ fn random_nets_agree_with_the_reference_explorer() {
     // The generator must exercise both outcomes.
     assert!(finished > 200 && unbounded > 50, "{finished} {unbounded}");
 }
+
+// ---------------------------------------------------------------------------------------------
+// Deadlocks only: the stubborn-set reduction
+// ---------------------------------------------------------------------------------------------
+
+fn deadlocks_only() -> ExploreOptions {
+    ExploreOptions {
+        deadlocks_only: true,
+        ..ExploreOptions::default()
+    }
+}
+
+/// A reduced report against the full one: the same deadlock verdict and dead markings, no more
+/// markings, a witness that replays to a dead marking, an unsafe marking only if one is real.
+fn check_reduced(net: &PtNet, full: &PtReport, reduced: &PtReport, what: &str) {
+    assert!(reduced.reduced && !full.reduced, "{what}");
+    assert_eq!(
+        (reduced.deadlock, reduced.dead_markings),
+        (full.deadlock, full.dead_markings),
+        "{what}: the reduction keeps every dead marking"
+    );
+    assert!(reduced.states <= full.states, "{what}");
+    let sim = Sim::new(net);
+    match &reduced.first_deadlock {
+        Some(t) => {
+            let m = sim.replay(t).expect("the witness fires");
+            assert!(sim.enabled(&m).is_empty(), "{what}: the witness ends dead");
+        }
+        None => assert!(!reduced.deadlock, "{what}: a deadlock comes with a witness"),
+    }
+    if let Some(u) = &reduced.first_unsafe {
+        let m = sim
+            .replay(u.trace.as_ref().expect("traces kept"))
+            .expect("fires");
+        assert_eq!(m[u.place], u.tokens, "{what}: the unsafe witness is real");
+        assert!(!full.safe, "{what}");
+    }
+}
+
+#[test]
+fn deadlocks_only_finds_the_same_dead_markings_on_the_mcc_models() {
+    // Measured on the models that run in full here; the large three against their verdict.
+    let mut smaller = 0;
+    for a in answers() {
+        let net = load(&a.file);
+        let reduced = explore(&net, deadlocks_only())
+            .unwrap_or_else(|e| panic!("{}: {}", a.model, render_error(&net, &e)));
+        assert_eq!(reduced.deadlock, a.deadlock, "{}: MCC's verdict", a.model);
+        assert!(reduced.states <= a.states, "{}", a.model);
+        smaller += usize::from(reduced.states < a.states);
+        if LARGE.contains(&a.model.as_str()) {
+            continue;
+        }
+        let full = explore(&net, ExploreOptions::default()).unwrap();
+        check_reduced(&net, &full, &reduced, &a.model);
+    }
+    // The reduction must actually reduce on a benchmark of concurrent systems.
+    assert!(
+        smaller >= 15,
+        "only {smaller} of 30 models explored fewer markings"
+    );
+}
+
+#[test]
+fn independent_components_cost_markings_linear_in_their_number() {
+    // Twelve independent two-place cycles (2^12 markings in full) beside a component that can
+    // deadlock: `go` takes the only token of `k` for good.
+    let names: Vec<(String, String, String, String)> = (0..12)
+        .map(|i| {
+            (
+                format!("a{i}"),
+                format!("b{i}"),
+                format!("up{i}"),
+                format!("down{i}"),
+            )
+        })
+        .collect();
+    let mut places: Vec<(&str, u64)> = vec![("k", 1), ("gone", 0)];
+    let mut arcs: Vec<(ArcList, ArcList)> = Vec::new();
+    let mut tnames: Vec<&str> = Vec::new();
+    for (a, b, up, down) in &names {
+        places.push((a, 1));
+        places.push((b, 0));
+        arcs.push((vec![(a, 1), ("k", 1)], vec![(b, 1), ("k", 1)]));
+        tnames.push(up);
+        arcs.push((vec![(b, 1)], vec![(a, 1)]));
+        tnames.push(down);
+    }
+    arcs.push((vec![("k", 1)], vec![("gone", 1)]));
+    tnames.push("go");
+    let ts: Vec<(&str, Arcs, Arcs)> = arcs
+        .iter()
+        .zip(&tnames)
+        .map(|((i, o), n)| (*n, &i[..], &o[..]))
+        .collect();
+    let n = net(&places, &ts);
+    let full = explore(&n, ExploreOptions::default()).unwrap();
+    let reduced = explore(&n, deadlocks_only()).unwrap();
+    check_reduced(&n, &full, &reduced, "components");
+    // Full: every combination of the cycles, with `k` and after `go` (2 x 4096). After `go`
+    // nothing goes up and every `down` still can: the one dead marking has every cycle at `a`.
+    assert_eq!(full.states, 2 * 4096);
+    assert_eq!(full.dead_markings, 1);
+    assert!(
+        reduced.states < 200,
+        "{} markings explored for 12 components",
+        reduced.states
+    );
+    let text = render_human(&n, &reduced);
+    assert!(text.contains("deadlocks only"), "{text}");
+    assert!(text.contains("not necessarily the shortest"), "{text}");
+    assert!(
+        text.contains("safe (1-bounded):        not decided"),
+        "{text}"
+    );
+    let json = to_json(&n, &reduced);
+    assert_eq!(json["reduced"], true);
+    assert!(json["safe"].is_null(), "{json}");
+}
+
+#[test]
+fn deadlocks_only_agrees_with_the_reference_explorer_on_random_nets() {
+    const LIMIT: usize = 3000;
+    let mut rng = Rng(0x5EED_1234_ABCD_0002);
+    let (mut compared, mut smaller) = (0, 0);
+    for case in 0..800 {
+        // Larger nets than the other random test: concurrency is what the reduction works on.
+        let n = random_wide_net(&mut rng, case % 2 == 0);
+        let sim = Sim::new(&n);
+        let Some(want) = sim.explore(LIMIT) else {
+            continue;
+        };
+        let full = explore(&n, ExploreOptions::default()).unwrap();
+        let reduced = explore(&n, deadlocks_only())
+            .unwrap_or_else(|e| panic!("case {case}: a bounded net reported as {e}: {n:?}"));
+        assert_eq!(full.dead_markings, want.4, "case {case}");
+        check_reduced(&n, &full, &reduced, &format!("case {case}: {n:?}"));
+        compared += 1;
+        smaller += usize::from(reduced.states < full.states);
+    }
+    assert!(compared > 300 && smaller > 100, "{compared} {smaller}");
+}
+
+/// Up to 16 places and 14 transitions, arcs to few places each: several loosely coupled parts.
+fn random_wide_net(rng: &mut Rng, safe_start: bool) -> PtNet {
+    let places = 4 + rng.below(13) as usize;
+    let transitions = 2 + rng.below(13) as usize;
+    let names: Vec<String> = (0..places.max(transitions))
+        .map(|i| format!("n{i}"))
+        .collect();
+    let marks: Vec<(&str, u64)> = (0..places)
+        .map(|p| {
+            let m = if safe_start {
+                rng.below(2)
+            } else {
+                [0, 0, 1, 1, 2][rng.below(5) as usize]
+            };
+            (names[p].as_str(), m)
+        })
+        .collect();
+    let mut arcs: Vec<(ArcList, ArcList)> = Vec::new();
+    for _ in 0..transitions {
+        // Each transition works in a window of nearby places, so distant ones are independent.
+        let base = rng.below(places as u64) as usize;
+        let side = |rng: &mut Rng, n: u64| {
+            (0..n)
+                .map(|_| {
+                    let p = (base + rng.below(3) as usize) % places;
+                    let w = if safe_start || rng.below(4) > 0 { 1 } else { 2 };
+                    (names[p].as_str(), w)
+                })
+                .collect::<Vec<_>>()
+        };
+        let (n_in, n_out) = (1 + rng.below(2), rng.below(3));
+        let ins = side(rng, n_in);
+        let outs = side(rng, n_out);
+        arcs.push((ins, outs));
+    }
+    let ts: Vec<(&str, Arcs, Arcs)> = arcs
+        .iter()
+        .enumerate()
+        .map(|(i, (a, b))| (names[i].as_str(), &a[..], &b[..]))
+        .collect();
+    net(&marks, &ts)
+}
