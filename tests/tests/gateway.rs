@@ -847,10 +847,14 @@ fn redermor_project(vehicle: &str) -> petrel_tests::TempProject {
         )
     });
     petrel_tests::TempProject::copy(&repo().join("missions/redermor"), move |name, text| {
-        let text = if name == "vehicle.toml" {
-            file.clone()
-        } else {
-            text
+        let text = match name {
+            "vehicle.toml" => file.clone(),
+            // The data server's stale-depth rule counts in wall-clock time (1 s): on a loaded
+            // 2-core machine a stalled simulator trips it and the nominal flight aborts, in one
+            // computer's run as in two. This test is about the link, not that rule: both runs
+            // get the same, looser bound.
+            "can.toml" => text.replace(r#"timeout = "1s""#, r#"timeout = "30s""#),
+            _ => text,
         };
         text.replace("{project}/bench/", &format!("{}/", bench.display()))
     })
