@@ -252,7 +252,8 @@ pub struct Reactor {
 
 impl Reactor {
     /// A reactor that reports SIGINT and SIGTERM as [`Ready::termination_requested`], whatever
-    /// its strategy: iceoryx2's handlers are installed now, and a spinning wait polls them.
+    /// its strategy: iceoryx2 installs its handlers at the first wait (a sleeping wait's, or
+    /// a spinning wait's first poll for them), and a spinning wait polls them.
     pub fn new(strategy: WaitStrategy) -> Result<Self, ReactorError> {
         Self::build(strategy, SignalHandlingMode::HandleTerminationRequests)
     }
@@ -267,13 +268,11 @@ impl Reactor {
             .signal_handling_mode(mode)
             .create::<ipc::Service>()
             .map_err(ReactorError::Create)?;
+        // iceoryx2 installs its SIGINT/SIGTERM handlers at the first look for a termination
+        // request: the WaitSet's first sleep, or (below) a spinning wait's first poll, which a
+        // spinning reactor needs since it may never sleep. Not earlier: a process that only
+        // blocks keeps exactly iceoryx2's own timing of the install.
         let handles_signals = mode == SignalHandlingMode::HandleTerminationRequests;
-        if handles_signals {
-            // iceoryx2 installs its handlers at the first sleep in a WaitSet, which a spinning
-            // reactor never reaches: a SIGTERM would then kill the process before it removes
-            // its shared memory. The first look installs them (and finds nothing yet).
-            let _ = SignalHandler::termination_requested();
-        }
         Ok(Reactor {
             waitset,
             strategy,
@@ -376,8 +375,10 @@ impl Reactor {
                 }));
             }
             spins = spins.wrapping_add(1);
-            // A signal caught while spinning (a lock of iceoryx2's handler: every 64 rounds).
-            if self.handles_signals && spins & 63 == 0 && SignalHandler::termination_requested() {
+            // A signal caught while spinning (a lock of iceoryx2's handler): at the first round
+            // of every wait, so that a busy reactor whose waits end within a few rounds still
+            // looks (and installs the handlers), then every 64 rounds.
+            if self.handles_signals && spins & 63 == 1 && SignalHandler::termination_requested() {
                 return Ok(Some(Ready {
                     termination_requested: true,
                     ..Ready::default()
