@@ -90,6 +90,17 @@ struct RawVerify {
     goals: Vec<Vec<Spanned<String>>>,
     #[serde(default)]
     progress_excludes: Option<Vec<Spanned<String>>>,
+    #[serde(default)]
+    bounds: Ordered<RawBound>,
+}
+
+/// `[verify.bounds]`: `NAME = { from = "leak", to = "EMERGENCY.surfacing", within = "1s" }`.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawBound {
+    from: Spanned<String>,
+    to: Spanned<String>,
+    within: Option<Spanned<String>>,
 }
 
 #[derive(serde::Deserialize)]
@@ -572,7 +583,75 @@ pub fn parse_manifest(file: FileId, text: &str, diags: &mut Diagnostics) -> Opti
         .progress_excludes
         .as_ref()
         .map(|list| places(&r, list));
+    for (k, v) in &raw.verify.bounds.0 {
+        let name = r.name(k, "bound", text);
+        let from = bound_end_at(&mut r, &v.from, text);
+        let to = bound_end_at(&mut r, &v.to, text);
+        let within = v.within.as_ref().map(|w| {
+            let mut range = w.span();
+            if text[range.clone()].starts_with('"') {
+                range = range.start + 1..range.end.saturating_sub(1);
+            }
+            Name {
+                text: w.get_ref().clone(),
+                span: r.span(range),
+            }
+        });
+        m.bounds.push(BoundDecl {
+            name,
+            from,
+            to,
+            within,
+        });
+    }
     Some(m)
+}
+
+/// One end of a bound as written in the manifest (positions inside the string when they are
+/// exact, as for invariants).
+fn bound_end_at(r: &mut Reader, v: &Spanned<String>, text: &str) -> BoundEnd {
+    let mut range = v.span();
+    let raw_text = &text[range.clone()];
+    let exact =
+        raw_text.starts_with('"') && !raw_text.starts_with("\"\"\"") && !raw_text.contains('\\');
+    if exact {
+        range = range.start + 1..range.end.saturating_sub(1);
+        return bound_end(r.file, range.start, v.get_ref(), r.diags);
+    }
+    // Escapes move positions: report at the whole string.
+    let mut inner = Diagnostics::new();
+    let mut end = bound_end(r.file, 0, v.get_ref(), &mut inner);
+    for mut d in inner.into_iter() {
+        d.span = Some(r.span(v.span()));
+        r.diags.push(d);
+    }
+    if let BoundEnd::Event(n) = &mut end {
+        n.span = r.span(v.span());
+    }
+    end
+}
+
+/// One end of a bound, from its text at byte `offset` of `file`: a bare name is an event, any
+/// other text a marking formula (E0108 when it does not read). PNML's reader shares it, so a
+/// bound reads the same from both.
+pub(crate) fn bound_end(
+    file: FileId,
+    offset: usize,
+    text: &str,
+    diags: &mut Diagnostics,
+) -> BoundEnd {
+    let trimmed = text.trim();
+    if is_identifier(trimmed) {
+        let lead = text.len() - text.trim_start().len();
+        return BoundEnd::Event(Name {
+            text: trimmed.to_string(),
+            span: Span::new(file, offset + lead, offset + lead + trimmed.len()),
+        });
+    }
+    BoundEnd::Marking {
+        text: text.to_string(),
+        formula: crate::formula::parse_formula(file, offset, text, "E0108", diags),
+    }
 }
 
 /// E0109: a net file path of the manifest that would leave the project directory.
@@ -741,6 +820,24 @@ pub fn format_manifest(m: &Manifest) -> String {
         if let Some(ex) = &m.progress_excludes {
             let cats: Vec<String> = ex.iter().map(|n| toml_str(&n.text)).collect();
             let _ = writeln!(out, "progress_excludes = [{}]", cats.join(", "));
+        }
+    }
+    if !m.bounds.is_empty() {
+        out.push_str("\n[verify.bounds]\n");
+        for b in &m.bounds {
+            let mut fields = vec![
+                format!("from = {}", toml_str(b.from.text())),
+                format!("to = {}", toml_str(b.to.text())),
+            ];
+            if let Some(w) = &b.within {
+                fields.push(format!("within = {}", toml_str(&w.text)));
+            }
+            let _ = writeln!(
+                out,
+                "{} = {{ {} }}",
+                toml_key(&b.name.text),
+                fields.join(", ")
+            );
         }
     }
     if !m.timers.is_empty() {
