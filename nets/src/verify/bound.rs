@@ -29,6 +29,7 @@ use super::{BoundFinding, BoundStatus, Trace};
 use crate::compiled::{Bound, CompiledProject, Guard, Occurrence};
 use crate::semantics::{Scratch, Semantics};
 use std::collections::HashMap;
+use std::fmt::Write as _;
 
 /// Timed states one bound may visit before it gives up (the report says so).
 const MAX_VISITS: usize = 2_000_000;
@@ -55,6 +56,8 @@ struct Visit {
 struct Witness {
     visit: usize,
     last: Option<u32>,
+    /// The wait went round a cycle that takes time.
+    cycle: bool,
 }
 
 /// The bounds of `p` over the timed graph `g` (states laid out by `plain`).
@@ -247,6 +250,7 @@ impl Search<'_> {
             let here = Witness {
                 visit: v,
                 last: None,
+                cycle: false,
             };
             if self.dead[node as usize] {
                 if f.unbounded.is_none() {
@@ -275,7 +279,7 @@ impl Search<'_> {
                             "a cycle without {} that takes time: the mission can go round it forever",
                             b.to_text
                         ),
-                        here,
+                        Witness { cycle: true, ..here },
                     ));
                 }
                 continue;
@@ -302,6 +306,7 @@ impl Search<'_> {
                     let w = Witness {
                         visit: v,
                         last: Some(edge.label),
+                        cycle: false,
                     };
                     record(&mut f, self.tm.observer_range(&n), w);
                     continue;
@@ -366,7 +371,22 @@ impl Search<'_> {
                 return finding;
             }
         };
-        let (trace, then) = self.path(&f, witness);
+        let (trace, mut then, nodes) = self.path(&f, witness);
+        if f.unbounded.as_ref().is_some_and(|(_, w)| w.cycle) {
+            // The path up to the first state met again, and that turn of the cycle.
+            if let Some((i, j)) = (0..nodes.len()).find_map(|j| {
+                nodes[..j]
+                    .iter()
+                    .position(|&n| n == nodes[j])
+                    .map(|i| (i, j))
+            }) {
+                let turn = then[i..j].join(" → ");
+                then.truncate(j);
+                if let Some(r) = &mut finding.reason {
+                    let _ = write!(r, " (one turn: {turn})");
+                }
+            }
+        }
         finding.trace = trace;
         finding.then = then;
         finding.met = b.within_us.map(|us| {
@@ -399,6 +419,7 @@ impl Search<'_> {
                 Witness {
                     visit: id,
                     last: None,
+                    cycle: false,
                 },
             );
             return;
@@ -438,12 +459,15 @@ impl Search<'_> {
     }
 
     /// The witness's path: the events up to and including the step where `from` happened,
-    /// then those after it (ending with the step where `to` happened, if it did).
-    fn path(&self, f: &Found, w: Witness) -> (Trace, Trace) {
+    /// then those after it (ending with the step where `to` happened, if it did), and the
+    /// graph states met after `from` (one more than those events when `to` did not happen).
+    fn path(&self, f: &Found, w: Witness) -> (Trace, Trace, Vec<u32>) {
         let text = |l: u32| self.g.labels[l as usize].text.clone();
         let mut then: Trace = w.last.map(text).into_iter().collect();
+        let mut nodes = Vec::new();
         let mut v = w.visit;
         loop {
+            nodes.push(f.visits[v].node);
             match f.visits[v].parent {
                 Parent::Step { prev, label } => {
                     then.push(text(label));
@@ -451,9 +475,10 @@ impl Search<'_> {
                 }
                 Parent::From { source, label } => {
                     then.reverse();
+                    nodes.reverse();
                     let mut trace = self.g.trace(source);
                     trace.extend(label.map(text));
-                    return (trace, then);
+                    return (trace, then, nodes);
                 }
             }
         }
