@@ -155,8 +155,60 @@ impl petrel_player::engine::Sink for Taken {
     }
 }
 
+/// Watches one bound on the engine's steps: the occurrences of `from` waiting for `to`, and
+/// the delays seen, as docs/verification.md defines them.
+struct Observer<'b> {
+    b: &'b Bound,
+    /// The times of the occurrences of `from` still waiting for `to`.
+    pending: Vec<u64>,
+    from_held: bool,
+    /// The delays seen (microseconds).
+    out: Vec<u64>,
+}
+
+impl Observer<'_> {
+    fn holds(e: &Engine, o: &Occurrence) -> bool {
+        match o {
+            Occurrence::Marking(f) => e.layout().holds(f, e.state()),
+            Occurrence::Event(_) => false,
+        }
+    }
+
+    /// After a step (or at the start, with nothing taken): `to` answers what was pending;
+    /// `from` may start a wait, which a `to` marking holding there answers at once.
+    fn after(&mut self, e: &Engine, taken: &Taken) {
+        let by_event = |o: &Occurrence| match o {
+            Occurrence::Event(ev) => taken.event == Some(*ev) && taken.fired,
+            Occurrence::Marking(_) => false,
+        };
+        let now = e.now();
+        if by_event(&self.b.to) || Self::holds(e, &self.b.to) {
+            self.out.extend(self.pending.drain(..).map(|t0| now - t0));
+        }
+        let now_holds = Self::holds(e, &self.b.from);
+        if by_event(&self.b.from) || (now_holds && !self.from_held) {
+            self.pending.push(now);
+            if Self::holds(e, &self.b.to) {
+                self.out.extend(self.pending.drain(..).map(|t0| now - t0));
+            }
+        }
+        self.from_held = now_holds;
+    }
+
+    /// Processes the engine's queue one step at a time.
+    fn steps(&mut self, e: &mut Engine) {
+        loop {
+            let mut t = Taken::default();
+            if e.step(&mut t).is_none() {
+                break;
+            }
+            self.after(e, &t);
+        }
+    }
+}
+
 /// The delays (microseconds) the engine shows between each occurrence of a bound's `from` and
-/// the next `to`, as docs/verification.md defines them, on `runs` random scripts.
+/// the next `to` on `runs` random scripts.
 fn observed(p: &CompiledProject, b: &Bound, runs: u64) -> Vec<u64> {
     let timer_events: Vec<u32> = p.timers.iter().map(|t| t.event).collect();
     let outside: Vec<u32> = (0..p.events.len() as u32)
@@ -171,59 +223,26 @@ fn observed(p: &CompiledProject, b: &Bound, runs: u64) -> Vec<u64> {
         60_000_000,
         700_000_000,
     ];
-    let holds = |e: &Engine, o: &Occurrence| match o {
-        Occurrence::Marking(f) => e.layout().holds(f, e.state()),
-        Occurrence::Event(_) => false,
+    let mut o = Observer {
+        b,
+        pending: Vec::new(),
+        from_held: false,
+        out: Vec::new(),
     };
-    let mut out = Vec::new();
     for seed in 0..runs {
         let mut r = Lcg(seed ^ 0x5eed);
         let mut e = Engine::new(p);
         e.start(0, &mut NullSink);
-        // The times of the occurrences of `from` still waiting for `to`.
-        let mut pending: Vec<u64> = Vec::new();
-        let mut from_held = false;
-        // After each step: `to` answers what was pending, `from` may start a wait, which a `to`
-        // marking holding there answers at once.
-        let mut after_step =
-            |e: &Engine, taken: &Taken, pending: &mut Vec<u64>, out: &mut Vec<u64>| {
-                let by_event = |o: &Occurrence| match o {
-                    Occurrence::Event(ev) => taken.event == Some(*ev) && taken.fired,
-                    Occurrence::Marking(_) => false,
-                };
-                if by_event(&b.to) || holds(e, &b.to) {
-                    out.extend(pending.drain(..).map(|t0| e.now() - t0));
-                }
-                let now_holds = holds(e, &b.from);
-                if by_event(&b.from) || (now_holds && !from_held) {
-                    pending.push(e.now());
-                    if holds(e, &b.to) {
-                        out.extend(pending.drain(..).map(|t0| e.now() - t0));
-                    }
-                }
-                from_held = now_holds;
-            };
-        let steps =
-            |e: &mut Engine,
-             pending: &mut Vec<u64>,
-             out: &mut Vec<u64>,
-             after: &mut dyn FnMut(&Engine, &Taken, &mut Vec<u64>, &mut Vec<u64>)| {
-                loop {
-                    let mut t = Taken::default();
-                    if e.step(&mut t).is_none() {
-                        break;
-                    }
-                    after(e, &t, pending, out);
-                }
-            };
-        // The start: the initial state, where a `from` marking may already hold.
-        steps(&mut e, &mut pending, &mut out, &mut after_step);
-        after_step(&e, &Taken::default(), &mut pending, &mut out);
+        o.pending.clear();
+        o.from_held = false;
+        // The initial state, where a `from` marking may already hold, then what start queued.
+        o.after(&e, &Taken::default());
+        o.steps(&mut e);
         for _ in 0..12 {
             let target = e.now() + delays[r.next(delays.len() as u64) as usize];
             while let Some(d) = e.next_deadline().filter(|&d| d <= target) {
                 e.advance_to(d);
-                steps(&mut e, &mut pending, &mut out, &mut after_step);
+                o.steps(&mut e);
             }
             e.advance_to(target);
             if e.is_over() || outside.is_empty() {
@@ -236,11 +255,11 @@ fn observed(p: &CompiledProject, b: &Bound, runs: u64) -> Vec<u64> {
                 .map(|(_, t)| value(*t, &mut r))
                 .collect();
             if e.submit(ev, params).is_ok() {
-                steps(&mut e, &mut pending, &mut out, &mut after_step);
+                o.steps(&mut e);
             }
         }
     }
-    out
+    o.out
 }
 
 #[test]
