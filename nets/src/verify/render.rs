@@ -387,11 +387,15 @@ fn bound_text(b: &super::BoundFinding) -> String {
             if let Some(min) = b.min_seconds {
                 let _ = write!(line, "at least {}, ", secs(min));
             }
+            // The path to where it may wait forever.
+            let mut to = trace_text(&b.trace);
+            if !b.then.is_empty() {
+                let _ = write!(to, ", then {}", b.then.join(" → "));
+            }
             let _ = write!(
                 line,
-                "unbounded: {}; {}",
-                b.reason.as_deref().unwrap_or(""),
-                path(b)
+                "unbounded: {}; {to}",
+                b.reason.as_deref().unwrap_or("")
             );
         }
         S::FromNeverHappens => {
@@ -642,11 +646,12 @@ fn diagnostics_with(
                 b.reason.as_deref().unwrap_or("")
             ),
         };
-        let then = if b.then.is_empty() {
-            "at once".to_string()
-        } else {
-            b.then.join(" → ")
-        };
+        let mut path = trace_text(&b.trace);
+        if !b.then.is_empty() {
+            let _ = write!(path, ", then {}", b.then.join(" → "));
+        } else if b.status == super::BoundStatus::Bounded {
+            path.push_str(", then at once");
+        }
         d.push(at(
             span,
             Diagnostic::error(
@@ -654,7 +659,7 @@ fn diagnostics_with(
                 Default::default(),
                 format!("bound `{}` is not met: {what}, more than {within}", b.name),
             )
-            .label(format!("{}, then {then}", trace_text(&b.trace)))
+            .label(path)
             .help("follow the path: a watchdog timer in the nets (a fallback after at most the time allowed) bounds a wait for an outside event; or allow more time"),
         ));
     }
