@@ -884,6 +884,10 @@ R1 = { net = "ROBOT", args = ["r1", 0.5, 3, true, [1.0, 2]] }
 
 [invariants]
 mutex = "not (R1.in and R2.in)"
+
+[verify.bounds]
+reaction = { from = "alarm", to = "R1.in or not active R2", within = "1.5s" }
+back = { from = "R1.in", to = "go" }
 "#;
 
     #[test]
@@ -901,6 +905,31 @@ mutex = "not (R1.in and R2.in)"
             .map(|f| f.name.text.as_str())
             .collect();
         assert_eq!(fns, ["plan", "stop"]);
+        assert!(matches!(&m.bounds[0].from, BoundEnd::Event(n) if n.text == "alarm"));
+        assert!(matches!(
+            &m.bounds[0].to,
+            BoundEnd::Marking {
+                formula: Some(_),
+                ..
+            }
+        ));
+        assert_eq!(
+            m.bounds[0].within.as_ref().map(|w| w.text.as_str()),
+            Some("1.5s")
+        );
+        assert!(matches!(&m.bounds[1].to, BoundEnd::Event(n) if n.text == "go"));
+        // A formula's names point inside the string.
+        let BoundEnd::Marking {
+            formula: Some(Formula::Or(a, _)),
+            ..
+        } = &m.bounds[0].to
+        else {
+            panic!("{:?}", m.bounds[0].to)
+        };
+        let Formula::Marked(n) = &**a else {
+            panic!("{a:?}")
+        };
+        assert_eq!(&TEXT[n.span.start as usize..n.span.end as usize], "R1.in");
         let again = parse_manifest(FileId(0), &format_manifest(&m), &mut d).unwrap();
         assert!(d.is_empty(), "{d:?}");
         assert_eq!(m, again);
