@@ -116,6 +116,11 @@ pub struct VerifyArgs {
     /// Without it, a timer's expiry may come at any moment (the untimed analysis).
     #[arg(long)]
     timed: bool,
+    /// Report a time bound: over every occurrence of FROM, the least and greatest time until
+    /// the next TO (each an event, or a marking formula such as `EMERGENCY.surfacing`), as
+    /// `[verify.bounds]` declares them. Implies --timed. May be given more than once.
+    #[arg(long, value_name = "FROM..TO")]
+    bound: Vec<String>,
     /// A PNML file only: decide deadlocks alone, with stubborn sets (a partial-order reduction
     /// that reaches every dead marking through fewer markings); bounds and safety are then not
     /// decided.
@@ -126,6 +131,9 @@ pub struct VerifyArgs {
 /// Verifies a project (or one of its nets), or explores a PNML file as a P/T net.
 pub fn verify(a: VerifyArgs) -> Outcome {
     if a.dir.is_file() {
+        if !a.bound.is_empty() {
+            return Outcome::Usage("--bound needs a project directory, not a PNML file".into());
+        }
         return verify_pnml(&a.dir, a.format, a.max_states, a.deadlocks);
     }
     if a.deadlocks {
@@ -138,15 +146,22 @@ pub fn verify(a: VerifyArgs) -> Outcome {
         Ok(c) => c,
         Err(o) => return o,
     };
-    let Some(c) = checked.compiled else {
+    let Some(mut c) = checked.compiled else {
         return Outcome::Errors;
     };
+    for text in &a.bound {
+        match petrel_nets::check::command_line_bound(&c, text) {
+            Ok(b) => c.bounds.push(b),
+            Err(e) => return Outcome::Usage(e),
+        }
+    }
     let interactive = interactive(a.format);
     let opts = verify::VerifyOptions {
         max_states: a.max_states,
         only_net: a.net,
         no_reduction: a.no_reduction,
-        timed: a.timed,
+        // A bound asked for on the command line needs the timed exploration.
+        timed: a.timed || !a.bound.is_empty(),
         progress: interactive.then(|| {
             Box::new(|states: u64, rate: f64| {
                 eprint!("\r{states} states, {rate:.0} states/s   ");

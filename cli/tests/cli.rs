@@ -508,6 +508,99 @@ fn verify_timed_drops_an_order_of_timers_that_cannot_happen() {
 }
 
 #[test]
+fn verify_reports_time_bounds_declared_and_asked_for() {
+    let dir = repo()
+        .join("nets/tests/data/timed/relay")
+        .display()
+        .to_string();
+    // Declared in [verify.bounds]: decided with --timed, not without.
+    let o = petrel(&["verify", &dir, "--timed"]);
+    let t = stdout(&o);
+    assert_eq!(o.status.code(), Some(0), "{t}");
+    assert!(
+        t.contains("bound relay (go .. M.done): 3s to 8s; the longest: after go, then finish → skip → b_exp; within 8s: met"),
+        "{t}"
+    );
+    assert!(
+        t.contains("bound heartbeat (go .. W.over): at least 0s, unbounded: a cycle"),
+        "{t}"
+    );
+    let o = petrel(&["verify", &dir]);
+    let t = stdout(&o);
+    assert_eq!(o.status.code(), Some(0), "{t}");
+    assert!(
+        t.contains("bound relay (go .. M.done): not decided: needs --timed"),
+        "{t}"
+    );
+    // Asked for on the command line: --timed is implied; JSON for tools.
+    let o = petrel(&[
+        "verify",
+        &dir,
+        "--bound",
+        "M.two..b_exp",
+        "--format",
+        "json",
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let doc: serde_json::Value = serde_json::from_str(&stdout(&o)).expect("json");
+    assert_eq!(doc["timed"], true);
+    let bounds = doc["bounds"].as_array().expect("bounds");
+    let asked = bounds
+        .iter()
+        .find(|b| b["name"] == "M.two..b_exp")
+        .expect("asked");
+    assert_eq!(asked["status"], "bounded");
+    assert_eq!(
+        (asked["min_seconds"].as_f64(), asked["max_seconds"].as_f64()),
+        (Some(3.0), Some(3.0))
+    );
+    let relay = bounds
+        .iter()
+        .find(|b| b["name"] == "relay")
+        .expect("declared");
+    assert_eq!(relay["met"], true);
+    assert_eq!(relay["within_seconds"].as_f64(), Some(8.0));
+    assert_eq!(relay["then"].as_array().map(Vec::len), Some(3));
+    // A bound that does not read is a usage error naming it.
+    let o = petrel(&["verify", &dir, "--bound", "go..M.nowhere"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(
+        stderr(&o).contains("unknown place `M.nowhere`"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn verify_fails_on_a_bound_over_its_requirement() {
+    let copy = copy_project(&repo().join("nets/tests/data/timed/relay"));
+    let manifest = copy.path().join("petrel.toml");
+    let text = std::fs::read_to_string(&manifest).unwrap();
+    std::fs::write(
+        &manifest,
+        text.replace("within = \"8s\"", "within = \"7s\""),
+    )
+    .unwrap();
+    let dir = copy.path().display().to_string();
+    let o = petrel(&["verify", &dir, "--timed"]);
+    let t = stdout(&o);
+    assert_eq!(o.status.code(), Some(1), "{t}");
+    assert!(
+        t.contains("[E0607] Error: bound `relay` is not met: M.done after go can take up to 8s, more than 7s"),
+        "{t}"
+    );
+    assert!(t.contains("petrel.toml:31:49 ]"), "{t}");
+    assert!(
+        t.contains("error[E0607]: bound relay (go .. M.done): 3s to 8s"),
+        "{t}"
+    );
+    assert!(t.contains("within 7s: VIOLATED"), "{t}");
+    // Untimed, the requirement is not decided: no error.
+    let o = petrel(&["verify", &dir]);
+    assert_eq!(o.status.code(), Some(0), "{}", stdout(&o));
+}
+
+#[test]
 fn run_plays_the_mission_scripts_in_virtual_time_as_json_lines() {
     // Every script of every mission: a new one is covered as soon as it is written.
     let mut scripts = Vec::new();

@@ -324,6 +324,7 @@ impl<'p> Checker<'p> {
             invariants: Vec::new(),
             goals: Vec::new(),
             progress_excludes: self.progress_excludes(),
+            bounds: Vec::new(),
         };
         project.start = self.start(&project, &root_inst);
         project.goals = m
@@ -337,6 +338,7 @@ impl<'p> Checker<'p> {
             .map(|f| self.final_marking(&project, f))
             .collect();
         project.invariants = self.invariants(&project);
+        project.bounds = self.bounds(&project);
         Some(project)
     }
 
@@ -1156,6 +1158,67 @@ impl<'p> Checker<'p> {
             }
         }
         out
+    }
+
+    /// The manifest's time bounds: each end an event or a formula, `within` a duration.
+    fn bounds(&mut self, project: &c::CompiledProject) -> Vec<c::Bound> {
+        let decls = &self.p.manifest.bounds;
+        unique(&mut self.d, "bound", "", decls.iter().map(|b| &b.name));
+        let mut out = Vec::new();
+        for b in decls {
+            let from = self.occurrence(project, &b.from);
+            let to = self.occurrence(project, &b.to);
+            let within_us = match &b.within {
+                None => Some(None),
+                Some(w) => match crate::duration::parse_duration_us(&w.text) {
+                    Some(us) => Some(Some(us)),
+                    None => {
+                        self.d.push(
+                            Diagnostic::error(
+                                "E0420",
+                                w.span,
+                                format!("bound `{}`: `{}` is not a duration", b.name, w.text),
+                            )
+                            .label("not a duration")
+                            .help("write a number and a unit: `500ms`, `90s`, `10min`, `1.5h`"),
+                        );
+                        None
+                    }
+                },
+            };
+            if let (Some(from), Some(to), Some(within_us)) = (from, to, within_us) {
+                out.push(c::Bound {
+                    name: b.name.text.clone(),
+                    from,
+                    to,
+                    from_text: b.from.text().trim().to_string(),
+                    to_text: b.to.text().trim().to_string(),
+                    within_us,
+                });
+            }
+        }
+        out
+    }
+
+    /// One end of a bound: a declared event, or a formula over the state.
+    fn occurrence(
+        &mut self,
+        project: &c::CompiledProject,
+        end: &BoundEnd,
+    ) -> Option<c::Occurrence> {
+        match end {
+            BoundEnd::Event(n) => match self.events.get(n.as_str()) {
+                Some(&e) => Some(c::Occurrence::Event(e)),
+                None => {
+                    self.unknown("E0203", "event", n, self.events.keys().copied().collect());
+                    None
+                }
+            },
+            BoundEnd::Marking { formula, .. } => formula
+                .as_ref()
+                .and_then(|f| self.state_formula(project, f))
+                .map(c::Occurrence::Marking),
+        }
     }
 
     /// A formula of the manifest resolved against the project's nets and places.
@@ -2276,6 +2339,57 @@ fn fold_guard(g: c::Guard, fixed: &[c::Value]) -> c::Guard {
             }
         }
     }
+}
+
+/// A bound given on the command line (`petrel verify --bound FROM..TO`), each end an event's
+/// name or a marking formula as in `[verify.bounds]`; the error says which end does not read.
+pub fn command_line_bound(project: &c::CompiledProject, text: &str) -> Result<c::Bound, String> {
+    let Some((from, to)) = text.split_once("..") else {
+        return Err(format!(
+            "bound `{text}`: write FROM..TO, each an event or a marking formula (`leak..EMERGENCY.surfacing`)"
+        ));
+    };
+    let end = |what: &str, t: &str| -> Result<c::Occurrence, String> {
+        let mut d = Diagnostics::new();
+        let read = crate::manifest::bound_end(crate::source::FileId::default(), 0, t, &mut d);
+        if let Some(first) = d.iter().next() {
+            return Err(format!(
+                "bound `{text}`: {what} `{}`: {}",
+                t.trim(),
+                first.message
+            ));
+        }
+        match read {
+            BoundEnd::Event(n) => project
+                .events
+                .iter()
+                .position(|e| e.name == n.text)
+                .map(|e| c::Occurrence::Event(e as c::EventId))
+                .ok_or_else(|| {
+                    format!("bound `{text}`: {what} `{n}` is not a declared event (write `NET.place` for a marking)")
+                }),
+            BoundEnd::Marking { formula, .. } => {
+                let mut bad = Vec::new();
+                let f = formula.and_then(|f| {
+                    resolve_formula(project, &f, &mut |n: &Name, kind: &str| {
+                        bad.push(format!("unknown {kind} `{n}`"))
+                    })
+                });
+                match f {
+                    Some(f) if bad.is_empty() => Ok(c::Occurrence::Marking(f)),
+                    _ => Err(format!("bound `{text}`: {what} `{}`: {}", t.trim(), bad.join(", "))),
+                }
+            }
+        }
+    };
+    Ok(c::Bound {
+        name: text.to_string(),
+        from: end("from", from)?,
+        to: end("to", to)?,
+        from_text: from.trim().to_string(),
+        to_text: to.trim().to_string(),
+        within_us: None,
+    })
 }
 
 /// Resolves a formula's names against a compiled project; `unknown` is told of each name that

@@ -335,6 +335,35 @@ pub struct CompiledProject {
     pub goals: Vec<Vec<(NetId, PlaceRef)>>,
     /// Categories whose events the progress check does not count on the way to an end.
     pub progress_excludes: Vec<Category>,
+    /// Time bounds to report (`[verify.bounds]`, and `petrel verify --bound`).
+    pub bounds: Vec<Bound>,
+}
+
+/// One end of a time bound: an event a transition takes, or a marking formula that holds.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Occurrence {
+    /// The event is delivered and some transition takes it.
+    Event(EventId),
+    /// The formula holds in the stable state reached.
+    Marking(StateFormula),
+}
+
+/// A time bound: over every occurrence of `from`, the least and greatest time until the next
+/// `to` (docs/verification.md, "Time bounds").
+#[derive(Clone, Debug, PartialEq)]
+pub struct Bound {
+    /// Its name (the manifest's key, or the command line's text).
+    pub name: String,
+    /// Where the observer's clock starts.
+    pub from: Occurrence,
+    /// What stops it.
+    pub to: Occurrence,
+    /// `from` as written.
+    pub from_text: String,
+    /// `to` as written.
+    pub to_text: String,
+    /// The requirement, in microseconds: a greater (or no) bound is an error (E0607).
+    pub within_us: Option<u64>,
 }
 
 impl CompiledProject {

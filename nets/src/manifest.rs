@@ -90,6 +90,17 @@ struct RawVerify {
     goals: Vec<Vec<Spanned<String>>>,
     #[serde(default)]
     progress_excludes: Option<Vec<Spanned<String>>>,
+    #[serde(default)]
+    bounds: Ordered<RawBound>,
+}
+
+/// `[verify.bounds]`: `NAME = { from = "leak", to = "EMERGENCY.surfacing", within = "1s" }`.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawBound {
+    from: Spanned<String>,
+    to: Spanned<String>,
+    within: Option<Spanned<String>>,
 }
 
 #[derive(serde::Deserialize)]
@@ -572,7 +583,75 @@ pub fn parse_manifest(file: FileId, text: &str, diags: &mut Diagnostics) -> Opti
         .progress_excludes
         .as_ref()
         .map(|list| places(&r, list));
+    for (k, v) in &raw.verify.bounds.0 {
+        let name = r.name(k, "bound", text);
+        let from = bound_end_at(&mut r, &v.from, text);
+        let to = bound_end_at(&mut r, &v.to, text);
+        let within = v.within.as_ref().map(|w| {
+            let mut range = w.span();
+            if text[range.clone()].starts_with('"') {
+                range = range.start + 1..range.end.saturating_sub(1);
+            }
+            Name {
+                text: w.get_ref().clone(),
+                span: r.span(range),
+            }
+        });
+        m.bounds.push(BoundDecl {
+            name,
+            from,
+            to,
+            within,
+        });
+    }
     Some(m)
+}
+
+/// One end of a bound as written in the manifest (positions inside the string when they are
+/// exact, as for invariants).
+fn bound_end_at(r: &mut Reader, v: &Spanned<String>, text: &str) -> BoundEnd {
+    let mut range = v.span();
+    let raw_text = &text[range.clone()];
+    let exact =
+        raw_text.starts_with('"') && !raw_text.starts_with("\"\"\"") && !raw_text.contains('\\');
+    if exact {
+        range = range.start + 1..range.end.saturating_sub(1);
+        return bound_end(r.file, range.start, v.get_ref(), r.diags);
+    }
+    // Escapes move positions: report at the whole string.
+    let mut inner = Diagnostics::new();
+    let mut end = bound_end(r.file, 0, v.get_ref(), &mut inner);
+    for mut d in inner.into_iter() {
+        d.span = Some(r.span(v.span()));
+        r.diags.push(d);
+    }
+    if let BoundEnd::Event(n) = &mut end {
+        n.span = r.span(v.span());
+    }
+    end
+}
+
+/// One end of a bound, from its text at byte `offset` of `file`: a bare name is an event, any
+/// other text a marking formula (E0108 when it does not read). PNML's reader shares it, so a
+/// bound reads the same from both.
+pub(crate) fn bound_end(
+    file: FileId,
+    offset: usize,
+    text: &str,
+    diags: &mut Diagnostics,
+) -> BoundEnd {
+    let trimmed = text.trim();
+    if is_identifier(trimmed) {
+        let lead = text.len() - text.trim_start().len();
+        return BoundEnd::Event(Name {
+            text: trimmed.to_string(),
+            span: Span::new(file, offset + lead, offset + lead + trimmed.len()),
+        });
+    }
+    BoundEnd::Marking {
+        text: text.to_string(),
+        formula: crate::formula::parse_formula(file, offset, text, "E0108", diags),
+    }
 }
 
 /// E0109: a net file path of the manifest that would leave the project directory.
@@ -743,6 +822,24 @@ pub fn format_manifest(m: &Manifest) -> String {
             let _ = writeln!(out, "progress_excludes = [{}]", cats.join(", "));
         }
     }
+    if !m.bounds.is_empty() {
+        out.push_str("\n[verify.bounds]\n");
+        for b in &m.bounds {
+            let mut fields = vec![
+                format!("from = {}", toml_str(b.from.text())),
+                format!("to = {}", toml_str(b.to.text())),
+            ];
+            if let Some(w) = &b.within {
+                fields.push(format!("within = {}", toml_str(&w.text)));
+            }
+            let _ = writeln!(
+                out,
+                "{} = {{ {} }}",
+                toml_key(&b.name.text),
+                fields.join(", ")
+            );
+        }
+    }
     if !m.timers.is_empty() {
         out.push_str("\n[timers]\n");
         for t in &m.timers {
@@ -787,6 +884,10 @@ R1 = { net = "ROBOT", args = ["r1", 0.5, 3, true, [1.0, 2]] }
 
 [invariants]
 mutex = "not (R1.in and R2.in)"
+
+[verify.bounds]
+reaction = { from = "alarm", to = "R1.in or not active R2", within = "1.5s" }
+back = { from = "R1.in", to = "go" }
 "#;
 
     #[test]
@@ -804,6 +905,31 @@ mutex = "not (R1.in and R2.in)"
             .map(|f| f.name.text.as_str())
             .collect();
         assert_eq!(fns, ["plan", "stop"]);
+        assert!(matches!(&m.bounds[0].from, BoundEnd::Event(n) if n.text == "alarm"));
+        assert!(matches!(
+            &m.bounds[0].to,
+            BoundEnd::Marking {
+                formula: Some(_),
+                ..
+            }
+        ));
+        assert_eq!(
+            m.bounds[0].within.as_ref().map(|w| w.text.as_str()),
+            Some("1.5s")
+        );
+        assert!(matches!(&m.bounds[1].to, BoundEnd::Event(n) if n.text == "go"));
+        // A formula's names point inside the string.
+        let BoundEnd::Marking {
+            formula: Some(Formula::Or(a, _)),
+            ..
+        } = &m.bounds[0].to
+        else {
+            panic!("{:?}", m.bounds[0].to)
+        };
+        let Formula::Marked(n) = &**a else {
+            panic!("{a:?}")
+        };
+        assert_eq!(&TEXT[n.span.start as usize..n.span.end as usize], "R1.in");
         let again = parse_manifest(FileId(0), &format_manifest(&m), &mut d).unwrap();
         assert!(d.is_empty(), "{d:?}");
         assert_eq!(m, again);

@@ -285,6 +285,45 @@ pub struct InvariantDecl {
     pub formula: Option<Formula>,
 }
 
+/// One end of a time bound: an event, or a marking (a formula over the state).
+#[derive(Clone, Debug, PartialEq)]
+pub enum BoundEnd {
+    /// A bare name: the event happens (a transition takes it).
+    Event(Name),
+    /// Anything else: the marking formula (as `[invariants]` write them) holds.
+    Marking {
+        /// The formula as written (kept for the manifest's round trip).
+        text: String,
+        /// The formula, when it reads.
+        formula: Option<Formula>,
+    },
+}
+
+impl BoundEnd {
+    /// The end as written.
+    pub fn text(&self) -> &str {
+        match self {
+            BoundEnd::Event(n) => &n.text,
+            BoundEnd::Marking { text, .. } => text,
+        }
+    }
+}
+
+/// A time bound of the manifest's `[verify.bounds]`: `petrel verify --timed` reports, over
+/// every occurrence of `from`, the least and greatest time until the next `to`
+/// (docs/verification.md, "Time bounds").
+#[derive(Clone, Debug, PartialEq)]
+pub struct BoundDecl {
+    /// Its name.
+    pub name: Name,
+    /// Where the observer's clock starts.
+    pub from: BoundEnd,
+    /// What stops it.
+    pub to: BoundEnd,
+    /// The requirement, a duration as written (`90s`), if any: a greater bound is an error.
+    pub within: Option<Name>,
+}
+
 /// A net file named by the manifest.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FileRef {
@@ -326,6 +365,8 @@ pub struct Manifest {
     pub instances: Vec<InstanceDecl>,
     /// Invariants, in the order written.
     pub invariants: Vec<InvariantDecl>,
+    /// Time bounds to report (`[verify.bounds]`), in the order written.
+    pub bounds: Vec<BoundDecl>,
 }
 
 /// Comments and spacing that belong before an item, kept so `petrel fmt` loses nothing.

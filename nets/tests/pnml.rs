@@ -758,9 +758,32 @@ fn sample_project() -> Project {
             internal: false,
         }])
         .collect();
+    let formula = |t: &str| {
+        petrel_nets::formula::parse_formula(FileId(0), 0, t, "E0108", &mut Diagnostics::new())
+    };
     let manifest = Manifest {
         instances: Vec::new(),
         invariants: Vec::new(),
+        bounds: vec![
+            BoundDecl {
+                name: n("reaction"),
+                from: BoundEnd::Event(n("tick")),
+                to: BoundEnd::Marking {
+                    text: "nav.a and not global.ready".into(),
+                    formula: formula("nav.a and not global.ready"),
+                },
+                within: Some(n("1.5s")),
+            },
+            BoundDecl {
+                name: n("open"),
+                from: BoundEnd::Marking {
+                    text: " active nav or (global.ready implies nav.b) ".into(),
+                    formula: formula(" active nav or (global.ready implies nav.b) "),
+                },
+                to: BoundEnd::Event(n("ev_nominal")),
+                within: None,
+            },
+        ],
         goals: Vec::new(),
         progress_excludes: None,
         name: "uav mission <&> \"quoted\"".into(),

@@ -356,6 +356,17 @@ fn write_manifest(w: &mut Writer, m: &Manifest, layout: &Layout) {
             w.close(kind);
         }
     }
+    for b in &m.bounds {
+        let mut attrs = vec![
+            ("name", b.name.as_str()),
+            ("from", b.from.text()),
+            ("to", b.to.text()),
+        ];
+        if let Some(w) = &b.within {
+            attrs.push(("within", w.as_str()));
+        }
+        w.empty("bound", &attrs);
+    }
     if let Some(excluded) = &m.progress_excludes {
         w.open("progress-excludes", &[]);
         for c in excluded {

@@ -598,6 +598,40 @@ impl Rebuild<'_, '_> {
                 }
             }
         }
+        for b in n.children("bound") {
+            let name = self.name(b, "name");
+            let mut end = |key: &str| {
+                let text = self.req(b, key).to_string();
+                let end = self.parsed(b, "bound end", &text, |file, t, d| {
+                    Some(crate::manifest::bound_end(file, 0, t, d))
+                });
+                match end {
+                    Some(BoundEnd::Event(n)) => BoundEnd::Event(Name {
+                        text: n.text,
+                        span: b.span,
+                    }),
+                    Some(BoundEnd::Marking { text, formula }) => BoundEnd::Marking {
+                        text,
+                        formula: formula.map(|f| respan_formula(f, b.span)),
+                    },
+                    None => BoundEnd::Marking {
+                        text,
+                        formula: None,
+                    },
+                }
+            };
+            let (from, to) = (end("from"), end("to"));
+            let within = b.attr("within").map(|w| Name {
+                text: w.to_string(),
+                span: b.span,
+            });
+            m.bounds.push(BoundDecl {
+                name,
+                from,
+                to,
+                within,
+            });
+        }
         // Absent: the default (catastrophic); present and empty: every category counts.
         m.progress_excludes = n.child("progress-excludes").map(|x| {
             x.children("category")

@@ -16,6 +16,7 @@
 //! docs/verification.md says exactly what is checked; docs/semantics.md what is explored.
 
 mod analysis;
+mod bound;
 mod env;
 mod explore;
 mod minimize;
@@ -230,6 +231,51 @@ pub struct LoopFinding {
     pub components: u64,
 }
 
+/// What became of a time bound.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BoundStatus {
+    /// `to` always comes, within `max_seconds` of `from`.
+    Bounded,
+    /// Some path waits forever for `to` after `from` (`reason` says how).
+    Unbounded,
+    /// `from` never happens: there is nothing to bound.
+    FromNeverHappens,
+    /// Not computed: without `--timed`, with `--net`, from a reload's state, or the search
+    /// stopped (`reason` says which).
+    NotDecided,
+}
+
+/// A time bound (`[verify.bounds]`, `--bound`): over every occurrence of `from`, the least and
+/// greatest time until the next `to` (docs/verification.md, "Time bounds").
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct BoundFinding {
+    /// The bound's name (the manifest's key, or the command line's text).
+    pub name: String,
+    /// `from` as written: an event, or a marking formula.
+    pub from: String,
+    /// `to` as written.
+    pub to: String,
+    /// The requirement (`within`), in seconds.
+    pub within_seconds: Option<f64>,
+    /// Bounded, unbounded, `from` never happens, or not decided.
+    pub status: BoundStatus,
+    /// Why it is unbounded (what `to` may wait for forever), or not decided.
+    pub reason: Option<String>,
+    /// The least time from `from` to the next `to`, over every path where `to` comes.
+    pub min_seconds: Option<f64>,
+    /// The greatest, when bounded.
+    pub max_seconds: Option<f64>,
+    /// The witness (the longest wait, or the one that may last forever): the events up to and
+    /// including the step where `from` happened.
+    pub trace: Trace,
+    /// Then the events after it, to the step where `to` happened (bounded) or to the state that
+    /// waits forever (unbounded).
+    pub then: Trace,
+    /// With `within`: whether the bound meets it (an unbounded one does not; E0607).
+    pub met: Option<bool>,
+}
+
 /// Everything verification found.
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct Report {
@@ -287,6 +333,8 @@ pub struct Report {
     /// Timed exploration (`--timed`): timers with literal durations expire in duration order;
     /// states are stable states with a zone over the timers' clocks.
     pub timed: bool,
+    /// The time bounds of the project, each decided with `--timed`.
+    pub bounds: Vec<BoundFinding>,
     /// Seconds spent.
     pub seconds: f64,
     /// Each net's template (its declaration in the net files), for locating findings.
@@ -307,6 +355,7 @@ impl Report {
             && self.invariant_violations.is_empty()
             && self.no_progress.is_none()
             && self.stuck_nets.is_empty()
+            && self.bounds.iter().all(|b| b.met != Some(false))
     }
 
     /// The number of errors (each finding that is one), as the reports count them.
@@ -317,6 +366,7 @@ impl Report {
             + self.invariant_violations.len()
             + usize::from(self.no_progress.is_some())
             + self.stuck_nets.len()
+            + self.bounds.iter().filter(|b| b.met == Some(false)).count()
     }
 
     /// The number of warnings the diagnostics give: conflicts, starvation, transitions that
@@ -519,6 +569,37 @@ fn verify_inner(
         }
         report.event_loops = analysis::event_loops(p, &g, &components);
     }
+    report.bounds = match &timing {
+        Some(tm) if alone.is_none() && start.is_none() => {
+            bound::bounds(p, &sem, &env, &g, tm, &describe)
+        }
+        _ => {
+            let why = if !opts.timed {
+                "needs --timed (timers expiring when their durations say)"
+            } else if alone.is_some() {
+                "not with --net (a bound speaks of the whole project)"
+            } else {
+                "not from a reload's state (the running timers' remaining times are not known)"
+            };
+            project
+                .bounds
+                .iter()
+                .map(|b| BoundFinding {
+                    name: b.name.clone(),
+                    from: b.from_text.clone(),
+                    to: b.to_text.clone(),
+                    within_seconds: b.within_us.map(|us| us as f64 / 1e6),
+                    status: BoundStatus::NotDecided,
+                    reason: Some(why.to_string()),
+                    min_seconds: None,
+                    max_seconds: None,
+                    trace: Vec::new(),
+                    then: Vec::new(),
+                    met: None,
+                })
+                .collect()
+        }
+    };
     report.unsafe_places = g.unsafe_places.clone();
     report.livelocks = g.livelocks.clone();
     report.conflicts = g.conflicts.clone();
@@ -684,5 +765,7 @@ fn only_net(p: &CompiledProject, id: NetId) -> CompiledProject {
         progress_excludes: p.progress_excludes.clone(),
         // The invariants speak of the whole project.
         invariants: Vec::new(),
+        // So do the bounds (not decided with `--net`).
+        bounds: Vec::new(),
     }
 }

@@ -256,6 +256,17 @@ fn render(project_name: &str, r: &Report, all: bool, details: bool) -> String {
             );
         }
     }
+    if !r.bounds.is_empty() {
+        let _ = writeln!(o, "time bounds: {}", r.bounds.len());
+    }
+    for b in &r.bounds {
+        let line = bound_text(b);
+        if b.met == Some(false) {
+            item(&mut o, "E0607", "error", line);
+        } else {
+            let _ = writeln!(o, "  {line}");
+        }
+    }
     if r.partial {
         let _ = writeln!(o, "starvation: not checked (partial-order reduction)");
     } else {
@@ -341,6 +352,73 @@ fn render(project_name: &str, r: &Report, all: bool, details: bool) -> String {
         let _ = writeln!(o, "result: {errors} error(s), {warnings} warning(s)");
     }
     o
+}
+
+/// Seconds for people: `600s`, `7.5s`, `0.2s` (to the millisecond, the unit of timers).
+fn secs(v: f64) -> String {
+    let text = format!("{v:.3}");
+    let text = text.trim_end_matches('0').trim_end_matches('.');
+    format!("{text}s")
+}
+
+/// A time bound on one line: `bound NAME (FROM .. TO): 0s to 600s, ...`.
+fn bound_text(b: &super::BoundFinding) -> String {
+    use super::BoundStatus as S;
+    let mut line = format!("bound {} ({} .. {}): ", b.name, b.from, b.to);
+    let path = |b: &super::BoundFinding| {
+        let then = if b.then.is_empty() {
+            "at once".to_string()
+        } else {
+            b.then.join(" → ")
+        };
+        format!("{}, then {then}", trace_text(&b.trace))
+    };
+    match b.status {
+        S::Bounded => {
+            let _ = write!(
+                line,
+                "{} to {}; the longest: {}",
+                b.min_seconds.map_or("?".into(), secs),
+                b.max_seconds.map_or("?".into(), secs),
+                path(b)
+            );
+        }
+        S::Unbounded => {
+            if let Some(min) = b.min_seconds {
+                let _ = write!(line, "at least {}, ", secs(min));
+            }
+            // The path to where it may wait forever.
+            let mut to = trace_text(&b.trace);
+            if !b.then.is_empty() {
+                let _ = write!(to, ", then {}", b.then.join(" → "));
+            }
+            let _ = write!(
+                line,
+                "unbounded: {}; {to}",
+                b.reason.as_deref().unwrap_or("")
+            );
+        }
+        S::FromNeverHappens => {
+            let _ = write!(line, "{} never happens", b.from);
+        }
+        S::NotDecided => {
+            let _ = write!(line, "not decided: {}", b.reason.as_deref().unwrap_or(""));
+        }
+    }
+    if let Some(w) = b.within_seconds {
+        match b.met {
+            Some(true) => {
+                let _ = write!(line, "; within {}: met", secs(w));
+            }
+            Some(false) => {
+                let _ = write!(line, "; within {}: VIOLATED", secs(w));
+            }
+            None => {
+                let _ = write!(line, "; within {}: not decided", secs(w));
+            }
+        }
+    }
+    line
 }
 
 fn excluded_text(excluded: &[String]) -> String {
@@ -548,6 +626,42 @@ fn diagnostics_with(
             }
         }
         d.push(diag);
+    }
+    for b in r.bounds.iter().filter(|b| b.met == Some(false)) {
+        let decl = project
+            .manifest
+            .bounds
+            .iter()
+            .find(|x| x.name.text == b.name);
+        let span = decl.map(|x| x.within.as_ref().map_or(x.name.span, |w| w.span));
+        let within = b.within_seconds.map(secs).unwrap_or_default();
+        let what = match (b.status, b.max_seconds) {
+            (super::BoundStatus::Bounded, Some(max)) => {
+                format!("{} after {} can take up to {}", b.to, b.from, secs(max))
+            }
+            _ => format!(
+                "{} may never come after {}: {}",
+                b.to,
+                b.from,
+                b.reason.as_deref().unwrap_or("")
+            ),
+        };
+        let mut path = trace_text(&b.trace);
+        if !b.then.is_empty() {
+            let _ = write!(path, ", then {}", b.then.join(" → "));
+        } else if b.status == super::BoundStatus::Bounded {
+            path.push_str(", then at once");
+        }
+        d.push(at(
+            span,
+            Diagnostic::error(
+                "E0607",
+                Default::default(),
+                format!("bound `{}` is not met: {what}, more than {within}", b.name),
+            )
+            .label(path)
+            .help("follow the path: a watchdog timer in the nets (a fallback after at most the time allowed) bounds a wait for an outside event; or allow more time"),
+        ));
     }
     for s in &r.starvation {
         d.push(at(

@@ -26,7 +26,7 @@ const IDLE: u64 = u64::MAX;
 /// Duration word of a timer that runs with a duration not known statically.
 const UNTIMED: u64 = u64::MAX - 1;
 /// No bound.
-const INF: i64 = i64::MAX / 4;
+pub(super) const INF: i64 = i64::MAX / 4;
 
 /// What a step did to the timers, in order: `Some(duration)` for a start, `None` for a cancel.
 pub(super) type TimerOps = Vec<(TimerId, Option<TimerDuration>)>;
@@ -37,6 +37,9 @@ pub(super) struct Timing {
     pub base: usize,
     /// Number of timers.
     n: usize,
+    /// 1 when the zone has an observer's clock after the timers' (a time bound's, reset when
+    /// its `from` happens, never bounded: [`super::bound`]), else 0.
+    observer: usize,
 }
 
 impl Timing {
@@ -45,16 +48,25 @@ impl Timing {
         Timing {
             base,
             n: p.timers.len(),
+            observer: 0,
+        }
+    }
+
+    /// The same layout with an observer's clock (the last one).
+    pub fn with_observer(p: &CompiledProject, base: usize) -> Timing {
+        Timing {
+            observer: 1,
+            ..Timing::new(p, base)
         }
     }
 
     /// Words a timed state takes.
     pub fn words(&self) -> usize {
-        self.base + self.n + (self.n + 1) * (self.n + 1)
+        self.base + self.n + self.dim() * self.dim()
     }
 
     fn dim(&self) -> usize {
-        self.n + 1
+        self.n + 1 + self.observer
     }
 
     fn dur(&self, s: &[u64], k: usize) -> u64 {
@@ -108,6 +120,13 @@ impl Timing {
     /// already in `t`'s first words): timer `expired` expired (its clock at its duration), the
     /// step ran `ops`, then time may pass until the earliest deadline.
     pub fn step(&self, l: &Layout, t: &mut [u64], expired: Option<usize>, ops: &TimerOps) {
+        self.apply(l, t, expired, ops);
+        self.elapse(t);
+    }
+
+    /// The zone at the instant of a step ([`Timing::step`] without the time that passes
+    /// after it).
+    pub fn apply(&self, l: &Layout, t: &mut [u64], expired: Option<usize>, ops: &TimerOps) {
         if let Some(k) = expired {
             if self.tracked(t, k) {
                 // x_k >= d: with x_k <= d, the clock is at its duration.
@@ -147,6 +166,10 @@ impl Timing {
                 t[self.base + k] = UNTIMED;
             }
         }
+    }
+
+    /// Time passes after a step: every clock grows alike, up to the earliest deadline.
+    pub fn elapse(&self, t: &mut [u64]) {
         // Time passes: no upper bound on any clock (the pinned ones advance with the others,
         // and are pinned again below), but the tracked clocks' durations.
         for k in 0..self.n {
@@ -156,6 +179,9 @@ impl Timing {
                 INF
             };
             self.put(t, k + 1, 0, d);
+        }
+        if self.observer == 1 {
+            self.put(t, self.n + 1, 0, INF);
         }
         self.close(t);
         for k in 0..self.n {
@@ -197,6 +223,60 @@ impl Timing {
                 }
             }
         }
+    }
+
+    /// The observer's clock starts now (`x := 0`).
+    pub fn observer_reset(&self, t: &mut [u64]) {
+        debug_assert_eq!(self.observer, 1);
+        self.pin(t, self.n);
+    }
+
+    /// The least and greatest values (milliseconds) of the observer's clock in `t`.
+    pub fn observer_range(&self, t: &[u64]) -> (i64, i64) {
+        let c = self.n + 1;
+        (-self.at(t, 0, c), self.at(t, c, 0))
+    }
+
+    /// State `s` of the layout `plain` (no observer) with an observer's clock, pinned to the
+    /// reference.
+    pub fn extend(&self, plain: &Timing, s: &[u64]) -> Vec<u64> {
+        let mut t = s[..self.base + self.n].to_vec();
+        t.resize(self.words(), 0);
+        for i in 0..plain.dim() {
+            for j in 0..plain.dim() {
+                self.put(&mut t, i, j, plain.at(s, i, j));
+            }
+        }
+        self.pin(&mut t, self.n);
+        t
+    }
+
+    /// Every clock at 0: the zone at the instant of a start.
+    pub fn at_start(&self, t: &mut [u64]) {
+        for i in 0..self.dim() {
+            for j in 0..self.dim() {
+                self.put(t, i, j, 0);
+            }
+        }
+    }
+
+    /// Some timer with a known duration runs in `s`: time cannot pass beyond its deadline.
+    pub fn has_deadline(&self, s: &[u64]) -> bool {
+        (0..self.n).any(|k| self.tracked(s, k))
+    }
+
+    /// The timers that run in `s` with a duration not known statically.
+    pub fn untimed_running(&self, s: &[u64]) -> Vec<usize> {
+        (0..self.n).filter(|&k| self.dur(s, k) == UNTIMED).collect()
+    }
+
+    /// The longest literal duration among the timers running in `s` (0 if none).
+    pub fn longest(&self, s: &[u64]) -> i64 {
+        (0..self.n)
+            .filter(|&k| self.tracked(s, k))
+            .map(|k| self.dur(s, k) as i64)
+            .max()
+            .unwrap_or(0)
     }
 
     /// The least and greatest values (milliseconds since the timer started) of timer `k`'s
