@@ -560,8 +560,48 @@ pub(super) fn components(g: &Graph) -> Scc {
     Scc::new(g, None)
 }
 
-/// What a loop's inner edges show: the rules fired, the events, one state of it.
-type LoopInside = (HashSet<u32>, Vec<EventId>, u32, bool);
+/// A loop of stable states: a component with edges inside it between two different states.
+pub(super) struct Loop {
+    comp: u32,
+    /// Its first state (in breadth-first order) with such an edge.
+    first: u32,
+    /// The step kinds of those edges (indices in [`Graph::steps`]).
+    kinds: Vec<u32>,
+}
+
+/// The loops of the graph, in the order of their first states. One pass over the edges,
+/// component by component, the kinds marked in an array (a set of events or rules per edge
+/// cost more than the exploration on large graphs).
+pub(super) fn loops(g: &Graph, c: &Scc) -> Vec<Loop> {
+    let mut seen = vec![false; g.steps().len()];
+    let mut out = Vec::new();
+    for comp in 0..c.count() as u32 {
+        let mut first = u32::MAX;
+        let mut kinds: Vec<u32> = Vec::new();
+        for &v in c.members(comp) {
+            for k in g.edge_range(v) {
+                let to = g.edge_target(k);
+                if to == v || c.comp[to as usize] != comp {
+                    continue;
+                }
+                first = first.min(v);
+                let kind = g.edge_kind(k);
+                if !seen[kind] {
+                    seen[kind] = true;
+                    kinds.push(kind as u32);
+                }
+            }
+        }
+        for &k in &kinds {
+            seen[k as usize] = false;
+        }
+        if first != u32::MAX {
+            out.push(Loop { comp, first, kinds });
+        }
+    }
+    out.sort_unstable_by_key(|x| x.first);
+    out
+}
 
 /// Starvation: a loop of stable states the environment can keep the mission in forever, in
 /// which a net waits at a transition (active throughout, that transition's local inputs marked
@@ -573,34 +613,30 @@ pub(super) fn starvation(
     l: &Layout,
     g: &Graph,
     c: &Scc,
+    loops: &[Loop],
 ) -> Vec<StarvationFinding> {
     let mut out: Vec<StarvationFinding> = Vec::new();
-    // Per component: the rules fired on its inner edges (not self-loops that change nothing),
-    // its events, and one of its states.
-    let mut inner: HashMap<u32, LoopInside> = HashMap::new();
-    for from in 0..g.states.len() as u32 {
-        for e in g.edges(from) {
-            let (a, b) = (c.comp[from as usize], c.comp[e.to as usize]);
-            if a != b || from == e.to {
-                continue;
-            }
-            let entry = inner
-                .entry(a)
-                .or_insert((HashSet::new(), Vec::new(), from, true));
-            entry
-                .0
-                .extend(g.fired_sets[e.fired as usize].iter().copied());
-            let ev = g.labels[e.label as usize].event;
-            if !entry.1.contains(&ev) {
-                entry.1.push(ev);
-            }
-        }
-    }
-    let mut comps: Vec<(&u32, &LoopInside)> = inner.iter().collect();
-    comps.sort_by_key(|(_, v)| v.2);
-    for (comp, (fired, events, _, _)) in comps {
+    // Per loop: the rules fired on its inner edges (not self-loops that change nothing), its
+    // events, its states.
+    for lp in loops {
+        let fired: HashSet<u32> = lp
+            .kinds
+            .iter()
+            .flat_map(|&k| {
+                g.fired_sets[g.steps()[k as usize].1 as usize]
+                    .iter()
+                    .copied()
+            })
+            .collect();
+        let mut events: Vec<EventId> = lp
+            .kinds
+            .iter()
+            .map(|&k| g.labels[g.steps()[k as usize].0 as usize].event)
+            .collect();
+        events.sort_unstable();
+        events.dedup();
         // The states of the loop, in breadth-first order.
-        let mut states: Vec<usize> = c.members(*comp).iter().map(|&v| v as usize).collect();
+        let mut states: Vec<u32> = c.members(lp.comp).to_vec();
         states.sort_unstable();
         // Which places the loop's firings give back.
         let released: HashSet<u32> = fired
@@ -626,7 +662,7 @@ pub(super) fn starvation(
             // The net waits at this transition throughout the loop: active, its local inputs
             // marked in every state of it.
             let waiting = states.iter().all(|&i| {
-                let s = &g.states[i];
+                let s = &g.states[i as usize];
                 l.is_active(s, net)
                     && t.inputs.iter().all(|&x| match x {
                         PlaceRef::Local(_) => l.is_marked(s, net, x),
@@ -642,7 +678,9 @@ pub(super) fn starvation(
                 PlaceRef::Global(gl)
                     if !t.outputs.contains(&x)
                         && released.contains(&gl)
-                        && states.iter().any(|&i| !l.is_marked(&g.states[i], net, x)) =>
+                        && states
+                            .iter()
+                            .any(|&i| !l.is_marked(&g.states[i as usize], net, x)) =>
                 {
                     Some(gl)
                 }
@@ -660,7 +698,7 @@ pub(super) fn starvation(
                 transition: format!("{}.{}", p.nets[net as usize].name, t.name),
                 resource: format!("global.{}", p.globals[gl as usize].name),
                 loop_events: names,
-                trace: g.trace(states[0] as u32),
+                trace: g.trace(states[0]),
             });
         }
     }
@@ -669,46 +707,39 @@ pub(super) fn starvation(
 
 /// Loops of stable states that need events, one finding per set of events, with one turn.
 /// Self-loops (an event that changes nothing) are no loop.
-pub(super) fn event_loops(p: &CompiledProject, g: &Graph, c: &Scc) -> Vec<LoopFinding> {
-    let n = g.states.len() as u32;
+pub(super) fn event_loops(
+    p: &CompiledProject,
+    g: &Graph,
+    c: &Scc,
+    loops: &[Loop],
+) -> Vec<LoopFinding> {
     // The edges that move, with their events.
     let moves = |a: u32| {
         g.edges(a)
             .filter(move |e| e.to != a)
             .map(|e| (e.to, g.labels[e.label as usize].event))
     };
+    let name = |e: EventId| {
+        if e == NO_EVENT {
+            "(environment)".to_string()
+        } else {
+            p.events[e as usize].name.clone()
+        }
+    };
     let mut out: Vec<LoopFinding> = Vec::new();
-    let mut done = HashSet::new();
-    for a in 0..n {
-        let comp = c.comp[a as usize];
-        let size = c.members(comp).len() as u64;
-        if done.contains(&comp) || size < 2 {
-            continue;
-        }
-        if !moves(a).any(|(b, _)| c.comp[b as usize] == comp) {
-            continue;
-        }
-        done.insert(comp);
-        let name = |e: EventId| {
-            if e == NO_EVENT {
-                "(environment)".to_string()
-            } else {
-                p.events[e as usize].name.clone()
-            }
-        };
-        let turn: Vec<String> = shortest_cycle(a, &moves, &c.comp)
+    for lp in loops {
+        let size = c.members(lp.comp).len() as u64;
+        let turn: Vec<String> = shortest_cycle(lp.first, &moves, &c.comp)
             .into_iter()
             .map(name)
             .collect();
-        let mut inside: Vec<EventId> = Vec::new();
-        for &x in c.members(comp) {
-            for (y, e) in moves(x) {
-                if c.comp[y as usize] == comp && !inside.contains(&e) {
-                    inside.push(e);
-                }
-            }
-        }
+        let mut inside: Vec<EventId> = lp
+            .kinds
+            .iter()
+            .map(|&k| g.labels[g.steps()[k as usize].0 as usize].event)
+            .collect();
         inside.sort_unstable();
+        inside.dedup();
         let events: Vec<String> = inside.into_iter().map(name).collect();
         // The same loop in many components (a reaction possible in many states) is one finding.
         match out.iter_mut().find(|l| l.events == events) {

@@ -56,8 +56,6 @@ pub(super) const NO_EVENT: EventId = EventId::MAX;
 pub(super) struct Edge {
     pub to: u32,
     pub label: u32,
-    /// Index in [`Graph::fired_sets`] of the transitions (rules) that fired.
-    pub fired: u32,
 }
 
 /// Everything the exploration found.
@@ -146,11 +144,9 @@ impl Graph {
     /// Edge number `k`.
     #[inline]
     pub fn edge(&self, k: usize) -> Edge {
-        let (label, fired) = self.steps[self.edge_step.get(k) as usize];
         Edge {
             to: self.edge_to.get(k) as u32,
-            label,
-            fired,
+            label: self.steps[self.edge_step.get(k) as usize].0,
         }
     }
 
@@ -394,7 +390,9 @@ struct Ctx<'a> {
     label_ids: FxMap<(u32, Vec<bool>, Option<u32>, bool), u32>,
     fired_ids: FxMap<Vec<u32>, u32>,
     step_ids: FxMap<(u32, u32), u32>,
-    /// The labels of keys with no undecided guard, looked up without comparing vectors.
+    /// The labels of keys with no undecided guard, looked up without comparing vectors: by
+    /// delivery for a free event taken, else by the rest of the key.
+    free_labels: Vec<u32>,
     plain_labels: FxMap<(u32, Option<u32>, bool), u32>,
     /// The fired sets of one rule (by rule) and of none, likewise.
     single_fired: Vec<u32>,
@@ -450,7 +448,12 @@ impl Ctx<'_> {
 
     /// The label of `key`, if there is one yet.
     fn known_label(&self, key: &(u32, Vec<bool>, Option<u32>, bool)) -> Option<u32> {
-        if key.1.is_empty() {
+        if key.1.is_empty() && key.2.is_none() && !key.3 {
+            self.free_labels
+                .get(key.0 as usize)
+                .copied()
+                .filter(|&l| l != u32::MAX)
+        } else if key.1.is_empty() {
             self.plain_labels.get(&(key.0, key.2, key.3)).copied()
         } else {
             self.label_ids.get(key).copied()
@@ -470,7 +473,12 @@ impl Ctx<'_> {
         }
         g.labels.push(make());
         let l = (g.labels.len() - 1) as u32;
-        if key.1.is_empty() {
+        if key.1.is_empty() && key.2.is_none() && !key.3 {
+            if self.free_labels.len() <= key.0 as usize {
+                self.free_labels.resize(key.0 as usize + 1, u32::MAX);
+            }
+            self.free_labels[key.0 as usize] = l;
+        } else if key.1.is_empty() {
             self.plain_labels.insert((key.0, key.2, key.3), l);
         }
         self.label_ids.insert(key, l);
@@ -782,6 +790,7 @@ pub(super) fn explore(
         label_ids: FxMap::default(),
         fired_ids: FxMap::default(),
         step_ids: FxMap::default(),
+        free_labels: Vec::new(),
         plain_labels: FxMap::default(),
         single_fired: Vec::new(),
         no_fired: None,
@@ -878,6 +887,7 @@ pub(super) fn explore(
     let mut moves: Vec<Move> = Vec::new();
     let mut tried: Vec<Successor> = Vec::new();
     let mut order: Vec<u32> = Vec::new();
+    let (mut slots, mut found) = (Vec::new(), Vec::new());
     while next < g.states.len() {
         let i = next as u32;
         next += 1;
@@ -1035,8 +1045,14 @@ pub(super) fn explore(
             let fid = ctx.fired_set(&mut g);
             successors.push((t, lid, fid));
         }
-        for (t, label, fired) in successors {
-            let j = match g.states.find(&t) {
+        g.states.find_all(
+            successors.iter().map(|(t, _, _)| &t[..]),
+            &mut slots,
+            &mut found,
+        );
+        for ((t, label, fired), known) in successors.into_iter().zip(found.iter()) {
+            // A state not found may have been added by an earlier successor of this one.
+            let j = match known.or_else(|| g.states.find(&t)) {
                 Some(j) => j,
                 None => {
                     let j = g.states.len() as u32;

@@ -520,10 +520,11 @@ fn verify_inner(
             .collect();
     }
     if let (true, Some(all)) = (whole, &all) {
+        let loops = analysis::loops(&g, all);
         if !opts.skip_liveness {
-            report.starvation = analysis::starvation(p, l, &g, all);
+            report.starvation = analysis::starvation(p, l, &g, all, &loops);
         }
-        report.event_loops = analysis::event_loops(p, &g, all);
+        report.event_loops = analysis::event_loops(p, &g, all, &loops);
     }
     report.unsafe_places = g.unsafe_places.clone();
     report.livelocks = g.livelocks.clone();

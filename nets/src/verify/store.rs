@@ -62,7 +62,12 @@ impl StateStore {
 
     fn slot(&self, s: &[u64]) -> (usize, Option<u32>) {
         let mask = self.table.len() - 1;
-        let mut k = hash(s) as usize & mask;
+        self.probe(hash(s) as usize & mask, s)
+    }
+
+    /// The slot of `s` from slot `k` on, and its number if it is stored.
+    fn probe(&self, mut k: usize, s: &[u64]) -> (usize, Option<u32>) {
+        let mask = self.table.len() - 1;
         loop {
             match self.table[k] {
                 EMPTY => return (k, None),
@@ -80,6 +85,32 @@ impl StateStore {
     pub fn find(&self, s: &[u64]) -> Option<u32> {
         debug_assert_eq!(s.len(), self.words);
         self.slot(s).1
+    }
+
+    /// The numbers of `states` (`None` where not stored), looked up together: the table
+    /// entries of all of them are read before any state is compared, so that the cache misses
+    /// of a large exploration (a random table entry, then a random state, per lookup) overlap
+    /// instead of following one another. `slots` is scratch.
+    pub fn find_all<'a>(
+        &self,
+        states: impl Iterator<Item = &'a [u64]> + Clone,
+        slots: &mut Vec<(usize, u32)>,
+        out: &mut Vec<Option<u32>>,
+    ) {
+        let mask = self.table.len() - 1;
+        slots.clear();
+        slots.extend(states.clone().map(|s| {
+            let k = hash(s) as usize & mask;
+            (k, self.table[k])
+        }));
+        out.clear();
+        for (s, &(k, first)) in states.zip(slots.iter()) {
+            out.push(match first {
+                EMPTY => None,
+                j if self.get(j as usize).iter().zip(s).all(|(a, b)| a == b) => Some(j),
+                _ => self.probe((k + 1) & mask, s).1,
+            });
+        }
     }
 
     /// Stores `s` (not stored yet) and returns its number.
@@ -237,6 +268,10 @@ mod tests {
             assert_eq!(&st[k as usize], &[k, k * 7]);
         }
         assert_eq!(st.find(&[3, 20]), None);
+        let (mut slots, mut out) = (Vec::new(), Vec::new());
+        let asked: Vec<[u64; 2]> = vec![[5, 35], [3, 20], [999, 6993], [0, 0]];
+        st.find_all(asked.iter().map(|s| &s[..]), &mut slots, &mut out);
+        assert_eq!(out, vec![Some(5), None, Some(999), Some(0)]);
         assert_eq!(st.len(), 1000);
         assert_eq!(st.iter().count(), 1000);
     }
