@@ -110,6 +110,7 @@ pub(super) struct Scc {
 }
 
 impl Scc {
+    /// The components of `g`'s edges whose step kind `keep` keeps (every edge with `None`).
     pub fn new(g: &Graph, keep: Option<&[bool]>) -> Scc {
         let n = g.states.len();
         // Unvisited (0), then the depth-first index while the state is live, then its
