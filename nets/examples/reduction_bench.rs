@@ -4,12 +4,16 @@
 //! memory is its own; the missions of the repository likewise.
 //!
 //! Usage:
-//! - `reduction_bench [--limit SECONDS] [--max N]`: the missions, then the family for
-//!   N = 2, 4, 8, 12, 16, 18, 20, 50, 100 up to `--max` (100 by default); the full exploration stops being
-//!   run once one takes more than `--limit` seconds (20 by default) or reaches a million
-//!   states. Prints a Markdown table.
+//! - `reduction_bench [--limit SECONDS] [--max N] [--baseline EXE]`: the missions, then the
+//!   family for N = 2, 4, 8, 12, 16, 18, 20, 50, 100 up to `--max` (100 by default); the full
+//!   exploration stops being run once one takes more than `--limit` seconds (20 by default) or
+//!   reaches a million states. Prints a Markdown table; then what the full exploration costs
+//!   per state (microseconds, and bytes of peak memory above that of the smallest project);
+//!   with `--baseline`, another build of this program (built from an older commit, say) runs
+//!   the same full explorations in the same run, before and after side by side.
 //! - `reduction_bench --one (DIR | toggles:N) (reduced | full)`: one verification; prints
-//!   `states edges seconds peak_kb errors warnings` on one line.
+//!   `states edges seconds peak_kb errors warnings graph_bytes` on one line (`graph_bytes`:
+//!   what the explored graph's states, parent pointers and edges hold).
 
 use petrel_nets::project::{from_sources, load_and_check};
 use petrel_nets::verify::{verify, VerifyOptions};
@@ -69,18 +73,19 @@ fn one(what: &str, reduced: bool) -> Result<String, String> {
     .map_err(|e| e.to_string())?;
     let secs = started.elapsed().as_secs_f64();
     Ok(format!(
-        "{} {} {secs:.4} {} {} {}",
+        "{} {} {secs:.4} {} {} {} {}",
         r.states,
         r.edges,
         peak_kb(),
         r.errors(),
-        r.warnings()
+        r.warnings(),
+        r.graph_bytes
     ))
 }
 
-/// One verification in a child process: states, edges, seconds, peak kB, errors, warnings.
-fn child(what: &str, reduced: bool) -> Result<[f64; 6], String> {
-    let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+/// One verification in a child process (`exe`): states, edges, seconds, peak kB, errors,
+/// warnings, graph bytes (0 from a build that does not count them).
+fn child(exe: &Path, what: &str, reduced: bool) -> Result<[f64; 7], String> {
     let o = Command::new(exe)
         .args(["--one", what, if reduced { "reduced" } else { "full" }])
         .output()
@@ -89,8 +94,8 @@ fn child(what: &str, reduced: bool) -> Result<[f64; 6], String> {
         return Err(String::from_utf8_lossy(&o.stderr).into_owned());
     }
     let text = String::from_utf8_lossy(&o.stdout);
-    let mut out = [0.0; 6];
-    for (k, f) in text.split_whitespace().take(6).enumerate() {
+    let mut out = [0.0; 7];
+    for (k, f) in text.split_whitespace().take(7).enumerate() {
         out[k] = f.parse().unwrap_or(0.0);
     }
     Ok(out)
@@ -115,18 +120,30 @@ fn main() -> ExitCode {
         };
     }
     let (mut limit, mut max) = (20.0, 100usize);
+    let mut baseline: Option<std::path::PathBuf> = None;
     let mut it = args.into_iter();
     while let Some(a) = it.next() {
-        let value = it.next().and_then(|x| x.parse::<f64>().ok());
+        let text = it.next();
+        let value = text.as_deref().and_then(|x| x.parse::<f64>().ok());
         match (a.as_str(), value) {
             ("--limit", Some(x)) => limit = x,
             ("--max", Some(x)) => max = x as usize,
+            ("--baseline", _) if text.is_some() => baseline = text.map(Into::into),
             _ => {
-                eprintln!("usage: reduction_bench [--limit SECONDS] [--max N]");
+                eprintln!("usage: reduction_bench [--limit SECONDS] [--max N] [--baseline EXE]");
                 return ExitCode::from(2);
             }
         }
     }
+    let me = match std::env::current_exe() {
+        Ok(x) => x,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(1);
+        }
+    };
+    // The full explorations, for the per-state costs: (label, what, result).
+    let mut fulls: Vec<(String, String, [f64; 7])> = Vec::new();
     println!("| project | states full | states reduced | s full | s reduced | time ratio | MB full | MB reduced | memory ratio | same errors, warnings |");
     println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---|");
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../missions");
@@ -141,7 +158,7 @@ fn main() -> ExitCode {
     }
     let mut full_too = true;
     for (label, what) in &work {
-        let red = match child(what, true) {
+        let red = match child(&me, what, true) {
             Ok(x) => x,
             Err(e) => {
                 eprintln!("error: {what}: {e}");
@@ -149,8 +166,11 @@ fn main() -> ExitCode {
             }
         };
         let full = if full_too {
-            match child(what, false) {
-                Ok(x) => Some(x),
+            match child(&me, what, false) {
+                Ok(x) => {
+                    fulls.push((label.clone(), what.clone(), x));
+                    Some(x)
+                }
                 Err(e) => {
                     eprintln!("error: {what}: {e}");
                     return ExitCode::from(1);
@@ -187,6 +207,70 @@ fn main() -> ExitCode {
                 red[0],
                 red[2],
                 red[3] / 1024.0
+            ),
+        }
+    }
+    per_state(&fulls, baseline.as_deref())
+}
+
+/// What the full exploration costs per state: microseconds, bytes of peak memory above the
+/// smallest project's (the process's own), and the graph's counted bytes; with a baseline
+/// build, its figures for the same projects, run now.
+fn per_state(fulls: &[(String, String, [f64; 7])], baseline: Option<&Path>) -> ExitCode {
+    let floor = |runs: &[[f64; 7]]| runs.iter().map(|r| r[3]).fold(f64::INFINITY, f64::min);
+    let mut before: Vec<[f64; 7]> = Vec::new();
+    if let Some(exe) = baseline {
+        for (_, what, _) in fulls {
+            match child(exe, what, false) {
+                Ok(x) => before.push(x),
+                Err(e) => {
+                    eprintln!("error: baseline {what}: {e}");
+                    return ExitCode::from(1);
+                }
+            }
+        }
+    }
+    let after: Vec<[f64; 7]> = fulls.iter().map(|f| f.2).collect();
+    let (floor_after, floor_before) = (floor(&after), floor(&before));
+    let us = |r: &[f64; 7]| r[2] * 1e6 / r[0].max(1.0);
+    let bytes = |r: &[f64; 7], floor: f64| (r[3] - floor).max(0.0) * 1024.0 / r[0].max(1.0);
+    println!();
+    println!(
+        "Full exploration per state (peak memory above {floor_after:.0} kB, the smallest run's)"
+    );
+    println!();
+    if before.is_empty() {
+        println!("| project | states | edges | us/state | bytes/state | graph bytes/state |");
+        println!("|---|---:|---:|---:|---:|---:|");
+    } else {
+        println!("| project | states | edges | us/state before | us/state after | time ratio | bytes/state before | bytes/state after | memory ratio | graph bytes/state after | same errors, warnings |");
+        println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|");
+    }
+    for (k, (label, _, a)) in fulls.iter().enumerate() {
+        let graph = a[6] / a[0].max(1.0);
+        match before.get(k) {
+            None => println!(
+                "| {label} | {} | {} | {:.2} | {:.0} | {graph:.0} |",
+                a[0],
+                a[1],
+                us(a),
+                bytes(a, floor_after)
+            ),
+            Some(b) => println!(
+                "| {label} | {} | {} | {:.2} | {:.2} | {:.2} | {:.0} | {:.0} | {:.2} | {graph:.0} | {} |",
+                a[0],
+                a[1],
+                us(b),
+                us(a),
+                us(a) / us(b).max(1e-9),
+                bytes(b, floor_before),
+                bytes(a, floor_after),
+                bytes(a, floor_after) / bytes(b, floor_before).max(1e-9),
+                if (b[0], b[1], b[4], b[5]) == (a[0], a[1], a[4], a[5]) {
+                    "yes"
+                } else {
+                    "NO"
+                }
             ),
         }
     }

@@ -2,7 +2,10 @@
 //! resource cycles behind them, starvation, loops of stable states.
 //!
 //! Every analysis reads the [`Graph`] the exploration built, in its breadth-first order, so the
-//! first state a finding is met in has the shortest trace.
+//! first state a finding is met in has the shortest trace. The graph keeps its edges forward
+//! only (grouped by source state): what is reachable backwards (an end, a firing) is computed
+//! over its strongly connected components ([`Scc`]), numbered so that every edge goes to a
+//! component numbered no higher, with no reversed copy of the edges.
 
 use super::explore::{Graph, NO_EVENT};
 use super::{
@@ -93,52 +96,130 @@ pub(super) fn invariants(
     out
 }
 
-/// The graph's edges reversed, as one flat list per target state (built once, walked by every
-/// backward search).
-pub(super) struct Reverse {
+/// The strongly connected components of the graph, or of the edges whose step kind `keep`
+/// keeps (Pearce's space-efficient variant of Tarjan's algorithm, iterative): numbered in the
+/// order they complete, so every kept edge goes from a component to one numbered no higher
+/// (reverse topological order), with each component's states.
+pub(super) struct Scc {
+    /// Each state's component.
+    pub comp: Vec<u32>,
+    /// The states, grouped by component in increasing number.
+    order: Vec<u32>,
+    /// Component `c`'s states are `order[start[c]..start[c + 1]]`.
     start: Vec<u32>,
-    /// (source state, edge index), grouped by target state.
-    from: Vec<(u32, u32)>,
 }
 
-impl Reverse {
-    pub fn new(g: &Graph) -> Reverse {
+impl Scc {
+    /// The components of `g`'s edges whose step kind `keep` keeps (every edge with `None`).
+    pub fn new(g: &Graph, keep: Option<&[bool]>) -> Scc {
         let n = g.states.len();
-        let mut start = vec![0u32; n + 1];
-        for e in &g.edges {
-            start[e.to as usize + 1] += 1;
-        }
-        for k in 0..n {
-            start[k + 1] += start[k];
-        }
-        let mut next = start.clone();
-        let mut from = vec![(0u32, 0u32); g.edges.len()];
-        for (k, e) in g.edges.iter().enumerate() {
-            let slot = &mut next[e.to as usize];
-            from[*slot as usize] = (e.from, k as u32);
-            *slot += 1;
-        }
-        Reverse { start, from }
-    }
-}
-
-/// The states from which a target is reachable along `keep` edges (backward breadth first from
-/// the targets).
-fn can_reach(rev: &Reverse, targets: &[bool], keep: &dyn Fn(usize) -> bool) -> Vec<bool> {
-    let mut reach = targets.to_vec();
-    let mut queue: VecDeque<u32> = (0..reach.len() as u32)
-        .filter(|&i| reach[i as usize])
-        .collect();
-    while let Some(j) = queue.pop_front() {
-        let (a, b) = (rev.start[j as usize], rev.start[j as usize + 1]);
-        for &(i, k) in &rev.from[a as usize..b as usize] {
-            if !reach[i as usize] && keep(k as usize) {
-                reach[i as usize] = true;
-                queue.push_back(i);
+        // Unvisited (0), then the depth-first index while the state is live, then its
+        // component counted down from n - 1 (above every live index: Pearce's invariant).
+        let mut rindex = vec![0u32; n];
+        let mut stack: Vec<u32> = Vec::new();
+        // The depth-first path: each state and how many of its edges were looked at, with
+        // ROOT while no edge led lower.
+        const ROOT: u32 = 1 << 31;
+        let mut call: Vec<(u32, u32)> = Vec::new();
+        let mut order: Vec<u32> = Vec::with_capacity(n);
+        let mut start: Vec<u32> = vec![0];
+        let mut index = 1u32;
+        let mut c = (n as u32).wrapping_sub(1);
+        for r in 0..n as u32 {
+            if rindex[r as usize] != 0 {
+                continue;
+            }
+            rindex[r as usize] = index;
+            index += 1;
+            call.push((r, ROOT));
+            while let Some(&mut (v, ref mut off)) = call.last_mut() {
+                let range = g.edge_range(v);
+                let k = range.start + (*off & !ROOT) as usize;
+                if k < range.end {
+                    *off += 1;
+                    if keep.is_some_and(|kp| !kp[g.edge_kind(k)]) {
+                        continue;
+                    }
+                    let w = g.edge_target(k);
+                    if rindex[w as usize] == 0 {
+                        rindex[w as usize] = index;
+                        index += 1;
+                        call.push((w, ROOT));
+                    } else if rindex[w as usize] < rindex[v as usize] {
+                        rindex[v as usize] = rindex[w as usize];
+                        *off &= !ROOT;
+                    }
+                    continue;
+                }
+                let root = *off & ROOT != 0;
+                call.pop();
+                if root {
+                    index -= 1;
+                    while let Some(&w) = stack.last() {
+                        if rindex[v as usize] > rindex[w as usize] {
+                            break;
+                        }
+                        stack.pop();
+                        rindex[w as usize] = c;
+                        index -= 1;
+                        order.push(w);
+                    }
+                    rindex[v as usize] = c;
+                    order.push(v);
+                    c = c.wrapping_sub(1);
+                    start.push(order.len() as u32);
+                } else {
+                    stack.push(v);
+                }
+                if let Some(&mut (u, ref mut uoff)) = call.last_mut() {
+                    if rindex[v as usize] < rindex[u as usize] {
+                        rindex[u as usize] = rindex[v as usize];
+                        *uoff &= !ROOT;
+                    }
+                }
             }
         }
+        // Number the components from 0 in the order they completed.
+        let top = (n as u32).wrapping_sub(1);
+        for x in &mut rindex {
+            *x = top - *x;
+        }
+        Scc {
+            comp: rindex,
+            order,
+            start,
+        }
     }
-    reach
+
+    /// How many components.
+    pub fn count(&self) -> usize {
+        self.start.len() - 1
+    }
+
+    /// The states of component `c`.
+    pub fn members(&self, c: u32) -> &[u32] {
+        &self.order[self.start[c as usize] as usize..self.start[c as usize + 1] as usize]
+    }
+
+    /// Per component: whether a state where `target` holds is reachable from it along the
+    /// edges `keep` keeps (all with `None`; the components must be those of the same edges).
+    /// The components are met in increasing number, so every one an edge leads to is done.
+    fn reach(&self, g: &Graph, keep: Option<&[bool]>, target: &dyn Fn(u32) -> bool) -> Vec<bool> {
+        let mut out: Vec<bool> = Vec::with_capacity(self.count());
+        for c in 0..self.count() as u32 {
+            let r = self.members(c).iter().any(|&v| {
+                target(v)
+                    || g.edge_range(v).any(|k| {
+                        keep.is_none_or(|kp| kp[g.edge_kind(k)]) && {
+                            let d = self.comp[g.edge_target(k) as usize];
+                            d != c && out[d as usize]
+                        }
+                    })
+            });
+            out.push(r);
+        }
+        out
+    }
 }
 
 /// Progress: from every reachable state, an end stays reachable without the events of the
@@ -150,7 +231,7 @@ pub(super) fn progress(
     p: &CompiledProject,
     l: &Layout,
     g: &Graph,
-    rev: &Reverse,
+    all: &Scc,
     ends: &[bool],
     describe: &dyn Fn(&[u64]) -> Vec<String>,
 ) -> Option<(ProgressFinding, u32, u32, Vec<bool>)> {
@@ -159,38 +240,50 @@ pub(super) fn progress(
         // No end declared: nothing to make progress towards.
         return None;
     }
-    let allowed = |k: usize| {
-        let e = g.labels[g.edges[k].label as usize].event;
-        e == NO_EVENT || !p.progress_excludes.contains(&p.events[e as usize].category)
-    };
-    let reach = can_reach(rev, ends, &allowed);
-    let failing: Vec<usize> = (0..n).filter(|&i| !reach[i]).collect();
-    let &first = failing.first()?;
-    // Where the mission stays: a failing state whose loop (allowed edges only) has no way out.
-    // Every allowed successor of a failing state fails too, so such a loop exists below each.
-    let mut adj: Vec<Vec<(u32, EventId)>> = vec![Vec::new(); n];
-    for (k, e) in g.edges.iter().enumerate() {
-        if allowed(k) && !reach[e.from as usize] {
-            adj[e.from as usize].push((e.to, 0));
-        }
-    }
-    let comp = tarjan(n, &adj);
-    let mut has_exit = vec![false; n];
-    for (a, succ) in adj.iter().enumerate() {
-        if succ.iter().any(|&(b, _)| comp[b as usize] != comp[a]) {
-            has_exit[comp[a] as usize] = true;
-        }
-    }
-    let stays = failing
+    // The step kinds progress counts on.
+    let allowed: Vec<bool> = g
+        .steps()
         .iter()
-        .copied()
-        .find(|&i| !has_exit[comp[i] as usize])
+        .map(|&(label, _)| {
+            let e = g.labels[label as usize].event;
+            e == NO_EVENT || !p.progress_excludes.contains(&p.events[e as usize].category)
+        })
+        .collect();
+    // Over the allowed edges: their own components, unless every edge is allowed.
+    let own;
+    let (scc, keep) = if allowed.iter().all(|&a| a) {
+        (all, None)
+    } else {
+        own = Scc::new(g, Some(&allowed));
+        (&own, Some(allowed.as_slice()))
+    };
+    let creach = scc.reach(g, keep, &|v| ends[v as usize]);
+    let reach: Vec<bool> = (0..n).map(|i| creach[scc.comp[i] as usize]).collect();
+    let first = (0..n).find(|&i| !reach[i])?;
+    let failing = reach.iter().filter(|&&r| !r).count();
+    // Where the mission stays: a failing state whose loop (allowed edges only) has no way out.
+    // Every allowed successor of a failing state fails too (it is in a component numbered no
+    // higher, whose states all fail or all reach), so such a loop exists below each.
+    let has_exit = |c: u32| {
+        scc.members(c).iter().any(|&v| {
+            g.edge_range(v).any(|k| {
+                keep.is_none_or(|kp| kp[g.edge_kind(k)]) && scc.comp[g.edge_target(k) as usize] != c
+            })
+        })
+    };
+    let mut exit_known: HashMap<u32, bool> = HashMap::new();
+    let stays = (0..n)
+        .filter(|&i| !reach[i])
+        .find(|&i| {
+            let c = scc.comp[i];
+            !*exit_known.entry(c).or_insert_with(|| has_exit(c))
+        })
         .unwrap_or(first);
     Some((
         ProgressFinding {
             marking: describe(&g.states[first]),
             trace: g.trace(first as u32),
-            states: failing.len() as u64,
+            states: failing as u64,
             excluded: p
                 .progress_excludes
                 .iter()
@@ -256,36 +349,23 @@ pub(super) fn stuck_nets(
     p: &CompiledProject,
     l: &Layout,
     g: &Graph,
-    rev: &Reverse,
+    all: &Scc,
     describe: &dyn Fn(&[u64]) -> Vec<String>,
-) -> (Vec<Stuck>, Vec<Vec<bool>>) {
+) -> (Vec<Stuck>, CanFire) {
     let n = g.states.len();
     let mut out = Vec::new();
-    // Rules of each net, and the edges where each net fires.
-    let mut fires: Vec<Vec<bool>> = vec![vec![false; n]; p.nets.len()];
-    for e in &g.edges {
-        for &r in &g.fired_sets[e.fired as usize] {
-            fires[l.rules[r as usize].net as usize][e.from as usize] = true;
-        }
-    }
-    let mut can: Vec<Vec<bool>> = Vec::with_capacity(p.nets.len());
-    for (net, fires) in fires.iter().enumerate() {
-        can.push(if p.nets[net].transitions.is_empty() {
-            // A net with no transition never fires: it is a store of places, not stuck.
-            vec![true; n]
-        } else {
-            can_reach(rev, fires, &|_| true)
-        });
-    }
+    let can = CanFire::new(p, l, g, all);
     for net in 0..p.nets.len() {
         let found = (0..n).find(|&i| {
             let s = &g.states[i];
-            l.is_active(s, net as NetId) && !can[net][i] && !end_for_net(p, l, s, net as NetId)
+            l.is_active(s, net as NetId)
+                && !can.can(all, net as NetId, i as u32)
+                && !end_for_net(p, l, s, net as NetId)
         });
         let Some(i) = found else { continue };
         let s = &g.states[i];
         let stuck_here: Vec<NetId> = (0..p.nets.len() as NetId)
-            .filter(|&m| l.is_active(s, m) && !can[m as usize][i])
+            .filter(|&m| l.is_active(s, m) && !can.can(all, m, i as u32))
             .collect();
         out.push((
             StuckFinding {
@@ -307,6 +387,60 @@ pub(super) fn stuck_nets(
         ));
     }
     (out, can)
+}
+
+/// Per component of the whole graph: the nets that can still fire from its states (a set of
+/// nets, one bit each).
+pub(super) struct CanFire {
+    words: usize,
+    bits: Vec<u64>,
+    /// Nets with no transition: they never fire, and are a store of places, not stuck.
+    no_transitions: Vec<bool>,
+}
+
+impl CanFire {
+    fn new(p: &CompiledProject, l: &Layout, g: &Graph, all: &Scc) -> CanFire {
+        let words = p.nets.len().div_ceil(64).max(1);
+        // The nets each step kind fires.
+        let mut fires = vec![0u64; g.steps().len() * words];
+        for (k, &(_, f)) in g.steps().iter().enumerate() {
+            for &r in &g.fired_sets[f as usize] {
+                let net = l.rules[r as usize].net as usize;
+                fires[k * words + net / 64] |= 1 << (net % 64);
+            }
+        }
+        let mut bits = vec![0u64; all.count() * words];
+        for c in 0..all.count() as u32 {
+            let (here, done) = bits.split_at_mut(c as usize * words);
+            let row = &mut done[..words];
+            for &v in all.members(c) {
+                for k in g.edge_range(v) {
+                    let kind = g.edge_kind(k);
+                    let d = all.comp[g.edge_target(k) as usize];
+                    for w in 0..words {
+                        row[w] |= fires[kind * words + w];
+                        if d != c {
+                            row[w] |= here[d as usize * words + w];
+                        }
+                    }
+                }
+            }
+        }
+        CanFire {
+            words,
+            bits,
+            no_transitions: p.nets.iter().map(|n| n.transitions.is_empty()).collect(),
+        }
+    }
+
+    /// Whether net `net` can still fire from state `i` (`all`: the components it was built on).
+    pub fn can(&self, all: &Scc, net: NetId, i: u32) -> bool {
+        let net = net as usize;
+        self.no_transitions[net] || {
+            let c = all.comp[i as usize] as usize;
+            self.bits[c * self.words + net / 64] & (1 << (net % 64)) != 0
+        }
+    }
 }
 
 /// The global places a net's transitions miss in `s` (all their local inputs marked).
@@ -422,28 +556,53 @@ fn resource_cycle(
     None
 }
 
-/// Loops of stable states: strongly connected components, their edges inside.
-pub(super) struct Components {
-    pub comp: Vec<u32>,
-    pub size: HashMap<u32, u64>,
+/// Loops of stable states: the strongly connected components of the whole graph.
+pub(super) fn components(g: &Graph) -> Scc {
+    Scc::new(g, None)
 }
 
-pub(super) fn components(g: &Graph) -> Components {
-    let n = g.states.len();
-    let mut adj: Vec<Vec<(u32, EventId)>> = vec![Vec::new(); n];
-    for e in &g.edges {
-        adj[e.from as usize].push((e.to, g.labels[e.label as usize].event));
-    }
-    let comp = tarjan(n, &adj);
-    let mut size = HashMap::new();
-    for &c in &comp {
-        *size.entry(c).or_insert(0u64) += 1;
-    }
-    Components { comp, size }
+/// A loop of stable states: a component with edges inside it between two different states.
+pub(super) struct Loop {
+    comp: u32,
+    /// Its first state (in breadth-first order) with such an edge.
+    first: u32,
+    /// The step kinds of those edges (indices in [`Graph::steps`]).
+    kinds: Vec<u32>,
 }
 
-/// What a loop's inner edges show: the rules fired, the events, one state of it.
-type LoopInside = (HashSet<u32>, Vec<EventId>, u32, bool);
+/// The loops of the graph, in the order of their first states. One pass over the edges,
+/// component by component, the kinds marked in an array (a set of events or rules per edge
+/// cost more than the exploration on large graphs).
+pub(super) fn loops(g: &Graph, c: &Scc) -> Vec<Loop> {
+    let mut seen = vec![false; g.steps().len()];
+    let mut out = Vec::new();
+    for comp in 0..c.count() as u32 {
+        let mut first = u32::MAX;
+        let mut kinds: Vec<u32> = Vec::new();
+        for &v in c.members(comp) {
+            for k in g.edge_range(v) {
+                let to = g.edge_target(k);
+                if to == v || c.comp[to as usize] != comp {
+                    continue;
+                }
+                first = first.min(v);
+                let kind = g.edge_kind(k);
+                if !seen[kind] {
+                    seen[kind] = true;
+                    kinds.push(kind as u32);
+                }
+            }
+        }
+        for &k in &kinds {
+            seen[k as usize] = false;
+        }
+        if first != u32::MAX {
+            out.push(Loop { comp, first, kinds });
+        }
+    }
+    out.sort_unstable_by_key(|x| x.first);
+    out
+}
 
 /// Starvation: a loop of stable states the environment can keep the mission in forever, in
 /// which a net waits at a transition (active throughout, that transition's local inputs marked
@@ -454,39 +613,32 @@ pub(super) fn starvation(
     p: &CompiledProject,
     l: &Layout,
     g: &Graph,
-    c: &Components,
+    c: &Scc,
+    loops: &[Loop],
 ) -> Vec<StarvationFinding> {
     let mut out: Vec<StarvationFinding> = Vec::new();
-    // Per component: the rules fired on its inner edges (not self-loops that change nothing),
-    // its events, and one of its states.
-    let mut inner: HashMap<u32, LoopInside> = HashMap::new();
-    for e in &g.edges {
-        let (a, b) = (c.comp[e.from as usize], c.comp[e.to as usize]);
-        if a != b || e.from == e.to {
-            continue;
-        }
-        let entry = inner
-            .entry(a)
-            .or_insert((HashSet::new(), Vec::new(), e.from, true));
-        entry
-            .0
-            .extend(g.fired_sets[e.fired as usize].iter().copied());
-        let ev = g.labels[e.label as usize].event;
-        if !entry.1.contains(&ev) {
-            entry.1.push(ev);
-        }
-    }
-    let mut comps: Vec<(&u32, &LoopInside)> = inner.iter().collect();
-    comps.sort_by_key(|(_, v)| v.2);
-    // The states of each loop, gathered once.
-    let mut members: HashMap<u32, Vec<usize>> = HashMap::new();
-    for (i, comp) in c.comp.iter().enumerate() {
-        if inner.contains_key(comp) {
-            members.entry(*comp).or_default().push(i);
-        }
-    }
-    for (comp, (fired, events, _, _)) in comps {
-        let states = &members[comp];
+    // Per loop: the rules fired on its inner edges (not self-loops that change nothing), its
+    // events, its states.
+    for lp in loops {
+        let fired: HashSet<u32> = lp
+            .kinds
+            .iter()
+            .flat_map(|&k| {
+                g.fired_sets[g.steps()[k as usize].1 as usize]
+                    .iter()
+                    .copied()
+            })
+            .collect();
+        let mut events: Vec<EventId> = lp
+            .kinds
+            .iter()
+            .map(|&k| g.labels[g.steps()[k as usize].0 as usize].event)
+            .collect();
+        events.sort_unstable();
+        events.dedup();
+        // The states of the loop, in breadth-first order.
+        let mut states: Vec<u32> = c.members(lp.comp).to_vec();
+        states.sort_unstable();
         // Which places the loop's firings give back.
         let released: HashSet<u32> = fired
             .iter()
@@ -511,7 +663,7 @@ pub(super) fn starvation(
             // The net waits at this transition throughout the loop: active, its local inputs
             // marked in every state of it.
             let waiting = states.iter().all(|&i| {
-                let s = &g.states[i];
+                let s = &g.states[i as usize];
                 l.is_active(s, net)
                     && t.inputs.iter().all(|&x| match x {
                         PlaceRef::Local(_) => l.is_marked(s, net, x),
@@ -527,7 +679,9 @@ pub(super) fn starvation(
                 PlaceRef::Global(gl)
                     if !t.outputs.contains(&x)
                         && released.contains(&gl)
-                        && states.iter().any(|&i| !l.is_marked(&g.states[i], net, x)) =>
+                        && states
+                            .iter()
+                            .any(|&i| !l.is_marked(&g.states[i as usize], net, x)) =>
                 {
                     Some(gl)
                 }
@@ -545,7 +699,7 @@ pub(super) fn starvation(
                 transition: format!("{}.{}", p.nets[net as usize].name, t.name),
                 resource: format!("global.{}", p.globals[gl as usize].name),
                 loop_events: names,
-                trace: g.trace(states[0] as u32),
+                trace: g.trace(states[0]),
             });
         }
     }
@@ -554,59 +708,50 @@ pub(super) fn starvation(
 
 /// Loops of stable states that need events, one finding per set of events, with one turn.
 /// Self-loops (an event that changes nothing) are no loop.
-pub(super) fn event_loops(p: &CompiledProject, g: &Graph, c: &Components) -> Vec<LoopFinding> {
-    let n = g.states.len();
-    let mut adj: Vec<Vec<(u32, EventId)>> = vec![Vec::new(); n];
-    for e in &g.edges {
-        if e.from != e.to {
-            adj[e.from as usize].push((e.to, g.labels[e.label as usize].event));
+pub(super) fn event_loops(
+    p: &CompiledProject,
+    g: &Graph,
+    c: &Scc,
+    loops: &[Loop],
+) -> Vec<LoopFinding> {
+    // The edges that move, with their events.
+    let moves = |a: u32| {
+        g.edges(a)
+            .filter(move |e| e.to != a)
+            .map(|e| (e.to, g.labels[e.label as usize].event))
+    };
+    let name = |e: EventId| {
+        if e == NO_EVENT {
+            "(environment)".to_string()
+        } else {
+            p.events[e as usize].name.clone()
         }
-    }
+    };
     let mut out: Vec<LoopFinding> = Vec::new();
-    let mut done = HashSet::new();
-    for (a, succ) in adj.iter().enumerate() {
-        let comp = c.comp[a];
-        if done.contains(&comp) || c.size[&comp] < 2 {
-            continue;
-        }
-        if !succ.iter().any(|&(b, _)| c.comp[b as usize] == comp) {
-            continue;
-        }
-        done.insert(comp);
-        let name = |e: EventId| {
-            if e == NO_EVENT {
-                "(environment)".to_string()
-            } else {
-                p.events[e as usize].name.clone()
-            }
-        };
-        let turn: Vec<String> = shortest_cycle(a as u32, &adj, &c.comp)
+    for lp in loops {
+        let size = c.members(lp.comp).len() as u64;
+        let turn: Vec<String> = shortest_cycle(lp.first, &moves, &c.comp)
             .into_iter()
             .map(name)
             .collect();
-        let mut inside: Vec<EventId> = Vec::new();
-        for (x, succ) in adj.iter().enumerate() {
-            if c.comp[x] != comp {
-                continue;
-            }
-            for &(y, e) in succ {
-                if c.comp[y as usize] == comp && !inside.contains(&e) {
-                    inside.push(e);
-                }
-            }
-        }
+        let mut inside: Vec<EventId> = lp
+            .kinds
+            .iter()
+            .map(|&k| g.labels[g.steps()[k as usize].0 as usize].event)
+            .collect();
         inside.sort_unstable();
+        inside.dedup();
         let events: Vec<String> = inside.into_iter().map(name).collect();
         // The same loop in many components (a reaction possible in many states) is one finding.
         match out.iter_mut().find(|l| l.events == events) {
             Some(l) => {
-                l.states += c.size[&comp];
+                l.states += size;
                 l.components += 1;
             }
             None => out.push(LoopFinding {
                 events,
                 turn,
-                states: c.size[&comp],
+                states: size,
                 components: 1,
             }),
         }
@@ -614,12 +759,16 @@ pub(super) fn event_loops(p: &CompiledProject, g: &Graph, c: &Components) -> Vec
     out
 }
 
-fn shortest_cycle(start: u32, adj: &[Vec<(u32, EventId)>], comp: &[u32]) -> Vec<EventId> {
+fn shortest_cycle<I: Iterator<Item = (u32, EventId)>>(
+    start: u32,
+    moves: &dyn Fn(u32) -> I,
+    comp: &[u32],
+) -> Vec<EventId> {
     let c = comp[start as usize];
     let mut prev: HashMap<u32, (u32, EventId)> = HashMap::new();
     let mut queue = VecDeque::from([start]);
     while let Some(a) = queue.pop_front() {
-        for &(b, e) in &adj[a as usize] {
+        for (b, e) in moves(a) {
             if comp[b as usize] != c {
                 continue;
             }
@@ -643,57 +792,71 @@ fn shortest_cycle(start: u32, adj: &[Vec<(u32, EventId)>], comp: &[u32]) -> Vec<
     Vec::new()
 }
 
-/// Strongly connected components (iterative Tarjan); returns each node's component id.
-fn tarjan(n: usize, adj: &[Vec<(u32, EventId)>]) -> Vec<u32> {
-    const UNSEEN: u32 = u32::MAX;
-    let mut index = vec![UNSEEN; n];
-    let mut low = vec![0u32; n];
-    let mut on_stack = vec![false; n];
-    let mut comp = vec![UNSEEN; n];
-    let mut stack = Vec::new();
-    let mut next_index = 0u32;
-    let mut next_comp = 0u32;
-    for root in 0..n {
-        if index[root] != UNSEEN {
-            continue;
-        }
-        let mut call: Vec<(usize, usize)> = vec![(root, 0)];
-        index[root] = next_index;
-        low[root] = next_index;
-        next_index += 1;
-        stack.push(root);
-        on_stack[root] = true;
-        while let Some(&mut (v, ref mut k)) = call.last_mut() {
-            if *k < adj[v].len() {
-                let w = adj[v][*k].0 as usize;
-                *k += 1;
-                if index[w] == UNSEEN {
-                    index[w] = next_index;
-                    low[w] = next_index;
-                    next_index += 1;
-                    stack.push(w);
-                    on_stack[w] = true;
-                    call.push((w, 0));
-                } else if on_stack[w] {
-                    low[v] = low[v].min(index[w]);
-                }
-            } else {
-                call.pop();
-                if let Some(&(u, _)) = call.last() {
-                    low[u] = low[u].min(low[v]);
-                }
-                if low[v] == index[v] {
-                    while let Some(w) = stack.pop() {
-                        on_stack[w] = false;
-                        comp[w] = next_comp;
-                        if w == v {
-                            break;
-                        }
+#[cfg(test)]
+#[allow(clippy::needless_range_loop)]
+mod tests {
+    /// Strongly connected components by brute force: `a` and `b` are in one when each reaches
+    /// the other.
+    fn naive(n: usize, adj: &[Vec<u32>]) -> Vec<Vec<bool>> {
+        let mut reach = vec![vec![false; n]; n];
+        for a in 0..n {
+            let mut stack = vec![a];
+            reach[a][a] = true;
+            while let Some(x) = stack.pop() {
+                for &y in &adj[x] {
+                    if !reach[a][y as usize] {
+                        reach[a][y as usize] = true;
+                        stack.push(y as usize);
                     }
-                    next_comp += 1;
                 }
             }
         }
+        reach
     }
-    comp
+
+    #[test]
+    fn components_match_mutual_reachability_and_are_numbered_downstream() {
+        use super::super::explore::tests_graph;
+        // Pseudo-random graphs, small enough for the brute force.
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut rnd = move |m: u64| {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed % m
+        };
+        for _ in 0..200 {
+            let n = 1 + rnd(30) as usize;
+            let adj: Vec<Vec<u32>> = (0..n)
+                .map(|_| (0..rnd(4)).map(|_| rnd(n as u64) as u32).collect())
+                .collect();
+            let g = tests_graph(&adj);
+            let scc = super::Scc::new(&g, None);
+            let reach = naive(n, &adj);
+            for a in 0..n {
+                for b in 0..n {
+                    let same = reach[a][b] && reach[b][a];
+                    assert_eq!(scc.comp[a] == scc.comp[b], same, "{adj:?} {a} {b}");
+                }
+                for &b in &adj[a] {
+                    assert!(scc.comp[b as usize] <= scc.comp[a], "{adj:?}");
+                }
+            }
+            let mut seen = 0;
+            for c in 0..scc.count() as u32 {
+                for &v in scc.members(c) {
+                    assert_eq!(scc.comp[v as usize], c);
+                    seen += 1;
+                }
+            }
+            assert_eq!(seen, n);
+            // Reachability through the components, against the brute force.
+            let target = |v: u32| v.is_multiple_of(5);
+            let creach = scc.reach(&g, None, &target);
+            for a in 0..n {
+                let expect = (0..n).any(|b| reach[a][b] && target(b as u32));
+                assert_eq!(creach[scc.comp[a] as usize], expect, "{adj:?} {a}");
+            }
+        }
+    }
 }

@@ -9,7 +9,7 @@
 use super::env::{
     deliveries, Delivery, Env, Gate, MayHold, Oracle, Requests, Truth, MAX_GUARD_RUNS,
 };
-use super::store::StateStore;
+use super::store::{FxMap, Packed, StateStore};
 use super::timed::{TimerOps, Timing};
 use super::{ConflictFinding, LivelockFinding, Trace, UnsafeFinding, VerifyError, VerifyOptions};
 use crate::compiled::{
@@ -18,19 +18,9 @@ use crate::compiled::{
 use crate::model::Category;
 use crate::semantics::{Effects, Layout, Scratch, Semantics, State};
 use petrel_value::Value;
-use std::collections::{HashMap, HashSet};
+use std::collections::HashSet;
+use std::ops::Range;
 use std::time::Instant;
-
-/// How a stable state was first reached: the parent pointer of the shortest trace.
-#[derive(Clone, Copy, Debug)]
-pub(super) enum Via {
-    Start,
-    /// From state `.0` by the step labelled `.1`.
-    Step(u32, u32),
-    /// Single-net mode: from state `.0`, the environment marked or emptied a place that other
-    /// nets change (the label `.1` says which).
-    Env(u32, u32),
-}
 
 /// One step the environment can make happen: a delivery, with the outcomes of the guards the
 /// verifier could not decide, and the counter of an answer or emission it consumes.
@@ -61,21 +51,33 @@ pub(super) struct FreePlace {
 /// The event of a label that is no event: the environment changed a global place (`--net`).
 pub(super) const NO_EVENT: EventId = EventId::MAX;
 
-/// An edge of the graph: a step from one stable state to another (or the same).
+/// An edge of the graph from a given state: a step to another stable state (or the same).
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Edge {
-    pub from: u32,
     pub to: u32,
     pub label: u32,
-    /// Index in [`Graph::fired_sets`] of the transitions (rules) that fired.
-    pub fired: u32,
 }
 
 /// Everything the exploration found.
+///
+/// The graph is kept compact (docs/benchmarks.md, "What the full exploration costs per
+/// state"): the states packed in a [`StateStore`]; one parent pointer per state (the state it
+/// was first reached from and the label of that step), in [`Packed`] numbers; the edges grouped
+/// by source state in state order (breadth first expands the states in order, so the source
+/// is implicit), each a target and a step kind (a distinct label and fired set) in as few
+/// bytes as their largest values need.
 pub(super) struct Graph {
     pub states: StateStore,
-    pub via: Vec<Via>,
-    pub edges: Vec<Edge>,
+    /// The state each state was first reached from, itself for an initial state.
+    parent: Packed,
+    /// The label of that step.
+    parent_label: Packed,
+    /// Where the edges of each state start in `edge_to` and `edge_step` (one more at the end).
+    edge_start: Packed,
+    edge_to: Packed,
+    edge_step: Packed,
+    /// The step kinds: (label, fired set) pairs the edges name.
+    steps: Vec<(u32, u32)>,
     pub labels: Vec<Label>,
     pub fired_sets: Vec<Vec<u32>>,
     /// States where no delivery is possible.
@@ -96,21 +98,97 @@ pub(super) struct Graph {
 }
 
 impl Graph {
+    /// An empty graph of states of `words` words, for `rules` rules and `nets` nets.
+    fn new(words: usize, rules: usize, nets: usize) -> Graph {
+        Graph {
+            states: StateStore::new(words),
+            parent: Packed::new(),
+            parent_label: Packed::new(),
+            edge_start: Packed::new(),
+            edge_to: Packed::new(),
+            edge_step: Packed::new(),
+            steps: Vec::new(),
+            labels: Vec::new(),
+            fired_sets: Vec::new(),
+            dead: Vec::new(),
+            deliveries: Vec::new(),
+            unsafe_places: Vec::new(),
+            livelocks: Vec::new(),
+            conflicts: Vec::new(),
+            ever_fired: vec![false; rules],
+            ever_active: vec![false; nets],
+            max_tokens_per_marking: 0,
+            alone: false,
+            reduced: 0,
+        }
+    }
+
+    /// The state `s` was first reached from and the label of that step; `None` for an initial
+    /// state.
+    pub fn parent(&self, s: u32) -> Option<(u32, u32)> {
+        let p = self.parent.get(s as usize) as u32;
+        (p != s).then(|| (p, self.parent_label.get(s as usize) as u32))
+    }
+
+    /// How many edges.
+    pub fn edge_count(&self) -> usize {
+        self.edge_to.len()
+    }
+
+    /// The numbers of the edges of state `i` (for [`Graph::edge`]).
+    #[inline]
+    pub fn edge_range(&self, i: u32) -> Range<usize> {
+        self.edge_start.get(i as usize) as usize..self.edge_start.get(i as usize + 1) as usize
+    }
+
+    /// Edge number `k`.
+    #[inline]
+    pub fn edge(&self, k: usize) -> Edge {
+        Edge {
+            to: self.edge_to.get(k) as u32,
+            label: self.steps[self.edge_step.get(k) as usize].0,
+        }
+    }
+
+    /// The edges of state `i`, in the order the exploration found them.
+    pub fn edges(&self, i: u32) -> impl Iterator<Item = Edge> + '_ {
+        self.edge_range(i).map(|k| self.edge(k))
+    }
+
+    /// The step kinds, (label, fired set), that edges name; [`Graph::edge_kind`] gives an
+    /// edge's.
+    pub fn steps(&self) -> &[(u32, u32)] {
+        &self.steps
+    }
+
+    /// The step kind of edge `k` (an index in [`Graph::steps`]).
+    #[inline]
+    pub fn edge_kind(&self, k: usize) -> usize {
+        self.edge_step.get(k) as usize
+    }
+
+    /// The target of edge `k`.
+    #[inline]
+    pub fn edge_target(&self, k: usize) -> u32 {
+        self.edge_to.get(k) as u32
+    }
+
+    /// The bytes the states, parent pointers and edges hold (docs/benchmarks.md).
+    pub fn heap_bytes(&self) -> usize {
+        self.states.heap_bytes()
+            + self.parent.heap_bytes()
+            + self.parent_label.heap_bytes()
+            + self.edge_start.heap_bytes()
+            + self.edge_to.heap_bytes()
+            + self.edge_step.heap_bytes()
+    }
+
     /// The shortest trace to state `s`.
     pub fn trace(&self, mut s: u32) -> Trace {
         let mut out = Vec::new();
-        loop {
-            match self.via[s as usize] {
-                Via::Start => break,
-                Via::Step(prev, l) => {
-                    out.push(self.labels[l as usize].text.clone());
-                    s = prev;
-                }
-                Via::Env(prev, l) => {
-                    out.push(self.labels[l as usize].text.clone());
-                    s = prev;
-                }
-            }
+        while let Some((prev, l)) = self.parent(s) {
+            out.push(self.labels[l as usize].text.clone());
+            s = prev;
         }
         out.reverse();
         out
@@ -118,23 +196,30 @@ impl Graph {
 
     /// The steps (labels) of the shortest trace to `s`, `None` where the environment changed a
     /// global place.
-    pub fn steps(&self, mut s: u32) -> Vec<Option<u32>> {
+    pub fn trace_steps(&self, mut s: u32) -> Vec<Option<u32>> {
         let mut out = Vec::new();
-        loop {
-            match self.via[s as usize] {
-                Via::Start => break,
-                Via::Step(prev, l) => {
-                    out.push(Some(l));
-                    s = prev;
-                }
-                Via::Env(prev, _) => {
-                    out.push(None);
-                    s = prev;
-                }
-            }
+        while let Some((prev, l)) = self.parent(s) {
+            out.push((self.labels[l as usize].event != NO_EVENT).then_some(l));
+            s = prev;
         }
         out.reverse();
         out
+    }
+
+    /// The initial state the shortest trace to `s` starts from.
+    pub fn root(&self, mut s: u32) -> u32 {
+        while let Some((prev, _)) = self.parent(s) {
+            s = prev;
+        }
+        s
+    }
+
+    fn push_state(&mut self, t: &[u64], parent: Option<(u32, u32)>) -> u32 {
+        let j = self.states.push(t);
+        let (p, l) = parent.unwrap_or((j, 0));
+        self.parent.push(u64::from(p));
+        self.parent_label.push(u64::from(l));
+        j
     }
 }
 
@@ -150,7 +235,7 @@ pub(super) struct Recorder {
     pub requests: Requests,
     /// States seen during the current fixpoint (with the number of immediate firings before
     /// each), to find cycles of immediate transitions.
-    fixpoint_states: HashMap<State, usize>,
+    fixpoint_states: FxMap<State, usize>,
     fixpoint_rules: Vec<u32>,
     pub livelock: Option<Vec<u32>>,
     /// The timers the step started (with their duration) or cancelled, in order.
@@ -279,8 +364,8 @@ pub(super) fn run_step(
     t
 }
 
-/// A state reached from the one being expanded, how, and the edge's label and fired set.
-type Successor = (State, Via, Option<(u32, u32)>);
+/// A state reached from the one being expanded, with the edge's label and fired set.
+type Successor = (State, u32, u32);
 
 /// A delivery the environment can make in a state: which one, the counters it may consume
 /// (`None`: a free event), and whether no transition takes it (a pending event, dropped).
@@ -302,8 +387,18 @@ struct Ctx<'a> {
     scratch: Scratch,
     candidates: Vec<u32>,
     /// Keyed by delivery, guard outcomes, counter, and whether the delivery went unused.
-    label_ids: HashMap<(u32, Vec<bool>, Option<u32>, bool), u32>,
-    fired_ids: HashMap<Vec<u32>, u32>,
+    label_ids: FxMap<(u32, Vec<bool>, Option<u32>, bool), u32>,
+    fired_ids: FxMap<Vec<u32>, u32>,
+    step_ids: FxMap<(u32, u32), u32>,
+    /// The labels of keys with no undecided guard, looked up without comparing vectors: by
+    /// delivery for a free event taken, else by the rest of the key.
+    free_labels: Vec<u32>,
+    plain_labels: FxMap<(u32, Option<u32>, bool), u32>,
+    /// The fired sets of one rule (by rule) and of none, likewise.
+    single_fired: Vec<u32>,
+    no_fired: Option<u32>,
+    /// The last step's fired set, sorted (reused).
+    fired_buf: Vec<u32>,
     unsafe_seen: HashSet<(u32, u32)>,
     conflict_seen: HashSet<(u32, u32)>,
     livelock_seen: HashSet<Vec<u32>>,
@@ -351,26 +446,91 @@ impl Ctx<'_> {
         }
     }
 
+    /// The label of `key`, if there is one yet.
+    fn known_label(&self, key: &(u32, Vec<bool>, Option<u32>, bool)) -> Option<u32> {
+        if key.1.is_empty() && key.2.is_none() && !key.3 {
+            self.free_labels
+                .get(key.0 as usize)
+                .copied()
+                .filter(|&l| l != u32::MAX)
+        } else if key.1.is_empty() {
+            self.plain_labels.get(&(key.0, key.2, key.3)).copied()
+        } else {
+            self.label_ids.get(key).copied()
+        }
+    }
+
+    /// The label of `key`, made by `make` the first time (looked up before the key is
+    /// cloned: once per edge).
     fn label(
         &mut self,
         g: &mut Graph,
         key: (u32, Vec<bool>, Option<u32>, bool),
         make: impl FnOnce() -> Label,
     ) -> u32 {
-        *self.label_ids.entry(key).or_insert_with(|| {
-            g.labels.push(make());
-            (g.labels.len() - 1) as u32
-        })
+        if let Some(l) = self.known_label(&key) {
+            return l;
+        }
+        g.labels.push(make());
+        let l = (g.labels.len() - 1) as u32;
+        if key.1.is_empty() && key.2.is_none() && !key.3 {
+            if self.free_labels.len() <= key.0 as usize {
+                self.free_labels.resize(key.0 as usize + 1, u32::MAX);
+            }
+            self.free_labels[key.0 as usize] = l;
+        } else if key.1.is_empty() {
+            self.plain_labels.insert((key.0, key.2, key.3), l);
+        }
+        self.label_ids.insert(key, l);
+        l
     }
 
     /// The set of transitions the last step fired, as an index into `g.fired_sets`.
     fn fired_set(&mut self, g: &mut Graph) -> u32 {
-        let mut fired = self.rec.fired.clone();
-        fired.sort_unstable();
-        fired.dedup();
-        *self.fired_ids.entry(fired).or_insert_with_key(|f| {
-            g.fired_sets.push(f.clone());
-            (g.fired_sets.len() - 1) as u32
+        // Most steps fire one rule or none: looked up by index, not by a hashed vector.
+        let fast = match self.rec.fired.as_slice() {
+            [] => self.no_fired,
+            &[r] => self
+                .single_fired
+                .get(r as usize)
+                .copied()
+                .filter(|&f| f != u32::MAX),
+            _ => None,
+        };
+        if let Some(f) = fast {
+            return f;
+        }
+        self.fired_buf.clear();
+        self.fired_buf.extend_from_slice(&self.rec.fired);
+        self.fired_buf.sort_unstable();
+        self.fired_buf.dedup();
+        let f = match self.fired_ids.get(self.fired_buf.as_slice()) {
+            Some(&f) => f,
+            None => {
+                g.fired_sets.push(self.fired_buf.clone());
+                let f = (g.fired_sets.len() - 1) as u32;
+                self.fired_ids.insert(self.fired_buf.clone(), f);
+                f
+            }
+        };
+        match self.rec.fired.as_slice() {
+            [] => self.no_fired = Some(f),
+            &[r] => {
+                if self.single_fired.len() <= r as usize {
+                    self.single_fired.resize(r as usize + 1, u32::MAX);
+                }
+                self.single_fired[r as usize] = f;
+            }
+            _ => {}
+        }
+        f
+    }
+
+    /// The step kind of an edge labelled `label` that fired set `fired`.
+    fn step(&mut self, g: &mut Graph, label: u32, fired: u32) -> u32 {
+        *self.step_ids.entry((label, fired)).or_insert_with(|| {
+            g.steps.push((label, fired));
+            (g.steps.len() - 1) as u32
         })
     }
 
@@ -490,16 +650,22 @@ impl Ctx<'_> {
                     };
                     tm.step(&self.sem.layout, &mut t, k, &self.rec.timer_ops);
                 }
-                let (label, event) = (format!("{} (unused)", d.label), d.event);
-                let lid = self.label(g, (di as u32, Vec::new(), counter, true), || Label {
-                    text: label,
-                    event,
-                    delivery: di as u32,
-                    choices: Vec::new(),
-                    counter,
-                });
+                let key = (di as u32, Vec::new(), counter, true);
+                let lid = match self.known_label(&key) {
+                    Some(l) => l,
+                    None => {
+                        let (label, event) = (format!("{} (unused)", d.label), d.event);
+                        self.label(g, key, || Label {
+                            text: label,
+                            event,
+                            delivery: di as u32,
+                            choices: Vec::new(),
+                            counter,
+                        })
+                    }
+                };
                 let fid = self.fired_set(g);
-                out.push((t, Via::Step(i, lid), Some((lid, fid))));
+                out.push((t, lid, fid));
                 continue;
             }
             // Every outcome of the guards this delivery cannot decide.
@@ -535,32 +701,46 @@ impl Ctx<'_> {
                 let choices: Vec<bool> = (0..self.rec.oracle.used)
                     .map(|k| prefix.get(k).copied().unwrap_or(false))
                     .collect();
-                let (base, event) = (d.label.clone(), d.event);
-                let lid = self.label(g, (di as u32, choices.clone(), counter, false), || {
-                    let mut text = base;
-                    if !choices.is_empty() {
-                        let taken: Vec<&str> = choices
-                            .iter()
-                            .map(|c| if *c { "true" } else { "false" })
-                            .collect();
-                        text = format!("{text} (undecided guards taken {})", taken.join(", "));
+                let key = (di as u32, choices, counter, false);
+                let lid = match self.known_label(&key) {
+                    Some(l) => l,
+                    None => {
+                        let (base, event) = (d.label.clone(), d.event);
+                        let choices = key.1.clone();
+                        self.label(g, key, || {
+                            let mut text = base;
+                            if !choices.is_empty() {
+                                let taken: Vec<&str> = choices
+                                    .iter()
+                                    .map(|c| if *c { "true" } else { "false" })
+                                    .collect();
+                                text =
+                                    format!("{text} (undecided guards taken {})", taken.join(", "));
+                            }
+                            Label {
+                                text,
+                                event,
+                                delivery: di as u32,
+                                choices,
+                                counter,
+                            }
+                        })
                     }
-                    Label {
-                        text,
-                        event,
-                        delivery: di as u32,
-                        choices,
-                        counter,
-                    }
-                });
+                };
                 let fid = self.fired_set(g);
-                let text = g.labels[lid as usize].text.clone();
-                self.record(g, &|g| {
-                    let mut t = g.trace(i);
-                    t.push(text.clone());
-                    t
-                });
-                out.push((t, Via::Step(i, lid), Some((lid, fid))));
+                if self.rec.refused.is_empty() && self.rec.livelock.is_none() {
+                    // Nothing to report: only the rules that fired.
+                    for &r in &self.rec.fired {
+                        g.ever_fired[r as usize] = true;
+                    }
+                } else {
+                    self.record(g, &|g| {
+                        let mut t = g.trace(i);
+                        t.push(g.labels[lid as usize].text.clone());
+                        t
+                    });
+                }
+                out.push((t, lid, fid));
             }
         }
         Ok(())
@@ -607,31 +787,21 @@ pub(super) fn explore(
         guards,
         scratch: Scratch::default(),
         candidates: Vec::new(),
-        label_ids: HashMap::new(),
-        fired_ids: HashMap::new(),
+        label_ids: FxMap::default(),
+        fired_ids: FxMap::default(),
+        step_ids: FxMap::default(),
+        free_labels: Vec::new(),
+        plain_labels: FxMap::default(),
+        single_fired: Vec::new(),
+        no_fired: None,
+        fired_buf: Vec::new(),
         unsafe_seen: HashSet::new(),
         conflict_seen: HashSet::new(),
         livelock_seen: HashSet::new(),
     };
-    let mut g = Graph {
-        states: StateStore::new(words),
-        via: Vec::new(),
-        edges: Vec::new(),
-        labels: Vec::new(),
-        fired_sets: Vec::new(),
-        dead: Vec::new(),
-        deliveries: Vec::new(),
-        unsafe_places: Vec::new(),
-        livelocks: Vec::new(),
-        conflicts: Vec::new(),
-        ever_fired: vec![false; l.rules.len()],
-        ever_active: vec![false; p.nets.len()],
-        max_tokens_per_marking: 0,
-        alone: false,
-        reduced: 0,
-    };
+    let mut g = Graph::new(words, l.rules.len(), p.nets.len());
     // Breadth-first depth of each state, and whether it was (or must be) expanded in full:
-    // the cycle proviso of the reduction.
+    // the cycle proviso of the reduction (kept only when reducing).
     let mut depth: Vec<u32> = Vec::new();
     let mut full: Vec<bool> = Vec::new();
     let mut must_full: Vec<bool> = Vec::new();
@@ -646,8 +816,7 @@ pub(super) fn explore(
             tm.init(l, &mut t);
             tm.step(l, &mut t, None, &TimerOps::new());
         }
-        g.states.push(&t);
-        g.via.push(Via::Start);
+        g.push_state(&t, None);
     }
     let mut prefixes: Vec<Vec<bool>> = if start.is_some() {
         Vec::new()
@@ -679,14 +848,9 @@ pub(super) fn explore(
         ctx.record(&mut g, &|_| Vec::new());
         Oracle::next_prefixes(&prefix, ctx.rec.oracle.used, &mut prefixes);
         if g.states.find(&initial).is_none() {
-            g.states.push(&initial);
-            g.via.push(Via::Start);
+            g.push_state(&initial, None);
         }
     }
-    depth.resize(g.states.len(), 0);
-    full.resize(g.states.len(), false);
-    // The initial states are expanded in full: the loops of each component come back to them.
-    must_full.resize(g.states.len(), true);
 
     // The reduction: the component of each delivery (`None`: every component).
     // With catastrophic events counted on the way to an end, any component that can reach
@@ -709,12 +873,21 @@ pub(super) fn explore(
             .collect(),
         None => Vec::new(),
     };
+    let reducing = components.is_some();
+    if reducing {
+        depth.resize(g.states.len(), 0);
+        full.resize(g.states.len(), false);
+        // The initial states are expanded in full: the loops of each component come back to
+        // them.
+        must_full.resize(g.states.len(), true);
+    }
 
     let mut last_progress = Instant::now();
     let mut next = 0usize;
     let mut moves: Vec<Move> = Vec::new();
     let mut tried: Vec<Successor> = Vec::new();
     let mut order: Vec<u32> = Vec::new();
+    let (mut slots, mut found) = (Vec::new(), Vec::new());
     while next < g.states.len() {
         let i = next as u32;
         next += 1;
@@ -729,6 +902,7 @@ pub(super) fn explore(
             }
         }
         let s = g.states[i as usize].to_vec();
+        g.edge_start.push(g.edge_to.len() as u64);
         for (n, seen) in g.ever_active.iter_mut().enumerate() {
             *seen |= l.is_active(&s, n as NetId);
         }
@@ -761,13 +935,10 @@ pub(super) fn explore(
             if !global && order.len() > 1 {
                 // The component that moved last first: it tends to go round its own loop
                 // back to a state expanded in full.
-                let last = match g.via[i as usize] {
-                    Via::Step(_, lid) => {
-                        let dl = g.labels[lid as usize].delivery as usize;
-                        delivery_component.get(dl).copied().flatten()
-                    }
-                    _ => None,
-                };
+                let last = g.parent(i).and_then(|(_, lid)| {
+                    let dl = g.labels[lid as usize].delivery as usize;
+                    delivery_component.get(dl).copied().flatten()
+                });
                 order.sort_unstable_by_key(|&c| (Some(c) != last, c));
                 // A component whose deliveries all belong to categories progress does not count
                 // on is no choice while others offer counted ones: the states it leads to would
@@ -831,7 +1002,9 @@ pub(super) fn explore(
             opts.no_reduction = false;
             return full;
         }
-        full[i as usize] = !reduced;
+        if reducing {
+            full[i as usize] = !reduced;
+        }
 
         for (k, f) in free.iter().enumerate() {
             let set = !Layout::bit(&s, f.bit);
@@ -870,10 +1043,16 @@ pub(super) fn explore(
                 },
             );
             let fid = ctx.fired_set(&mut g);
-            successors.push((t, Via::Env(i, lid), Some((lid, fid))));
+            successors.push((t, lid, fid));
         }
-        for (t, how, step) in successors {
-            let j = match g.states.find(&t) {
+        g.states.find_all(
+            successors.iter().map(|(t, _, _)| &t[..]),
+            &mut slots,
+            &mut found,
+        );
+        for ((t, label, fired), known) in successors.into_iter().zip(found.iter()) {
+            // A state not found may have been added by an earlier successor of this one.
+            let j = match known.or_else(|| g.states.find(&t)) {
                 Some(j) => j,
                 None => {
                     let j = g.states.len() as u32;
@@ -882,27 +1061,52 @@ pub(super) fn explore(
                             return Err(VerifyError::TooManyStates { limit });
                         }
                     }
-                    g.states.push(&t);
-                    g.via.push(how);
-                    depth.push(depth[i as usize] + 1);
-                    full.push(false);
-                    must_full.push(false);
+                    g.push_state(&t, Some((i, label)));
+                    if reducing {
+                        depth.push(depth[i as usize] + 1);
+                        full.push(false);
+                        must_full.push(false);
+                    }
                     j
                 }
             };
-            if let Some((label, fired)) = step {
-                g.edges.push(Edge {
-                    from: i,
-                    to: j,
-                    label,
-                    fired,
-                });
-            }
+            let step = ctx.step(&mut g, label, fired);
+            g.edge_to.push(u64::from(j));
+            g.edge_step.push(u64::from(step));
         }
         if !any_enabled {
             g.dead.push(i);
         }
     }
+    g.edge_start.push(g.edge_to.len() as u64);
     g.deliveries = ctx.deliveries;
     Ok(g)
+}
+
+/// A graph with the edges `adj` (state `i`'s targets), every edge of one step kind, for the
+/// analyses' unit tests.
+#[cfg(test)]
+pub(super) fn tests_graph(adj: &[Vec<u32>]) -> Graph {
+    let mut g = Graph::new(1, 0, 0);
+    for i in 0..adj.len() {
+        g.push_state(&[i as u64], None);
+    }
+    g.labels.push(Label {
+        text: "e".into(),
+        event: 0,
+        delivery: 0,
+        choices: Vec::new(),
+        counter: None,
+    });
+    g.fired_sets.push(Vec::new());
+    g.steps.push((0, 0));
+    for succ in adj {
+        g.edge_start.push(g.edge_to.len() as u64);
+        for &j in succ {
+            g.edge_to.push(u64::from(j));
+            g.edge_step.push(0);
+        }
+    }
+    g.edge_start.push(g.edge_to.len() as u64);
+    g
 }

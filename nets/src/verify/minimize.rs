@@ -6,7 +6,7 @@
 //! the event did not matter. What is left is printed with `...` where events were elided.
 
 use super::env::{Env, Gate};
-use super::explore::{run_step, Graph, Recorder, Via, NO_EVENT};
+use super::explore::{run_step, Graph, Recorder, NO_EVENT};
 use super::Trace;
 use crate::compiled::CompiledProject;
 use crate::semantics::{Scratch, Semantics, State};
@@ -82,7 +82,7 @@ impl<'a> Minimizer<'a> {
     /// dropped when the state the rest of the trace leads to still satisfies `keep`.
     pub fn trace(&self, i: u32, keep: &dyn Fn(&[u64]) -> bool) -> Trace {
         let full = self.g.trace(i);
-        let steps = self.g.steps(i);
+        let steps = self.g.trace_steps(i);
         // The environment's own moves (single-net mode) are not replayed: keep the trace.
         if steps.len() < 2 || steps.len() > MAX_MINIMIZED || steps.iter().any(Option::is_none) {
             return full;
@@ -94,11 +94,7 @@ impl<'a> Minimizer<'a> {
         {
             return full;
         }
-        let mut root = i;
-        while let Via::Step(prev, _) | Via::Env(prev, _) = self.g.via[root as usize] {
-            root = prev;
-        }
-        let root = self.g.states[root as usize].to_vec();
+        let root = self.g.states[self.g.root(i) as usize].to_vec();
         let labels: Vec<u32> = steps.into_iter().flatten().collect();
         let mut needed = vec![true; labels.len()];
         for k in 0..labels.len() {

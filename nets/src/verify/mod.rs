@@ -337,6 +337,10 @@ pub struct Report {
     pub bounds: Vec<BoundFinding>,
     /// Seconds spent.
     pub seconds: f64,
+    /// Bytes the explored graph holds (its states, parent pointers and edges), for the
+    /// benchmarks (docs/benchmarks.md).
+    #[serde(skip)]
+    pub graph_bytes: u64,
     /// Each net's template (its declaration in the net files), for locating findings.
     #[serde(skip)]
     pub templates: HashMap<String, String>,
@@ -440,7 +444,8 @@ fn verify_inner(
     };
     let mut report = Report {
         states: g.states.len() as u64,
-        edges: g.edges.len() as u64,
+        edges: g.edge_count() as u64,
+        graph_bytes: g.heap_bytes() as u64,
         max_tokens_per_marking: g.max_tokens_per_marking,
         max_tokens_in_place: u64::from(g.max_tokens_per_marking > 0),
         safe: g.unsafe_places.is_empty(),
@@ -528,9 +533,11 @@ fn verify_inner(
     // What needs every state (loops, what stays reachable) is not asked of a partial graph.
     let whole = !report.partial;
     let ends = analysis::ends(p, l, &g);
-    if !opts.skip_liveness {
-        let rev = analysis::Reverse::new(&g);
-        report.no_progress = analysis::progress(p, l, &g, &rev, &ends, &describe).map(
+    // The strongly connected components of the whole graph, for what is reachable from each
+    // state (progress, stuck nets) and for the loops.
+    let all = (!opts.skip_liveness || whole).then(|| analysis::components(&g));
+    if let (false, Some(all)) = (opts.skip_liveness, &all) {
+        report.no_progress = analysis::progress(p, l, &g, all, &ends, &describe).map(
             |(mut f, first, stays, reach)| {
                 // Any state from which no end is reachable will do for the first trace; for the
                 // state the mission stays in, the nets not at an end must be where they are.
@@ -544,7 +551,7 @@ fn verify_inner(
                 f
             },
         );
-        let (stuck, can) = analysis::stuck_nets(p, l, &g, &rev, &describe);
+        let (stuck, can) = analysis::stuck_nets(p, l, &g, all, &describe);
         report.stuck_nets = stuck
             .into_iter()
             // A net stuck in a dead marking with nothing to wait for: the dead marking says it all.
@@ -555,19 +562,19 @@ fn verify_inner(
                 // Any state where this net is active and can never fire again.
                 f.trace = at(i, &|s| {
                     l.is_active(s, net)
-                        && index_of(s).is_some_and(|k| !can[net as usize][k as usize])
+                        && index_of(s).is_some_and(|k| !can.can(all, net, k))
                         && !analysis::end_for_net(p, l, s, net)
                 });
                 f
             })
             .collect();
     }
-    if whole {
-        let components = analysis::components(&g);
+    if let (true, Some(all)) = (whole, &all) {
+        let loops = analysis::loops(&g, all);
         if !opts.skip_liveness {
-            report.starvation = analysis::starvation(p, l, &g, &components);
+            report.starvation = analysis::starvation(p, l, &g, all, &loops);
         }
-        report.event_loops = analysis::event_loops(p, &g, &components);
+        report.event_loops = analysis::event_loops(p, &g, all, &loops);
     }
     report.bounds = match &timing {
         Some(tm) if alone.is_none() && start.is_none() => {

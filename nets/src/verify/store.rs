@@ -3,6 +3,12 @@
 //! environment's counters), and an open-addressing table of state numbers to find one. A
 //! state costs its words and about eight bytes of table, where a `Vec` per state, kept twice
 //! (the list and the map's key), cost over a hundred (docs/benchmarks.md).
+//!
+//! Beside it, [`Packed`]: numbers (state numbers, edge targets, step kinds) in as few bytes
+//! each as the largest of them needs, for the parent pointers and the edges.
+
+use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
 
 /// The states, numbered in the order they were added.
 pub(super) struct StateStore {
@@ -39,6 +45,12 @@ impl StateStore {
         self.data.len() / self.words.max(1)
     }
 
+    /// The bytes its states and table take (their lengths: the spare capacity of a growing
+    /// vector is not touched, so not resident), for the benchmarks' count.
+    pub fn heap_bytes(&self) -> usize {
+        self.data.len() * 8 + self.table.len() * 4
+    }
+
     /// State `i`.
     pub fn get(&self, i: usize) -> &[u64] {
         &self.data[i * self.words..(i + 1) * self.words]
@@ -51,11 +63,20 @@ impl StateStore {
 
     fn slot(&self, s: &[u64]) -> (usize, Option<u32>) {
         let mask = self.table.len() - 1;
-        let mut k = hash(s) as usize & mask;
+        self.probe(hash(s) as usize & mask, s)
+    }
+
+    /// The slot of `s` from slot `k` on, and its number if it is stored.
+    fn probe(&self, mut k: usize, s: &[u64]) -> (usize, Option<u32>) {
+        let mask = self.table.len() - 1;
         loop {
             match self.table[k] {
                 EMPTY => return (k, None),
-                j if self.get(j as usize) == s => return (k, Some(j)),
+                // Word by word: a state is a word or two, where a call to `memcmp` per probe
+                // cost a fifth of the exploration (docs/benchmarks.md).
+                j if self.get(j as usize).iter().zip(s).all(|(a, b)| a == b) => {
+                    return (k, Some(j))
+                }
                 _ => k = (k + 1) & mask,
             }
         }
@@ -65,6 +86,32 @@ impl StateStore {
     pub fn find(&self, s: &[u64]) -> Option<u32> {
         debug_assert_eq!(s.len(), self.words);
         self.slot(s).1
+    }
+
+    /// The numbers of `states` (`None` where not stored), looked up together: the table
+    /// entries of all of them are read before any state is compared, so that the cache misses
+    /// of a large exploration (a random table entry, then a random state, per lookup) overlap
+    /// instead of following one another. `slots` is scratch.
+    pub fn find_all<'a>(
+        &self,
+        states: impl Iterator<Item = &'a [u64]> + Clone,
+        slots: &mut Vec<(usize, u32)>,
+        out: &mut Vec<Option<u32>>,
+    ) {
+        let mask = self.table.len() - 1;
+        slots.clear();
+        slots.extend(states.clone().map(|s| {
+            let k = hash(s) as usize & mask;
+            (k, self.table[k])
+        }));
+        out.clear();
+        for (s, &(k, first)) in states.zip(slots.iter()) {
+            out.push(match first {
+                EMPTY => None,
+                j if self.get(j as usize).iter().zip(s).all(|(a, b)| a == b) => Some(j),
+                _ => self.probe((k + 1) & mask, s).1,
+            });
+        }
     }
 
     /// Stores `s` (not stored yet) and returns its number.
@@ -98,9 +145,117 @@ impl std::ops::Index<usize> for StateStore {
     }
 }
 
+/// A list of numbers stored in the fewest whole bytes (1 to 8) that hold the largest of them,
+/// widened when a larger one comes: edge targets below 2^24 take 3 bytes, step kinds below 256
+/// one, where a `u32` each would take 4.
+pub(super) struct Packed {
+    width: usize,
+    len: usize,
+    /// The numbers' bytes, then eight zero bytes, so that every number is read with one
+    /// eight-byte load (a copy of `width` bytes was a call to `memmove` per read).
+    bytes: Vec<u8>,
+}
+
+const PAD: [u8; 8] = [0; 8];
+
+fn width_of(v: u64) -> usize {
+    (8 - v.leading_zeros() as usize / 8).max(1)
+}
+
+impl Packed {
+    /// An empty list.
+    pub fn new() -> Packed {
+        Packed {
+            width: 1,
+            len: 0,
+            bytes: PAD.to_vec(),
+        }
+    }
+
+    /// How many numbers.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Adds `v` at the end.
+    pub fn push(&mut self, v: u64) {
+        let w = width_of(v);
+        if w > self.width {
+            self.widen(w);
+        }
+        let end = self.len * self.width;
+        self.bytes.truncate(end);
+        self.bytes.extend_from_slice(&v.to_le_bytes()[..self.width]);
+        self.bytes.extend_from_slice(&PAD);
+        self.len += 1;
+    }
+
+    /// Number `k`.
+    #[inline]
+    pub fn get(&self, k: usize) -> u64 {
+        let w = self.width;
+        let mut b = [0u8; 8];
+        b.copy_from_slice(&self.bytes[k * w..k * w + 8]);
+        let v = u64::from_le_bytes(b);
+        if w == 8 {
+            v
+        } else {
+            v & ((1u64 << (8 * w)) - 1)
+        }
+    }
+
+    /// The bytes its numbers take (not the spare capacity), for the benchmarks' count.
+    pub fn heap_bytes(&self) -> usize {
+        self.bytes.len()
+    }
+
+    fn widen(&mut self, w: usize) {
+        let mut bytes = Vec::with_capacity(self.len * w + PAD.len());
+        for k in 0..self.len {
+            bytes.extend_from_slice(&self.get(k).to_le_bytes()[..w]);
+        }
+        bytes.extend_from_slice(&PAD);
+        self.bytes = bytes;
+        self.width = w;
+    }
+}
+
+/// A fast hasher for the exploration's small keys (label keys, sets of rules): the standard
+/// SipHash cost a tenth of the exploration on them, and the keys are not chosen by an adversary.
+#[derive(Default, Clone, Copy)]
+pub(super) struct FxHasher(u64);
+
+impl Hasher for FxHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for chunk in bytes.chunks(8) {
+            let mut b = [0u8; 8];
+            b[..chunk.len()].copy_from_slice(chunk);
+            self.write_u64(u64::from_le_bytes(b));
+        }
+    }
+    fn write_u64(&mut self, v: u64) {
+        self.0 = (self.0.rotate_left(5) ^ v).wrapping_mul(0x517c_c1b7_2722_0a95);
+    }
+    fn write_u32(&mut self, v: u32) {
+        self.write_u64(u64::from(v));
+    }
+    fn write_u8(&mut self, v: u8) {
+        self.write_u64(u64::from(v));
+    }
+    fn write_usize(&mut self, v: usize) {
+        self.write_u64(v as u64);
+    }
+    fn finish(&self) -> u64 {
+        self.0
+    }
+}
+
+/// A `HashMap` with [`FxHasher`].
+pub(super) type FxMap<K, V> = HashMap<K, V, BuildHasherDefault<FxHasher>>;
+
 #[cfg(test)]
 mod tests {
-    use super::StateStore;
+    use super::{Packed, StateStore};
 
     #[test]
     fn finds_what_it_stores_and_nothing_else() {
@@ -114,7 +269,35 @@ mod tests {
             assert_eq!(&st[k as usize], &[k, k * 7]);
         }
         assert_eq!(st.find(&[3, 20]), None);
+        let (mut slots, mut out) = (Vec::new(), Vec::new());
+        let asked: Vec<[u64; 2]> = vec![[5, 35], [3, 20], [999, 6993], [0, 0]];
+        st.find_all(asked.iter().map(|s| &s[..]), &mut slots, &mut out);
+        assert_eq!(out, vec![Some(5), None, Some(999), Some(0)]);
         assert_eq!(st.len(), 1000);
         assert_eq!(st.iter().count(), 1000);
+    }
+
+    #[test]
+    fn packed_numbers_widen_and_keep_their_values() {
+        let mut p = Packed::new();
+        let values = [
+            0u64,
+            7,
+            255,
+            256,
+            3,
+            1 << 24,
+            5,
+            u64::from(u32::MAX),
+            1 << 40,
+            9,
+        ];
+        for (k, &v) in values.iter().enumerate() {
+            p.push(v);
+            assert_eq!(p.len(), k + 1);
+            for (j, &w) in values[..=k].iter().enumerate() {
+                assert_eq!(p.get(j), w);
+            }
+        }
     }
 }
