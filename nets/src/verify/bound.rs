@@ -79,16 +79,28 @@ pub(super) fn bounds(
                 .clone()
         })
         .collect();
+    // The compact graph names an edge's step kind; the search wants each edge whole (only
+    // projects that declare bounds pay for this copy).
+    let mut edges: Vec<BoundEdge> = Vec::with_capacity(g.edge_count());
     let mut out_edges: Vec<Vec<u32>> = vec![Vec::new(); g.states.len()];
-    for (k, e) in g.edges.iter().enumerate() {
-        out_edges[e.from as usize].push(k as u32);
+    for i in 0..g.states.len() as u32 {
+        for k in g.edge_range(i) {
+            let (label, fired) = g.steps()[g.edge_kind(k)];
+            out_edges[i as usize].push(edges.len() as u32);
+            edges.push(BoundEdge {
+                from: i,
+                to: g.edge_target(k),
+                label,
+                fired,
+            });
+        }
     }
     let mut dead = vec![false; g.states.len()];
     for &i in &g.dead {
         dead[i as usize] = true;
     }
     let initial: Vec<u32> = (0..g.states.len() as u32)
-        .filter(|&i| matches!(g.via[i as usize], super::explore::Via::Start))
+        .filter(|&i| g.parent(i).is_none())
         .collect();
     let mut s = Search {
         p,
@@ -99,12 +111,23 @@ pub(super) fn bounds(
         tm: Timing::with_observer(p, plain.base),
         rec: Recorder::with_guards(guards),
         scratch: Scratch::default(),
+        edges,
         out_edges,
         dead,
         initial,
         describe,
     };
     p.bounds.iter().map(|b| s.bound(b)).collect()
+}
+
+/// An edge of the explored graph, whole.
+#[derive(Clone, Copy)]
+struct BoundEdge {
+    from: u32,
+    to: u32,
+    label: u32,
+    /// Index in the graph's `fired_sets`.
+    fired: u32,
 }
 
 struct Search<'a> {
@@ -116,6 +139,7 @@ struct Search<'a> {
     tm: Timing,
     rec: Recorder,
     scratch: Scratch,
+    edges: Vec<BoundEdge>,
     out_edges: Vec<Vec<u32>>,
     dead: Vec<bool>,
     initial: Vec<u32>,
@@ -162,7 +186,7 @@ impl Search<'_> {
 
     /// Event `end` happens on edge `e`: its label's event, taken by some transition.
     fn event_on(&self, end: &Occurrence, e: u32) -> bool {
-        let edge = &self.g.edges[e as usize];
+        let edge = &self.edges[e as usize];
         match end {
             Occurrence::Event(ev) => {
                 self.g.labels[edge.label as usize].event == *ev
@@ -181,7 +205,7 @@ impl Search<'_> {
 
     /// `from` happens on edge `e`: its event is taken, or its marking starts to hold.
     fn starts_on(&self, b: &Bound, e: u32) -> bool {
-        let edge = &self.g.edges[e as usize];
+        let edge = &self.edges[e as usize];
         match &b.from {
             Occurrence::Event(_) => self.event_on(&b.from, e),
             Occurrence::Marking(_) => {
@@ -216,8 +240,8 @@ impl Search<'_> {
             };
             self.start(b, &mut f, &mut seen, &mut queue, i, parent, t);
         }
-        for e in 0..self.g.edges.len() as u32 {
-            let edge = self.g.edges[e as usize];
+        for e in 0..self.edges.len() as u32 {
+            let edge = self.edges[e as usize];
             if self.g.labels[edge.label as usize].delivery == u32::MAX || !self.starts_on(b, e) {
                 continue;
             }
@@ -289,7 +313,7 @@ impl Search<'_> {
             }
             for k in 0..self.out_edges[node as usize].len() {
                 let e = self.out_edges[node as usize][k];
-                let edge = self.g.edges[e as usize];
+                let edge = self.edges[e as usize];
                 if self.g.labels[edge.label as usize].delivery == u32::MAX {
                     continue;
                 }
@@ -446,7 +470,7 @@ impl Search<'_> {
         }
         let mut events: Vec<&str> = Vec::new();
         for &e in &self.out_edges[node as usize] {
-            let ev = self.g.labels[self.g.edges[e as usize].label as usize].event;
+            let ev = self.g.labels[self.edges[e as usize].label as usize].event;
             let name = self.p.events[ev as usize].name.as_str();
             if !events.contains(&name) {
                 events.push(name);
