@@ -83,7 +83,7 @@ pub use port::{
     SendError, Sender, SenderAccount, SenderStats, Sent, ServiceSpec, SignalsPublisher,
     SignalsSubscriber, Wakeups,
 };
-pub use reactor::{FdSource, Reactor, ReactorError, Ready, Source, WaitStrategy};
+pub use reactor::{FdSource, Reactor, ReactorError, ReactorStats, Ready, Source, WaitStrategy};
 pub use wire::{
     Ack, AckRefusal, CallMsg, EventMsg, Heartbeat, MarkingMsg, Origin, Recorder, RecorderState,
     ReloadAnswer, ReloadRequest, SignalsMsg, Value, WireError,

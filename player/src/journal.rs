@@ -235,7 +235,8 @@ impl Entry {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FlushPolicy {
     /// Written to the operating system after every record (survives a crash of the player, not
-    /// of the machine).
+    /// of the machine); the player writes the records of one round of work together, before it
+    /// waits again ([`Journal::batch_records`]).
     EveryRecord,
     /// Written and synced to the disk (fdatasync) after every record: survives a power loss,
     /// costs a disk round trip per record.
@@ -611,6 +612,9 @@ pub struct Journal {
     pub lost: u64,
     /// Of them, those a [`Entry::Gap`] on record accounts for.
     lost_in_gaps: u64,
+    /// Under `record` and `sync`, records wait for [`write_batch`](Self::write_batch) instead
+    /// of being written one by one.
+    batched: bool,
 }
 
 impl Journal {
@@ -635,6 +639,35 @@ impl Journal {
             failures: 0,
             lost: 0,
             lost_in_gaps: 0,
+            batched: false,
+        }
+    }
+
+    /// Under the `record` and `sync` policies, holds the records until
+    /// [`write_batch`](Self::write_batch) instead of writing each at once. The player's loop
+    /// calls it before every wait: the records of one round of work (an event taken, the steps
+    /// it caused) then reach the operating system in one system call, after the calls they
+    /// made went out rather than before, and still before the player sleeps and before any
+    /// acknowledgement (which [`flush`](Self::flush) precedes).
+    pub fn batch_records(&mut self) {
+        self.batched = true;
+    }
+
+    /// Writes the records held by [`batch_records`](Self::batch_records) (nothing to do
+    /// otherwise, or under an interval policy, or while the recorder is not ok: the heartbeat's
+    /// [`flush`](Self::flush) retries).
+    pub fn write_batch(&mut self) {
+        let Some(w) = self.writer.as_mut() else {
+            return;
+        };
+        let due = self.batched
+            && self.state == RecorderState::Ok
+            && w.queued_records() > 0
+            && matches!(w.policy, FlushPolicy::EveryRecord | FlushPolicy::Sync);
+        if due {
+            if let Err(e) = w.flush() {
+                self.fail(&e);
+            }
         }
     }
 
@@ -705,7 +738,7 @@ impl Journal {
                 Err(e) => self.start_dropping(format!("an entry cannot be recorded: {e}")),
                 Ok(()) => {
                     let due = match w.policy {
-                        FlushPolicy::EveryRecord | FlushPolicy::Sync => true,
+                        FlushPolicy::EveryRecord | FlushPolicy::Sync => !self.batched,
                         FlushPolicy::Interval(p) => w.last_flush.elapsed() >= p,
                     };
                     if due {

@@ -566,6 +566,7 @@ impl<'p> PlayerLoop<'p> {
             }
         };
         let mut journal = Journal::with_backlog(writer, opts.journal_backlog);
+        journal.batch_records();
         let mut record = StepRecord::new(project);
         let mut failed = Vec::new();
         let mut report = PlayReport::default();
@@ -672,6 +673,8 @@ impl<'p> PlayerLoop<'p> {
         loop {
             self.process_queue();
             self.heartbeat_if_due();
+            // Everything journaled reaches the operating system before the player sleeps.
+            self.journal.write_batch();
             if self.journal.has_changes() {
                 // The heartbeat's flush changed the recorder's state: tell the nets now.
                 continue;
