@@ -17,6 +17,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use crate::bus::{Bus, MemoryHub};
+use crate::clock::Clock;
 use crate::dbc::{Dbc, DecodeOutcome};
 use crate::frame::Frame;
 
@@ -221,16 +222,30 @@ pub fn spawn_plant(
     let mut node = hub.endpoint("sim")?;
     let clock = hub.clock();
     Ok(std::thread::spawn(move || {
-        let period = plant.period();
-        while !stop.load(Ordering::Relaxed) {
-            while let Ok(Some(tf)) = node.recv() {
-                plant.on_frame(tf.time_us, &tf.frame);
-            }
-            for frame in plant.step(clock.now_us()) {
-                // A full bus only delays the next sample: the plant speaks again next tick.
-                let _ = node.send(&frame);
-            }
-            std::thread::sleep(period);
-        }
+        run_plant(&mut node, plant.as_mut(), clock.as_ref(), &stop);
     }))
+}
+
+/// The host loop of a plant, whatever the bus: every [`Plant::period`], the frames received
+/// since the last tick go into the plant (at their receive times), then the frames of its
+/// step go out at `clock`'s time; until `stop` is set. The memory bus's thread
+/// ([`spawn_plant`]) and a simulator process on a SocketCAN interface (`redermor-sim`) both run
+/// it, so one plant behaves the same on both. `clock` must be the bus's receive clock (the
+/// hub's, or [`crate::clock::SystemClock`] for SocketCAN's kernel timestamps).
+pub fn run_plant(bus: &mut dyn Bus, plant: &mut dyn Plant, clock: &dyn Clock, stop: &AtomicBool) {
+    let period = plant.period();
+    while !stop.load(Ordering::Relaxed) {
+        // A read error (an interface down) ends this tick's reading: the vehicle's sensors
+        // go on, as a real one's would, and the data server sees what the bus lets through.
+        while let Ok(Some(tf)) = bus.recv() {
+            plant.on_frame(tf.time_us, &tf.frame);
+        }
+        // Frames still waiting from the last tick go first, in order.
+        let _ = bus.flush();
+        for frame in plant.step(clock.now_us()) {
+            // A full bus only delays the next sample: the plant speaks again next tick.
+            let _ = bus.send(&frame);
+        }
+        std::thread::sleep(period);
+    }
 }

@@ -156,9 +156,7 @@ fn redermor_plant(
     speed: f64,
     trace: Option<PathBuf>,
 ) -> Result<Option<petrel_can_bridge::serve::PlantFactory>, String> {
-    use petrel_redermor::mission::Mission;
-    use petrel_redermor::sensors::Scenario;
-    use petrel_redermor_live::plant::RedermorPlant;
+    use petrel_redermor_live::plant::PlantFiles;
     match sim {
         "auv" => {
             if mission.is_some() || scenario.is_some() || trace.is_some() {
@@ -169,36 +167,18 @@ fn redermor_plant(
             Ok(None)
         }
         "redermor" => {
-            let Some(mission_path) = mission else {
+            let Some(mission) = mission else {
                 return Err("--sim redermor needs --sim-mission FILE".into());
             };
-            if speed <= 0.0 {
-                return Err(format!("--sim-speed {speed}: a factor above 0"));
-            }
-            let read = |p: &PathBuf| {
-                std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))
-            };
-            let mission = Mission::from_toml(&read(&mission_path)?)
-                .map_err(|e| format!("{}: {e}", mission_path.display()))?;
-            let scenario = match scenario {
-                Some(p) => {
-                    Scenario::from_toml(&read(&p)?).map_err(|e| format!("{}: {e}", p.display()))?
-                }
-                None => Scenario::default(),
-            };
-            let trace: Option<Box<dyn std::io::Write + Send>> = match trace {
-                Some(p) => Some(Box::new(std::io::BufWriter::new(
-                    std::fs::File::create(&p)
-                        .map_err(|e| format!("cannot create {}: {e}", p.display()))?,
-                ))),
-                None => None,
-            };
+            let files = PlantFiles::read(
+                &mission,
+                scenario.as_deref(),
+                speed,
+                trace.as_deref(),
+                "--sim-",
+            )?;
             Ok(Some(Box::new(move |dbc| {
-                let plant = RedermorPlant::new(dbc, &mission, &scenario, speed);
-                Ok(Box::new(match trace {
-                    Some(t) => plant.with_trace(t),
-                    None => plant,
-                }) as _)
+                Ok(Box::new(files.build(dbc)) as _)
             })))
         }
         other => Err(format!(

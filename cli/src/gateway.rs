@@ -88,6 +88,18 @@ pub fn gateway(a: GatewayArgs) -> Outcome {
             }
         }
     }
+    // The CAN data server: its signals leave its computer for the others, and the program it
+    // takes commands as (can.toml's [commands] program) lives there, called from anywhere.
+    let signals_computer = file
+        .processes
+        .iter()
+        .find(|p| p.kind == Kind::Bridge)
+        .and_then(|p| p.computer.clone());
+    if let (Some(k), Some((can, _))) = (&signals_computer, &checked.can) {
+        if let Some(program) = &can.commands.program {
+            hosts.insert(program.clone(), k.clone());
+        }
+    }
     let listen: Vec<String> = a
         .listen
         .iter()
@@ -174,6 +186,7 @@ pub fn gateway(a: GatewayArgs) -> Outcome {
                 .collect(),
             player_computer,
             hosts,
+            signals_computer,
             detection_us: detection.as_micros() as u64,
         },
         listen,

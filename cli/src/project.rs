@@ -111,6 +111,11 @@ pub struct VerifyArgs {
     /// but progress, stuck nets, starvation and loops are checked whatever the project.
     #[arg(long)]
     no_reduction: bool,
+    /// Timed exploration: timers with literal durations expire in the order their durations
+    /// impose (a zone over their clocks), outside events stay free; no partial-order reduction.
+    /// Without it, a timer's expiry may come at any moment (the untimed analysis).
+    #[arg(long)]
+    timed: bool,
     /// A PNML file only: decide deadlocks alone, with stubborn sets (a partial-order reduction
     /// that reaches every dead marking through fewer markings); bounds and safety are then not
     /// decided.
@@ -141,6 +146,7 @@ pub fn verify(a: VerifyArgs) -> Outcome {
         max_states: a.max_states,
         only_net: a.net,
         no_reduction: a.no_reduction,
+        timed: a.timed,
         progress: interactive.then(|| {
             Box::new(|states: u64, rate: f64| {
                 eprint!("\r{states} states, {rate:.0} states/s   ");

@@ -486,6 +486,28 @@ fn verify_reduces_independent_nets_unless_told_not_to() {
 }
 
 #[test]
+fn verify_timed_drops_an_order_of_timers_that_cannot_happen() {
+    // The 2 s watchdog always expires before the 10 min timeout started with it.
+    let dir = format!(
+        "{}/../nets/tests/data/timed/race",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let untimed = petrel(&["verify", &dir]);
+    assert_eq!(untimed.status.code(), Some(1), "{}", stdout(&untimed));
+    let u = stdout(&untimed);
+    assert!(
+        u.contains("error[E0602]: dead marking: M{aborted}") && u.contains("go → mission_timeout"),
+        "{u}"
+    );
+    let timed = petrel(&["verify", &dir, "--timed"]);
+    let t = stdout(&timed);
+    assert_eq!(timed.status.code(), Some(0), "{t}");
+    assert!(t.contains("timed: timers expire in the order"), "{t}");
+    assert!(!t.contains("M{aborted}"), "{t}");
+    assert!(t.contains("transitions that never fire: M.abort"), "{t}");
+}
+
+#[test]
 fn run_plays_the_mission_scripts_in_virtual_time_as_json_lines() {
     // Every script of every mission: a new one is covered as soon as it is written.
     let mut scripts = Vec::new();

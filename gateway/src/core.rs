@@ -21,6 +21,9 @@ pub struct Plan {
     /// Each program of the vehicle and the computer that hosts it (programs absent from the
     /// map are taken to live with the player).
     pub hosts: BTreeMap<String, String>,
+    /// The computer the CAN data server (`petrel bridge`) runs on, whose signals every other
+    /// computer mirrors; `None`: the vehicle has no data server, no signals cross.
+    pub signals_computer: Option<String>,
     /// A peer silent for this long is lost, microseconds.
     pub detection_us: u64,
 }
@@ -37,6 +40,11 @@ impl Plan {
     /// Whether the player runs here.
     pub fn has_player(&self) -> bool {
         self.computer == self.player_computer
+    }
+
+    /// Whether the CAN data server runs here (its signals leave this computer).
+    pub fn has_signals(&self) -> bool {
+        self.signals_computer.as_deref() == Some(self.computer.as_str())
     }
 
     /// The programs hosted here.
@@ -151,8 +159,8 @@ pub struct Counts {
     pub refused: u64,
     /// Link messages for another computer (each computer hears every peer).
     pub not_mine: u64,
-    /// Broadcast news (heartbeats, marking deltas) for this computer that no process here
-    /// follows (no status, monitor or shadow running): not a loss.
+    /// Broadcast news (heartbeats, marking deltas, signals) for this computer that no process
+    /// here follows (no status, monitor, shadow or program reading signals): not a loss.
     pub unheard: u64,
 }
 
@@ -160,7 +168,7 @@ pub struct Counts {
 /// unheard`.
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct Counters {
-    /// By kind (`event`, `call`, `heartbeat`, `marking`, `beacon`).
+    /// By kind (`event`, `call`, `heartbeat`, `marking`, `signals`, `beacon`).
     pub kinds: BTreeMap<&'static str, Counts>,
     /// Link messages that did not decode, or came from a computer the vehicle does not have.
     pub undecodable: u64,
@@ -341,6 +349,10 @@ impl Core {
             // Other processes' heartbeats (the gateway's own status among them) stay here.
             return false;
         }
+        if matches!(kind, LinkKind::Signals) && origin != "can_bridge" {
+            // Only the data server's signals leave (a tool publishing signals is a test's).
+            return false;
+        }
         if own {
             self.counters.of(kind.name()).own += 1;
             return false;
@@ -352,6 +364,8 @@ impl Core {
             LinkKind::Call { program } => self.plan.host_of(program) != self.plan.computer,
             // The player's heartbeat and marking, for the other computers (ground stations).
             LinkKind::Heartbeat | LinkKind::Marking => self.plan.has_player() && origin == "player",
+            // The data server's signals, for the programs of the other computers.
+            LinkKind::Signals => self.plan.has_signals(),
             LinkKind::Beacon { .. } => false,
         }
     }
@@ -407,6 +421,12 @@ impl Core {
             LinkKind::Event => self.plan.has_player(),
             LinkKind::Call { program } => self.plan.host_of(program) == self.plan.computer,
             LinkKind::Heartbeat | LinkKind::Marking => !self.plan.has_player(),
+            // Every computer but the data server's own: a ground station's too (counted
+            // `unheard` when nothing there reads them).
+            LinkKind::Signals => {
+                self.plan.signals_computer.as_deref() == Some(msg.from.as_str())
+                    && !self.plan.has_signals()
+            }
         };
         if mine {
             Route::Deliver
@@ -476,6 +496,7 @@ mod tests {
                 .collect(),
             player_computer: "A".into(),
             hosts: [("PLN".to_string(), "B".to_string())].into(),
+            signals_computer: Some("A".into()),
             detection_us: 1_000_000,
         }
     }
@@ -550,6 +571,36 @@ mod tests {
             g.on_link(&msg("Z", 1, LinkKind::Event), 0, &mut ch),
             Route::Foreign(_)
         ));
+    }
+
+    #[test]
+    fn signals_leave_the_data_server_computer_only_and_reach_every_other() {
+        let mut a = Core::new(plan("A"), 1);
+        assert!(a.forward_local(&LinkKind::Signals, "can_bridge", false));
+        // What the gateway published itself (it came from the link) never goes back.
+        assert!(!a.forward_local(&LinkKind::Signals, "can_bridge", true));
+        assert_eq!(a.counters.kinds["signals"].own, 1);
+        assert!(!a.forward_local(&LinkKind::Signals, "tool/fake", false));
+        let mut b = Core::new(plan("B"), 2);
+        assert!(!b.forward_local(&LinkKind::Signals, "can_bridge", false));
+        let mut ch = vec![];
+        let mut m = msg("A", 1, LinkKind::Signals);
+        m.origin = "can_bridge".into();
+        assert_eq!(b.on_link(&m, 0, &mut ch), Route::Deliver);
+        let mut g = Core::new(plan("G"), 3);
+        assert_eq!(g.on_link(&m, 0, &mut ch), Route::Deliver);
+        // Signals claimed by a computer without the data server are not taken.
+        assert_eq!(
+            g.on_link(&msg("B", 1, LinkKind::Signals), 0, &mut ch),
+            Route::NotMine
+        );
+        let c = g.counters.kinds["signals"];
+        assert_eq!((c.from_link, c.not_mine), (2, 1));
+        // No data server in the vehicle: nothing leaves.
+        let mut none = plan("A");
+        none.signals_computer = None;
+        let mut a = Core::new(none, 4);
+        assert!(!a.forward_local(&LinkKind::Signals, "can_bridge", false));
     }
 
     #[test]

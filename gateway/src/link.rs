@@ -25,6 +25,8 @@ pub enum LinkKind {
     Heartbeat,
     /// The player's marking delta (body: an ipc `MarkingMsg`).
     Marking,
+    /// The CAN data server's latest signals (body: an ipc `SignalsMsg`).
+    Signals,
     /// The sending gateway is alive; `alive` lists the vehicle's nodes alive on its computer
     /// (`player`, `program/NAME`) that the other computers mirror. No body.
     Beacon {
@@ -41,6 +43,7 @@ impl LinkKind {
             LinkKind::Call { .. } => "call",
             LinkKind::Heartbeat => "heartbeat",
             LinkKind::Marking => "marking",
+            LinkKind::Signals => "signals",
             LinkKind::Beacon { .. } => "beacon",
         }
     }

@@ -21,7 +21,8 @@ use petrel_ipc::wire::{self, Message};
 use petrel_ipc::{
     CallReceiver, CallSender, EventMsg, EventReceiver, EventSender, FdSource, Heartbeat,
     HeartbeatPublisher, HeartbeatSubscriber, MarkingPublisher, MarkingSubscriber, Participant,
-    Reactor, Received, Role, Source, Value, Vehicle, WaitStrategy,
+    Reactor, Received, Role, SignalsPublisher, SignalsSubscriber, Source, Value, Vehicle,
+    WaitStrategy,
 };
 use zenoh::Wait;
 
@@ -160,6 +161,10 @@ struct Own {
     events_in: Option<EventReceiver>,
     beats_in: Option<HeartbeatSubscriber>,
     marking_in: Option<MarkingSubscriber>,
+    /// The data server's signals, on its computer.
+    signals_in: Option<SignalsSubscriber>,
+    /// The data server's signals republished, on the other computers (made at the first).
+    signals_out: Option<SignalsPublisher>,
     participant: Participant,
 }
 
@@ -232,6 +237,16 @@ pub fn run(settings: Settings) -> Result<serde_json::Value, GatewayError> {
         } else {
             None
         },
+        signals_in: if plan.has_signals() {
+            Some(
+                participant
+                    .signals_subscriber()
+                    .map_err(|e| err("the signals subscriber", e))?,
+            )
+        } else {
+            None
+        },
+        signals_out: None,
         participant,
     };
 
@@ -310,6 +325,9 @@ pub fn run(settings: Settings) -> Result<serde_json::Value, GatewayError> {
                 sources.push(r);
             }
             if let Some(r) = &gw.own.marking_in {
+                sources.push(r);
+            }
+            if let Some(r) = &gw.own.signals_in {
                 sources.push(r);
             }
             for m in gw.mirrors.values() {
@@ -483,6 +501,17 @@ impl Gateway {
                 &|_| {},
             );
         }
+        if let Some(r) = &self.own.signals_in {
+            take(
+                r,
+                &LinkKind::Signals,
+                &mut self.core,
+                &self.ids,
+                &mut out,
+                &mut failed,
+                &|_| {},
+            );
+        }
         for (node, m) in &self.mirrors {
             if let (Some(r), Some(program)) = (&m.calls_in, node.strip_prefix("program/")) {
                 let kind = LinkKind::Call {
@@ -524,10 +553,12 @@ impl Gateway {
                 // A stand-in may be needed before the message is delivered (a beacon that
                 // listed it came just before): make them match only when it is missing.
                 let needed = match msg.kind {
-                    LinkKind::Heartbeat | LinkKind::Marking => "player",
-                    _ => msg.origin.as_str(),
+                    LinkKind::Heartbeat | LinkKind::Marking => Some("player"),
+                    // The gateway republishes signals itself, under no stand-in.
+                    LinkKind::Signals => None,
+                    _ => Some(msg.origin.as_str()),
                 };
-                if !self.mirrors.contains_key(needed) {
+                if needed.is_some_and(|n| !self.mirrors.contains_key(n)) {
                     self.sync_mirrors();
                 }
                 let name = msg.kind.name();
@@ -619,14 +650,34 @@ impl Gateway {
                     m.marking.as_ref().map(|s| s.send_encoded(&msg.body))
                 }
             }
+            LinkKind::Signals => {
+                // Published by the gateway's own node (`tool/gw-NAME`): the programs read the
+                // latest signals whoever publishes them.
+                if self.own.signals_out.is_none() {
+                    let s = self
+                        .own
+                        .participant
+                        .signals_publisher()
+                        .map_err(|e| e.to_string())?;
+                    self.ids.0.insert(s.sender_id());
+                    self.own.signals_out = Some(s);
+                }
+                self.own
+                    .signals_out
+                    .as_ref()
+                    .map(|s| s.send_encoded(&msg.body))
+            }
             LinkKind::Beacon { .. } => return Ok(()),
         };
         match sent {
             Some(Ok(_)) => Ok(()),
-            // A heartbeat or marking delta nobody here follows (no status, monitor or shadow
-            // running): broadcast news, not a loss.
+            // A heartbeat, marking delta or signals nobody here follows (no status, monitor,
+            // shadow or program reading signals running): broadcast news, not a loss.
             Some(Err(petrel_ipc::SendError::NoReceiver { .. }))
-                if matches!(msg.kind, LinkKind::Heartbeat | LinkKind::Marking) =>
+                if matches!(
+                    msg.kind,
+                    LinkKind::Heartbeat | LinkKind::Marking | LinkKind::Signals
+                ) =>
             {
                 Err(UNHEARD.into())
             }

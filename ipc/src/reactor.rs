@@ -24,7 +24,6 @@ use iceoryx2::prelude::{
 use iceoryx2::waitset::{
     WaitSetAttachmentError, WaitSetCreateError, WaitSetRunError, WaitSetRunResult,
 };
-use iceoryx2_bb_posix::signal::SignalHandler;
 
 use crate::port::Receiver;
 use crate::wire::Message;
@@ -273,14 +272,12 @@ impl Ready {
 pub struct Reactor {
     waitset: WaitSet<ipc::Service>,
     strategy: WaitStrategy,
-    /// SIGINT and SIGTERM are caught and reported (not left their default action).
-    handles_signals: bool,
     stats: Cell<ReactorStats>,
 }
 
 impl Reactor {
-    /// A reactor that reports SIGINT and SIGTERM as [`Ready::termination_requested`], whatever
-    /// its strategy: iceoryx2's handlers are installed now, and a spinning wait polls them.
+    /// A reactor that reports SIGINT and SIGTERM as [`Ready::termination_requested`] (iceoryx2
+    /// installs its handlers for them at the first sleep).
     pub fn new(strategy: WaitStrategy) -> Result<Self, ReactorError> {
         Self::build(strategy, SignalHandlingMode::HandleTerminationRequests)
     }
@@ -295,17 +292,9 @@ impl Reactor {
             .signal_handling_mode(mode)
             .create::<ipc::Service>()
             .map_err(ReactorError::Create)?;
-        let handles_signals = mode == SignalHandlingMode::HandleTerminationRequests;
-        if handles_signals {
-            // iceoryx2 installs its handlers at the first sleep in a WaitSet, which a spinning
-            // reactor never reaches: a SIGTERM would then kill the process before it removes
-            // its shared memory. The first look installs them (and finds nothing yet).
-            let _ = SignalHandler::termination_requested();
-        }
         Ok(Reactor {
             waitset,
             strategy,
-            handles_signals,
             stats: Cell::new(ReactorStats::default()),
         })
     }
@@ -355,12 +344,6 @@ impl Reactor {
                 WaitStrategy::SpinThenBlock(spin) => spin.min(timeout),
             };
             while start.elapsed() < spin {
-                if self.handles_signals && SignalHandler::termination_requested() {
-                    return Ok(Ready {
-                        termination_requested: true,
-                        ..Ready::default()
-                    });
-                }
                 // A timer has no peer to starve, but other processes may want the core.
                 self.count(|s| s.yields += 1);
                 std::thread::yield_now();
@@ -419,13 +402,6 @@ impl Reactor {
                 }));
             }
             spins = spins.wrapping_add(1);
-            // A signal caught while spinning (a lock of iceoryx2's handler: every 64 rounds).
-            if self.handles_signals && spins & 63 == 0 && SignalHandler::termination_requested() {
-                return Ok(Some(Ready {
-                    termination_requested: true,
-                    ..Ready::default()
-                }));
-            }
             // Reading the clock costs ~20 ns: do it every 16 rounds.
             if spins & (YIELD_EVERY - 1) == 0 {
                 self.count(|s| s.yields += 1);

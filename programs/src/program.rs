@@ -35,8 +35,8 @@ pub struct ProgramConfig {
     /// How [`Program::recv`] waits for calls (default [`WaitStrategy::Block`]).
     pub wait: WaitStrategy,
     /// Report SIGINT and SIGTERM as [`ProgramError::Terminated`] instead of dying at once
-    /// (default true). Seen in [`Program::recv`], whatever the wait strategy (a spinning wait
-    /// polls for them).
+    /// (default true). Seen only when the program sleeps in [`Program::recv`]: with
+    /// [`WaitStrategy::Spin`] it never does, and the signals keep their default action.
     pub handle_signals: bool,
     /// While events are queued, how often [`Program::recv`] tries to deliver them (default
     /// 20 ms). A player that opens its call sender to this program is noticed at once.
@@ -211,7 +211,10 @@ impl Program {
         // Signals first: once a node of the program is alive, a supervisor (`petrel up`) takes
         // the program as started and may stop it at once; a SIGTERM must then reach a handler
         // (the program leaves in good order at its next `recv`), not the default action.
-        let handle_signals = config.handle_signals;
+        //
+        // A spinning reactor never sleeps in the wait set, which is what reports signals: leave
+        // them their default action rather than swallow them.
+        let handle_signals = config.handle_signals && config.wait != WaitStrategy::Spin;
         let mut reactor = if handle_signals {
             Reactor::new(WaitStrategy::Block)?
         } else {

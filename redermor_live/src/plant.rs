@@ -11,6 +11,7 @@
 //! `ThrusterCmd` and `DepthCmd` while the supervisor's heartbeat is fresh on the bus's clock
 //! (300 ms); without it they stop, as the vehicle's engine nodes do.
 
+use std::path::Path;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -206,6 +207,75 @@ impl Plant for RedermorPlant {
 
     fn period(&self) -> Duration {
         Duration::from_millis(20)
+    }
+}
+
+/// What a Redermor simulator is made of, read from its files and checked before the bus is
+/// opened: `petrel bridge --sim redermor` (the memory bus's thread) and `redermor-sim` (a
+/// process on a SocketCAN interface) both build their plant from one.
+pub struct PlantFiles {
+    mission: Mission,
+    scenario: Scenario,
+    speed: f64,
+    trace: Option<Box<dyn std::io::Write + Send>>,
+}
+
+impl std::fmt::Debug for PlantFiles {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("PlantFiles")
+            .field("speed", &self.speed)
+            .field("trace", &self.trace.is_some())
+            .finish_non_exhaustive()
+    }
+}
+
+impl PlantFiles {
+    /// Reads the mission file (where the vehicle starts, the seabed) and the scenario file
+    /// (current, faults at their times; none: a calm sea), checks `speed` (finite, above 0)
+    /// and creates the trace file. An error names the file, or the option (`option_prefix`,
+    /// such as `--sim-` or `--`, spells the options as the caller's command line does).
+    pub fn read(
+        mission: &Path,
+        scenario: Option<&Path>,
+        speed: f64,
+        trace: Option<&Path>,
+        option_prefix: &str,
+    ) -> Result<Self, String> {
+        if !(speed.is_finite() && speed > 0.0) {
+            return Err(format!("{option_prefix}speed {speed}: a factor above 0"));
+        }
+        let read =
+            |p: &Path| std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()));
+        let mission = Mission::from_toml(&read(mission)?)
+            .map_err(|e| format!("{}: {e}", mission.display()))?;
+        let scenario = match scenario {
+            Some(p) => {
+                Scenario::from_toml(&read(p)?).map_err(|e| format!("{}: {e}", p.display()))?
+            }
+            None => Scenario::default(),
+        };
+        let trace: Option<Box<dyn std::io::Write + Send>> = match trace {
+            Some(p) => Some(Box::new(std::io::BufWriter::new(
+                std::fs::File::create(p)
+                    .map_err(|e| format!("cannot create {}: {e}", p.display()))?,
+            ))),
+            None => None,
+        };
+        Ok(PlantFiles {
+            mission,
+            scenario,
+            speed,
+            trace,
+        })
+    }
+
+    /// The plant, speaking `dbc`'s messages.
+    pub fn build(self, dbc: Arc<Dbc>) -> RedermorPlant {
+        let plant = RedermorPlant::new(dbc, &self.mission, &self.scenario, self.speed);
+        match self.trace {
+            Some(t) => plant.with_trace(t),
+            None => plant,
+        }
     }
 }
 

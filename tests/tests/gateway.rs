@@ -833,3 +833,294 @@ fn a_cut_cable_is_a_lost_computer_and_nothing_is_lost_when_it_comes_back() {
         (lost, restored, 2)
     );
 }
+
+/// missions/redermor copied with `vehicle` (a vehicle file of it) as its vehicle.toml, free
+/// ports for the gateways, and the bench files read from the repository.
+fn redermor_project(vehicle: &str) -> petrel_tests::TempProject {
+    let bench = repo().join("missions/redermor/bench");
+    let file = std::fs::read_to_string(repo().join("missions/redermor").join(vehicle))
+        .expect("the vehicle file");
+    let file = ["7457", "7458", "7459"].iter().fold(file, |t, p| {
+        t.replace(
+            &format!("127.0.0.1:{p}"),
+            &format!("127.0.0.1:{}", free_port()),
+        )
+    });
+    petrel_tests::TempProject::copy(&repo().join("missions/redermor"), move |name, text| {
+        let text = match name {
+            "vehicle.toml" => file.clone(),
+            // The data server's stale-depth rule counts in wall-clock time (1 s): on a loaded
+            // 2-core machine a stalled simulator trips it and the nominal flight aborts, in one
+            // computer's run as in two. This test is about the link, not that rule: both runs
+            // get the same, looser bound.
+            "can.toml" => text.replace(r#"timeout = "1s""#, r#"timeout = "30s""#),
+            _ => text,
+        };
+        text.replace("{project}/bench/", &format!("{}/", bench.display()))
+    })
+}
+
+/// A journal's steps as this test compares them, up to the one that completes the mission
+/// (fires `MISSION.completed`): the event, the transitions it fired, and the actions without
+/// their arguments (`call PLN.itinerary`, `activate NET`, `emit area_reached`). Arguments carry
+/// the vehicle's position, which differs between any two live runs (the simulator runs on the
+/// wall clock); what comes after the completion is the vehicle stopping (programs lost in
+/// the order they stop).
+fn mission_steps(journal: &Path) -> Vec<String> {
+    let (docs, o) = journal_json(journal);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let strings = |v: &serde_json::Value| -> Vec<String> {
+        v.as_array()
+            .into_iter()
+            .flatten()
+            .map(|x| x.as_str().unwrap_or("").to_owned())
+            .collect()
+    };
+    let mut steps = Vec::new();
+    for d in docs.iter().filter(|d| d["kind"] == "step") {
+        let fired = strings(&d["fired"]);
+        let actions: Vec<String> = strings(&d["actions"])
+            .iter()
+            .map(|a| a.split('(').next().unwrap_or("").trim_end().to_owned())
+            .collect();
+        steps.push(format!(
+            "{} | {} | {}",
+            d["event"].as_str().unwrap_or(""),
+            fired.join(", "),
+            actions.join(", ")
+        ));
+        if fired.iter().any(|t| t == "MISSION.completed") {
+            return steps;
+        }
+    }
+    panic!("the mission never completed: {steps:#?}");
+}
+
+/// The last line of `path` that is a JSON object (a gateway prints its final counters).
+fn last_json(path: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(path).unwrap_or_default();
+    text.lines()
+        .rev()
+        .find_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter(|v| v.is_object())
+        .unwrap_or_else(|| panic!("no final counters in {}:\n{text}", path.display()))
+}
+
+/// `petrel monitor` on `computer`, listening on a free port of loopback: its address.
+fn monitor_on(computer: &Computer, project: &Path, vehicle: &str) -> (Child, std::net::SocketAddr) {
+    use std::io::BufRead;
+    let mut child = computer
+        .command(&petrel_bin())
+        .arg("monitor")
+        .arg(project)
+        .args(["--vehicle", vehicle, "--listen", "127.0.0.1:0"])
+        .stdout(Stdio::piped())
+        .stderr(
+            std::fs::File::create(computer.work.join("monitor.log")).expect("the monitor's log"),
+        )
+        .spawn()
+        .expect("petrel monitor starts");
+    let out = child.stdout.take().expect("its standard output");
+    let mut lines = std::io::BufReader::new(out).lines();
+    let addr = lines.by_ref().map_while(Result::ok).find_map(|l| {
+        l.strip_prefix("petrel monitor: listening on http://")
+            .and_then(|a| a.trim_end_matches('/').parse().ok())
+    });
+    std::thread::spawn(move || for _ in lines {});
+    let Some(addr) = addr else {
+        let _ = child.kill();
+        let _ = child.wait();
+        panic!("petrel monitor did not start: {}", logs(&computer.work));
+    };
+    (child, addr)
+}
+
+/// Redermor (issue 16's test): the supervision (the player and the CAN data server with its
+/// simulator) on oa1, the programs PLN, NAV (GDD, GUI, IDC) and EVT on oa2, a ground station
+/// with only its gateway, each computer brought up by `petrel up --computer`. NAV reads the
+/// data server's signals and commands the thrusters through it across the link. The nominal
+/// scenario gives the same journal steps as on one computer (see [`mission_steps`]) and
+/// reaches the same final marking; the ground station's `petrel monitor` follows the player's
+/// marking step by step; every counter accounts for every message.
+#[test]
+fn redermor_on_two_computers_flies_the_nominal_scenario_as_on_one() {
+    // One computer: vehicle.toml as it is.
+    let one = redermor_project("vehicle.toml");
+    let logs_one = one.path().join("logs");
+    let vehicle = unique_vehicle("rdm1");
+    let o = Command::new(petrel_bin())
+        .arg("up")
+        .arg(one.path())
+        .args(["--vehicle", &vehicle, "--logs"])
+        .arg(&logs_one)
+        .args(["--timeout", "400"])
+        .output()
+        .expect("petrel up runs");
+    petrel_tests::forget_vehicle(&vehicle);
+    assert!(
+        o.status.success(),
+        "petrel up on one computer:\n{}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let steps_one = mission_steps(&logs_one.join("journal"));
+
+    // Two computers and a ground station.
+    let work = Workdir::new();
+    let two = redermor_project("vehicle-two.toml");
+    let dir = two.path().to_path_buf();
+    let vehicle = unique_vehicle("rdm2");
+    let (a, b, g) = (
+        Computer::new(&work, "oa1"),
+        Computer::new(&work, "oa2"),
+        Computer::new(&work, "ground"),
+    );
+    let up = |c: &Computer| {
+        let logs = work.path().join(format!("run-{}", c.name));
+        let child = c.spawn(
+            &petrel_bin(),
+            &[
+                "up",
+                &dir.display().to_string(),
+                "--vehicle",
+                &vehicle,
+                "--computer",
+                c.name,
+                "--logs",
+                &logs.display().to_string(),
+                "--timeout",
+                "400",
+            ],
+            &format!("up-{}", c.name),
+        );
+        (child, logs)
+    };
+    let (up_a, logs_a) = up(&a);
+    let (up_b, logs_b) = up(&b);
+    let (up_g, logs_g) = up(&g);
+    let mut ups = Processes(vec![up_a, up_b, up_g]);
+    // The player on oa1 hears every program of oa2 through its stand-ins.
+    a.wait_for(&dir, &vehicle, "oa2's programs alive on oa1", |s| {
+        ["PLN", "GDD", "GUI", "IDC", "EVT"]
+            .iter()
+            .all(|p| s["programs"][p] == "alive")
+    });
+    let (monitor, addr) = monitor_on(&g, &dir, &vehicle);
+    let monitor = Processes(vec![monitor]);
+    let marked = || -> Option<Vec<String>> {
+        let r = petrel_tests::web::http(addr, "GET", "/api/marking", &[], "").ok()?;
+        let v = r.json();
+        (v["synced"] == true).then(|| {
+            v["marked"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .filter_map(|p| p.as_str().map(str::to_owned))
+                .collect()
+        })
+    };
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let first = loop {
+        if let Some(m) = marked() {
+            break m;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the ground's monitor never synchronised: {}",
+            logs(work.path())
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(
+        first.iter().any(|p| p == "MISSION.stop") && !first.iter().any(|p| p == "global.flown"),
+        "{first:?}"
+    );
+    a.send(&dir, &vehicle, "start_mission");
+    // The ground's monitor follows the marking on oa1 as the mission goes, to its end.
+    let mut seen = vec![first];
+    let deadline = Instant::now() + Duration::from_secs(400);
+    while !seen
+        .last()
+        .is_some_and(|m| m.iter().any(|p| p == "global.flown"))
+    {
+        assert!(
+            Instant::now() < deadline,
+            "the ground's monitor never showed the end: {seen:?}\n{}",
+            logs(work.path())
+        );
+        if let Some(m) = marked() {
+            if seen.last() != Some(&m) {
+                seen.push(m);
+            }
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(seen.len() >= 5, "the monitor saw few markings: {seen:?}");
+    assert_eq!(monitor.stop(), vec![Some(0)]);
+    // Each computer's `petrel up` sees the mission's end (oa2's and the ground's through the
+    // mirrored player) and stops.
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while ups.0.iter_mut().any(|c| matches!(c.try_wait(), Ok(None))) {
+        assert!(
+            Instant::now() < deadline,
+            "a computer's petrel up did not stop: {}",
+            logs(work.path())
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let codes: Vec<Option<i32>> = ups
+        .0
+        .iter_mut()
+        .map(|c| c.wait().ok().and_then(|s| s.code()))
+        .collect();
+    ups.0.clear();
+    assert_eq!(codes, [Some(0); 3], "{}", logs(work.path()));
+    let up_a = std::fs::read_to_string(work.path().join("up-oa1.log")).unwrap_or_default()
+        + &std::fs::read_to_string(work.path().join("up-oa1.out")).unwrap_or_default();
+    assert!(
+        up_a.contains("the mission reached its final marking"),
+        "{up_a}"
+    );
+
+    let steps_two = mission_steps(&logs_a.join("journal"));
+    assert_eq!(
+        steps_two,
+        steps_one,
+        "the journal steps differ from one computer's:\n{}",
+        logs(work.path())
+    );
+
+    // Every message each gateway heard is accounted for, none missing; the data server's
+    // signals reached oa2 (NAV and EVT read them there) and NAV's thruster commands reached
+    // the data server on oa1.
+    let counters = |logs: &Path, name: &str| last_json(&logs.join(format!("{name}.log")));
+    let (ca, cb, cg) = (
+        counters(&logs_a, "gateway-1"),
+        counters(&logs_b, "gateway-2"),
+        counters(&logs_g, "gateway-g"),
+    );
+    for c in [&ca, &cb, &cg] {
+        for (kind, k) in c["counters"]["kinds"].as_object().into_iter().flatten() {
+            assert!(accounted(k), "{kind}: {c}");
+        }
+        for (peer, p) in c["peers"].as_object().into_iter().flatten() {
+            assert_eq!(p["missing"], 0, "{peer}: {c}");
+        }
+    }
+    let n = |c: &serde_json::Value, kind: &str, what: &str| {
+        c["counters"]["kinds"][kind][what].as_u64().unwrap_or(0)
+    };
+    assert!(n(&ca, "signals", "to_link") > 0, "{ca}");
+    assert!(n(&cb, "signals", "delivered") > 0, "{cb}");
+    assert_eq!(n(&cb, "signals", "refused"), 0, "{cb}");
+    // On the ground, the monitor reads them (its vehicle panel); before it started, nobody
+    // did: heard, not lost (`unheard`).
+    assert!(n(&cg, "signals", "delivered") > 0, "{cg}");
+    assert_eq!(n(&cg, "signals", "refused"), 0, "{cg}");
+    assert!(
+        n(&cb, "call", "to_link") > 0 && n(&ca, "call", "delivered") > 0,
+        "{ca}\n{cb}"
+    );
+    assert!(n(&ca, "event", "delivered") > 0, "{ca}");
+    assert_eq!(n(&ca, "event", "refused"), 0, "{ca}");
+}

@@ -1188,12 +1188,28 @@ pub fn load(
     sources: &mut SourceMap,
     diags: &mut Diagnostics,
 ) -> std::io::Result<Option<VehicleFile>> {
-    let path = dir.join(VEHICLE_TOML);
-    let text = match std::fs::read_to_string(&path) {
-        Ok(t) => t,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(e),
-    };
+    match load_file(
+        &dir.join(VEHICLE_TOML),
+        project,
+        can_program,
+        sources,
+        diags,
+    ) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        other => other,
+    }
+}
+
+/// Reads and checks the vehicle file at `path` (`petrel up --file`: a variant of the
+/// project's vehicle.toml), as [`load`] does; a missing file is an error.
+pub fn load_file(
+    path: &Path,
+    project: Option<&CompiledProject>,
+    can_program: Option<&str>,
+    sources: &mut SourceMap,
+    diags: &mut Diagnostics,
+) -> std::io::Result<Option<VehicleFile>> {
+    let text = std::fs::read_to_string(path)?;
     let file = sources.add(path.display().to_string(), text.clone());
     Ok(check_file(file, &text, project, can_program, diags))
 }

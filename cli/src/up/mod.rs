@@ -34,6 +34,10 @@ pub struct UpArgs {
     /// Start only this computer's processes (and make only its timed sends).
     #[arg(long, value_name = "NAME")]
     computer: Option<String>,
+    /// Bring up the vehicle this file describes instead of the project's vehicle.toml (a
+    /// variant of it: another bus, other computers), e.g. missions/redermor/vehicle-vcan.toml.
+    #[arg(long, value_name = "FILE")]
+    file: Option<PathBuf>,
     /// Take the timed sends from this file ([[send]] entries) instead of vehicle.toml's.
     #[arg(long, value_name = "FILE")]
     scenario: Option<PathBuf>,
@@ -329,7 +333,7 @@ fn plan(a: UpArgs) -> Result<Plan, Outcome> {
         Scope {
             can: true,
             quick_verify: false,
-            vehicle: true,
+            vehicle: a.file.is_none(),
         },
         "up",
     )?;
@@ -337,7 +341,27 @@ fn plan(a: UpArgs) -> Result<Plan, Outcome> {
     let c = checked
         .compiled
         .ok_or_else(|| Outcome::Usage("the project did not compile".into()))?;
-    let Some(file) = checked.vehicle else {
+    let vehicle_file = match &a.file {
+        None => checked.vehicle,
+        Some(path) => {
+            let mut d = petrel_nets::diag::Diagnostics::new();
+            let can_program = checked
+                .can
+                .as_ref()
+                .and_then(|(config, _)| config.commands.program.as_deref());
+            let read = file::load_file(path, Some(&c), can_program, &mut sources, &mut d)
+                .map_err(|e| Outcome::Usage(format!("cannot read {}: {e}", path.display())))?;
+            crate::common::report(&d, &sources);
+            if d.has_errors() {
+                eprintln!(
+                    "fix the errors above first: `petrel up` needs a vehicle file that checks clean"
+                );
+                return Err(Outcome::Errors);
+            }
+            read
+        }
+    };
+    let Some(file) = vehicle_file else {
         return Err(Outcome::Usage(format!(
             "{} has no vehicle.toml: write one to say which processes make up the vehicle (docs/vehicle.md)",
             a.dir.display()

@@ -10,8 +10,11 @@ use super::env::{
     deliveries, Delivery, Env, Gate, MayHold, Oracle, Requests, Truth, MAX_GUARD_RUNS,
 };
 use super::store::StateStore;
+use super::timed::{TimerOps, Timing};
 use super::{ConflictFinding, LivelockFinding, Trace, UnsafeFinding, VerifyError, VerifyOptions};
-use crate::compiled::{Arg, CompiledProject, EventId, FunctionId, Guard, NetId, ProgramId};
+use crate::compiled::{
+    Arg, CompiledProject, EventId, FunctionId, Guard, NetId, ProgramId, TimerDuration, TimerId,
+};
 use crate::model::Category;
 use crate::semantics::{Effects, Layout, Scratch, Semantics, State};
 use petrel_value::Value;
@@ -150,6 +153,8 @@ pub(super) struct Recorder {
     fixpoint_states: HashMap<State, usize>,
     fixpoint_rules: Vec<u32>,
     pub livelock: Option<Vec<u32>>,
+    /// The timers the step started (with their duration) or cancelled, in order.
+    pub timer_ops: TimerOps,
 }
 
 impl Effects for Recorder {
@@ -165,6 +170,12 @@ impl Effects for Recorder {
     }
     fn emit(&mut self, event: EventId, _args: &[Arg], target: Option<NetId>) {
         self.requests.emits.push((event, target));
+    }
+    fn start_timer(&mut self, timer: TimerId, after: &TimerDuration) {
+        self.timer_ops.push((timer, Some(after.clone())));
+    }
+    fn cancel_timer(&mut self, timer: TimerId) {
+        self.timer_ops.push((timer, None));
     }
     fn immediate_step(&mut self, state: &[u64]) -> bool {
         if let Some(&at) = self.fixpoint_states.get(state) {
@@ -221,6 +232,7 @@ impl Recorder {
         self.fixpoint_states.clear();
         self.fixpoint_rules.clear();
         self.livelock = None;
+        self.timer_ops.clear();
     }
 }
 
@@ -295,6 +307,10 @@ struct Ctx<'a> {
     unsafe_seen: HashSet<(u32, u32)>,
     conflict_seen: HashSet<(u32, u32)>,
     livelock_seen: HashSet<Vec<u32>>,
+    /// Timed exploration: the zone beside each state, and each delivery's timer (the one
+    /// whose expiry it is, when its event is a timer's and comes from nowhere else).
+    timing: Option<Timing>,
+    timer_of: Vec<Option<usize>>,
 }
 
 impl Ctx<'_> {
@@ -364,7 +380,22 @@ impl Ctx<'_> {
         out.clear();
         for di in 0..self.deliveries.len() {
             let d = &self.deliveries[di];
-            let counters: Vec<Option<u32>> = match self.env.gate(s, d.event, d.target) {
+            let gate = self.env.gate(s, d.event, d.target);
+            // Timed: a timer's event comes when its clock reaches its duration, and only then.
+            let timer = match (&self.timing, &gate) {
+                (Some(tm), Gate::Free) => match self.timer_of[di] {
+                    Some(k) if d.target.is_none() => {
+                        if !tm.may_expire(&self.sem.layout, s, k) {
+                            continue;
+                        }
+                        Some(k)
+                    }
+                    Some(_) => continue,
+                    None => None,
+                },
+                _ => None,
+            };
+            let counters: Vec<Option<u32>> = match gate {
                 Gate::Closed => continue,
                 Gate::Free => vec![None],
                 Gate::Counters(list) => list.into_iter().map(Some).collect(),
@@ -386,9 +417,11 @@ impl Ctx<'_> {
                 // (docs/semantics.md, "Processing one event", step 5). The verifier must not
                 // let it wait for a consumer that may come later. A counter at "many" stays
                 // there: that drop changes nothing.
+                // Timed, an expiry nobody takes still stops its timer: time could not pass
+                // its deadline otherwise.
                 let once: Vec<Option<u32>> = counters
                     .into_iter()
-                    .filter(|c| c.is_some_and(|c| self.env.is_once(s, c)))
+                    .filter(|c| timer.is_some() || c.is_some_and(|c| self.env.is_once(s, c)))
                     .collect();
                 if !once.is_empty() {
                     out.push(Move {
@@ -439,7 +472,7 @@ impl Ctx<'_> {
         for &counter in &m.counters {
             if m.dropped {
                 let d = &self.deliveries[di];
-                let t = run_step(
+                let mut t = run_step(
                     self.sem,
                     self.env,
                     &mut self.rec,
@@ -449,6 +482,14 @@ impl Ctx<'_> {
                     &[],
                     counter,
                 );
+                if let Some(tm) = &self.timing {
+                    let k = if counter.is_none() {
+                        self.timer_of[di]
+                    } else {
+                        None
+                    };
+                    tm.step(&self.sem.layout, &mut t, k, &self.rec.timer_ops);
+                }
                 let (label, event) = (format!("{} (unused)", d.label), d.event);
                 let lid = self.label(g, (di as u32, Vec::new(), counter, true), || Label {
                     text: label,
@@ -472,7 +513,7 @@ impl Ctx<'_> {
                         event: self.p.events[d.event as usize].name.clone(),
                     });
                 }
-                let t = run_step(
+                let mut t = run_step(
                     self.sem,
                     self.env,
                     &mut self.rec,
@@ -482,6 +523,14 @@ impl Ctx<'_> {
                     &prefix,
                     counter,
                 );
+                if let Some(tm) = &self.timing {
+                    let k = if counter.is_none() {
+                        self.timer_of[di]
+                    } else {
+                        None
+                    };
+                    tm.step(&self.sem.layout, &mut t, k, &self.rec.timer_ops);
+                }
                 Oracle::next_prefixes(&prefix, self.rec.oracle.used, &mut prefixes);
                 let choices: Vec<bool> = (0..self.rec.oracle.used)
                     .map(|k| prefix.get(k).copied().unwrap_or(false))
@@ -540,11 +589,20 @@ pub(super) fn explore(
                 .clone()
         })
         .collect();
+    let deliveries = deliveries(p, l)?;
+    let timing = opts.timed.then(|| Timing::new(p, env.words));
+    let timer_of: Vec<Option<usize>> = deliveries
+        .iter()
+        .map(|d| Timing::timer_of(p, d.event))
+        .collect();
+    let words = timing.as_ref().map_or(env.words, Timing::words);
     let mut ctx = Ctx {
         p,
         sem,
         env,
-        deliveries: deliveries(p, l)?,
+        deliveries,
+        timing,
+        timer_of,
         rec: Recorder::with_guards(guards.clone()),
         guards,
         scratch: Scratch::default(),
@@ -556,7 +614,7 @@ pub(super) fn explore(
         livelock_seen: HashSet::new(),
     };
     let mut g = Graph {
-        states: StateStore::new(env.words),
+        states: StateStore::new(words),
         via: Vec::new(),
         edges: Vec::new(),
         labels: Vec::new(),
@@ -584,6 +642,10 @@ pub(super) fn explore(
         let mut t = from.to_vec();
         t.resize(env.words, 0);
         env.saturate(&mut t);
+        if let Some(tm) = &ctx.timing {
+            tm.init(l, &mut t);
+            tm.step(l, &mut t, None, &TimerOps::new());
+        }
         g.states.push(&t);
         g.via.push(Via::Start);
     }
@@ -600,7 +662,7 @@ pub(super) fn explore(
                 event: "(start)".into(),
             });
         }
-        let initial = run_step(
+        let mut initial = run_step(
             sem,
             env,
             &mut ctx.rec,
@@ -610,6 +672,10 @@ pub(super) fn explore(
             &prefix,
             None,
         );
+        if let Some(tm) = &ctx.timing {
+            tm.init(l, &mut initial);
+            tm.step(l, &mut initial, None, &ctx.rec.timer_ops);
+        }
         ctx.record(&mut g, &|_| Vec::new());
         Oracle::next_prefixes(&prefix, ctx.rec.oracle.used, &mut prefixes);
         if g.states.find(&initial).is_none() {
@@ -631,7 +697,8 @@ pub(super) fn explore(
         !p.progress_excludes
             .contains(&p.events[deliveries[di].event as usize].category)
     };
-    let components = (!opts.no_reduction && free.is_empty() && ends_local)
+    // Timed, a delivery also depends on the clocks of every running timer: no reduction.
+    let components = (!opts.no_reduction && !opts.timed && free.is_empty() && ends_local)
         .then(|| super::reduction::Components::new(p, l))
         .filter(|c| c.count > 1);
     let delivery_component: Vec<Option<u32>> = match &components {
@@ -782,6 +849,9 @@ pub(super) fn explore(
             ctx.rec.oracle.prefix.clear();
             sem.fixpoint(&mut t, &mut ctx.rec, &mut ctx.scratch);
             env.apply(&mut t, &ctx.rec.requests);
+            if let Some(tm) = &ctx.timing {
+                tm.step(l, &mut t, None, &ctx.rec.timer_ops);
+            }
             ctx.record(&mut g, &|g| g.trace(i));
             // An edge like the others, labelled with the environment's move (no event).
             let name = f.name.clone();

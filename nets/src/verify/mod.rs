@@ -22,6 +22,7 @@ mod minimize;
 mod reduction;
 mod render;
 mod store;
+mod timed;
 
 pub use render::{
     diagnostics, diagnostics_all, render_human, render_human_all, render_summary, to_json,
@@ -52,6 +53,10 @@ pub struct VerifyOptions {
     /// invariants, conflicts, progress and stuck nets exact (docs/verification.md);
     /// starvation and loops need every state, and are checked only when it left none out.
     pub no_reduction: bool,
+    /// Timed exploration (`--timed`): timers with literal durations expire in the order their
+    /// durations impose (a zone over their clocks beside each state), outside events stay
+    /// free. No partial-order reduction then, and traces are kept whole.
+    pub timed: bool,
 }
 
 /// Why a verification could not finish.
@@ -279,6 +284,9 @@ pub struct Report {
     /// checked (`--no-reduction` checks them); traces are witnesses, not necessarily the
     /// shortest (those to dead markings are).
     pub partial: bool,
+    /// Timed exploration (`--timed`): timers with literal durations expire in duration order;
+    /// states are stable states with a zone over the timers' clocks.
+    pub timed: bool,
     /// Seconds spent.
     pub seconds: f64,
     /// Each net's template (its declaration in the net files), for locating findings.
@@ -371,9 +379,13 @@ fn verify_inner(
     let env = env::Env::new(p, l.words);
     let mut g = explore::explore(p, &sem, &env, &free, &mut opts, started, start)?;
     g.alone = alone.is_some();
+    let timing = opts.timed.then(|| timed::Timing::new(p, env.words));
     let describe = |s: &[u64]| {
         let mut out = l.describe_state(p, s);
         out.extend(env.describe(s));
+        if let Some(tm) = &timing {
+            out.extend(tm.describe(p, s));
+        }
         out
     };
     let mut report = Report {
@@ -395,8 +407,10 @@ fn verify_inner(
     // Each finding at a state: its trace keeps the events that matter to it.
     let m = minimize::Minimizer::new(p, &sem, &env, &g);
     let skip = opts.skip_liveness;
+    // Timed, a trace with an event elided may not be possible in time: traces stay whole.
+    let whole = skip || opts.timed;
     let at = |i: u32, keep: &dyn Fn(&[u64]) -> bool| {
-        if skip {
+        if whole {
             g.trace(i)
         } else {
             m.trace(i, keep)
@@ -459,6 +473,7 @@ fn verify_inner(
         })
         .collect();
     report.reduced_states = g.reduced;
+    report.timed = opts.timed;
     report.partial = g.reduced > 0;
     // What needs every state (loops, what stays reachable) is not asked of a partial graph.
     let whole = !report.partial;

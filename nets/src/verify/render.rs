@@ -64,6 +64,12 @@ fn render(project_name: &str, r: &Report, all: bool, details: bool) -> String {
         "verified `{project_name}`: {} stable states, {} event deliveries, {:.3} s",
         r.states, r.edges, r.seconds
     );
+    if r.timed {
+        let _ = writeln!(
+            o,
+            "timed: timers expire in the order their durations impose (a zone over their clocks beside each state; no partial-order reduction; traces kept whole)"
+        );
+    }
     if r.partial {
         let _ = writeln!(
             o,
