@@ -490,3 +490,72 @@ fn a_spinning_reactor_lets_its_peer_on_the_same_core_answer() {
     assert_eq!(player.sleeps, 0, "player: {player:?}");
     assert_eq!(program.sleeps, 0, "program: {program:?}");
 }
+
+/// A spinning receiver consumes its notifications now and then (`consume_wakeups_every`), not
+/// at every message: they wait in the listener meanwhile. When it then sleeps, the waiting
+/// notifications neither keep waking it (no sample is pending) nor hide a new one.
+#[test]
+fn a_lazily_consuming_receiver_neither_misses_a_wakeup_nor_wakes_for_old_ones() {
+    let vehicle = TestVehicle::new("auv");
+    let (player, pln) = pair(&vehicle);
+    let rx = player.event_receiver().unwrap();
+    let tx = pln.event_sender().unwrap();
+    // The sender's arrival is news (it wakes a reactor): taken now.
+    assert_eq!(rx.take_wakeups().unwrap().senders_joined, 1);
+    // A period not yet over: draining takes the samples, not their notifications.
+    rx.consume_wakeups_every(Some(Duration::from_secs(3600)));
+    for i in 0..5 {
+        tx.send(&EventMsg::new("depth", vec![Value::Int(i)]))
+            .unwrap();
+    }
+    let drained = rx.drain(|r| assert!(r.is_ok())).unwrap();
+    assert_eq!(drained.messages, 5);
+    assert_eq!(
+        drained.wakeups.samples, 0,
+        "consumed before the period ended"
+    );
+    // Asleep with only old notifications waiting: it times out rather than returning ready.
+    let reactor = Reactor::without_signal_handling(WaitStrategy::Block).unwrap();
+    let r = reactor
+        .wait(&[&rx], Some(Duration::from_millis(50)))
+        .unwrap();
+    assert!(
+        r.timed_out(),
+        "woken by notifications of samples already taken"
+    );
+    // The reactor consumed them on the receiver's behalf: they are reported, once.
+    rx.consume_wakeups_every(None);
+    assert!(rx.take_wakeups().unwrap().samples >= 1);
+    assert_eq!(rx.take_wakeups().unwrap().samples, 0);
+    // A new sample wakes it.
+    rx.consume_wakeups_every(Some(Duration::from_secs(3600)));
+    let (done, wait_done) = std::sync::mpsc::channel::<()>();
+    let vehicle = &vehicle;
+    std::thread::scope(|s| {
+        s.spawn(move || {
+            // iceoryx2's ports stay in their thread: a sender of another program, kept until
+            // its sample is taken (its shared memory goes with it).
+            let gui = Participant::join(vehicle, Role::program("GUI").unwrap()).unwrap();
+            let tx = gui.event_sender().unwrap();
+            std::thread::sleep(Duration::from_millis(20));
+            tx.send(&EventMsg::new("depth", vec![Value::Int(9)]))
+                .unwrap();
+            let _ = wait_done.recv_timeout(Duration::from_secs(30));
+        });
+        // Woken by the new sender's arrival, then by its sample.
+        let r = loop {
+            let r = reactor.wait(&[&rx], Some(Duration::from_secs(10))).unwrap();
+            if r.timed_out() || rx.has_pending() {
+                break r;
+            }
+            rx.take_wakeups().unwrap();
+        };
+        assert!(
+            !r.timed_out(),
+            "a new sample did not wake the sleeping receiver"
+        );
+        let got = rx.try_recv().unwrap().expect("the sample that woke it");
+        assert_eq!(got.msg.params, vec![Value::Int(9)]);
+        done.send(()).unwrap();
+    });
+}
