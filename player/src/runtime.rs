@@ -20,7 +20,7 @@ use crate::journal::{
     Entry, FlushPolicy, Journal, JournalLock, JournalWriter, RecorderChange, Settlement,
     BATCH_DELAY,
 };
-use crate::record::{marked_places, outcome_name, StepRecord};
+use crate::record::{marked_places, outcome_name, place_changes, StepRecord};
 use petrel_ipc::{
     CallMsg, CallSender, EventReceiver, Heartbeat, HeartbeatPublisher, MarkingMsg,
     MarkingPublisher, Participant, ProgramWatch, Reactor, RecvError, ReloadAnswer,
@@ -447,7 +447,7 @@ pub struct PlayerLoop<'p> {
     step_no: u64,
     next_heartbeat: Instant,
     next_liveness: Instant,
-    /// The next marking message is a snapshot (after a reload).
+    /// The next marking message is a snapshot (after a reload, or steps no monitor saw).
     snapshot_next: bool,
     /// The vehicle, for the programs' liveness watch of a reloaded version.
     vehicle: Vehicle,
@@ -1371,20 +1371,20 @@ impl<'p> PlayerLoop<'p> {
         let project = self.project;
         let layout = self.engine.layout();
         let now = self.engine.state();
-        let before = marked_places(project, layout, &self.previous);
-        let after = marked_places(project, layout, now);
         let snapshot = self.step_no == 0 || std::mem::take(&mut self.snapshot_next);
+        // Only the places that changed are named (a snapshot names every marked one).
+        let (changed, unmarked) = place_changes(project, layout, &self.previous, now);
+        let marked = if snapshot {
+            marked_places(project, layout, now)
+        } else {
+            changed
+        };
         let record = &mut self.record;
         let net_names = |ids: &mut Vec<NetId>| -> Vec<String> {
             ids.drain(..)
                 .map(|n| project.nets[n as usize].name.clone())
                 .collect()
         };
-        // A snapshot lists the whole state: every active net.
-        let active: Vec<String> = (0..project.nets.len() as NetId)
-            .filter(|&n| self.engine.is_active(n))
-            .map(|n| project.nets[n as usize].name.clone())
-            .collect();
         let (event, params) = match record.taken.take() {
             Some((e, p)) => (Some(e), p),
             None => (None, Vec::new()),
@@ -1396,23 +1396,15 @@ impl<'p> PlayerLoop<'p> {
             params,
             actions: record.actions.clone(),
             fired: record.fired_names(),
-            marked: if snapshot {
-                after.clone()
-            } else {
-                after
-                    .iter()
-                    .filter(|p| !before.contains(p))
-                    .cloned()
-                    .collect()
-            },
-            unmarked: before
-                .iter()
-                .filter(|p| !after.contains(p))
-                .cloned()
-                .collect(),
+            marked,
+            unmarked,
             activated: if snapshot {
+                // A snapshot lists the whole state: every active net.
                 record.activated.clear();
-                active
+                (0..project.nets.len() as NetId)
+                    .filter(|&n| self.engine.is_active(n))
+                    .map(|n| project.nets[n as usize].name.clone())
+                    .collect()
             } else {
                 net_names(&mut record.activated)
             },
@@ -1715,6 +1707,38 @@ mod tests {
         assert_eq!(doc["marking"]["A"].as_array().map(Vec::len), Some(2));
         assert_eq!(doc["senders"].as_object().map(|m| m.len()), Some(64));
         assert!(Heartbeat::max_encoded_len(bound) < petrel_ipc::wire::MAX_BODY_LEN);
+    }
+
+    #[test]
+    fn place_changes_name_what_the_two_markings_differ_in() {
+        let p = project();
+        let engine = Engine::new(&p);
+        let layout = engine.layout();
+        let words = engine.state().len();
+        // Pseudo-random markings (every bit pattern of the places matters, not realism).
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut state = || -> Vec<u64> {
+            (0..words)
+                .map(|_| {
+                    seed ^= seed << 13;
+                    seed ^= seed >> 7;
+                    seed ^= seed << 17;
+                    seed
+                })
+                .collect()
+        };
+        for _ in 0..200 {
+            let (before, after) = (state(), state());
+            let (b, a) = (
+                marked_places(&p, layout, &before),
+                marked_places(&p, layout, &after),
+            );
+            let expected_marked: Vec<_> = a.iter().filter(|x| !b.contains(x)).cloned().collect();
+            let expected_unmarked: Vec<_> = b.iter().filter(|x| !a.contains(x)).cloned().collect();
+            let (marked, unmarked) = place_changes(&p, layout, &before, &after);
+            assert_eq!(marked, expected_marked);
+            assert_eq!(unmarked, expected_unmarked);
+        }
     }
 
     fn programs() -> CompiledProject {
