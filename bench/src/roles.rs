@@ -476,7 +476,9 @@ pub fn ports() -> Res<()> {
         let events = player.event_receiver().map_err(s)?;
         step("events receiver (the player's)");
         let calls = player.call_sender("P0").map_err(s)?;
-        step("a call sender (one per program)");
+        step("a call sender, a program taking text or lists (grows to 64 KiB calls)");
+        let sized = player.call_sender_sized("P2", Some(64)).map_err(s)?;
+        step("a call sender sized from the project (fixed-size parameters: 64 B calls)");
         let marking = player.marking_publisher().map_err(s)?;
         step("marking publisher");
         let beat = player.heartbeat_publisher_sized(64 * 1024).map_err(s)?;
@@ -492,7 +494,7 @@ pub fn ports() -> Res<()> {
         let signals = program.signals_subscriber().map_err(s)?;
         step("a signals subscriber");
         drop((
-            events, calls, marking, beat, sender, receiver, beats, signals, program, player,
+            events, calls, sized, marking, beat, sender, receiver, beats, signals, program, player,
         ));
     }
     let _ = petrel_ipc::remove_vehicle_files(&vehicle);

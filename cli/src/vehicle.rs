@@ -23,8 +23,9 @@ pub struct PlayArgs {
     /// Run without a flight recorder.
     #[arg(long, conflicts_with_all = ["journal", "resume"])]
     no_journal: bool,
-    /// When journal records reach the disk: record (every record, to the OS), sync (every
-    /// record, to the disk), or a period such as 50ms.
+    /// When journal records reach the disk: record (every record, to the OS, before the
+    /// player sleeps or within 1 ms under a spinning --wait, and always before the events
+    /// are acknowledged), sync (the same, to the disk), or a period such as 50ms.
     #[arg(long, default_value = "record")]
     flush: String,
     /// Start a new journal segment past this many megabytes.

@@ -81,9 +81,9 @@ pub use port::{
     HeartbeatSubscriber, MarkingPublisher, MarkingSubscriber, Received, Receiver, ReceiverStats,
     RecvError, ReloadAnswerPublisher, ReloadAnswerSubscriber, ReloadReceiver, ReloadRequester,
     SendError, Sender, SenderAccount, SenderStats, Sent, ServiceSpec, SignalsPublisher,
-    SignalsSubscriber, Wakeups,
+    SignalsSubscriber, Wakeups, SPIN_WAKEUP_PERIOD,
 };
-pub use reactor::{FdSource, Reactor, ReactorError, Ready, Source, WaitStrategy};
+pub use reactor::{FdSource, Reactor, ReactorError, ReactorStats, Ready, Source, WaitStrategy};
 pub use wire::{
     Ack, AckRefusal, CallMsg, EventMsg, Heartbeat, MarkingMsg, Origin, Recorder, RecorderState,
     ReloadAnswer, ReloadRequest, SignalsMsg, Value, WireError,

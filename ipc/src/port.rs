@@ -21,6 +21,7 @@ use std::collections::HashMap;
 use std::fmt;
 use std::marker::PhantomData;
 use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 use iceoryx2::port::listener::{Listener, ListenerWaitError};
 use iceoryx2::port::notifier::Notifier;
@@ -43,6 +44,10 @@ pub const WAKE_SENDER_LEFT: usize = 3;
 pub const WAKE_SENDER_DIED: usize = 4;
 /// Largest event id of the paired event services.
 pub const WAKE_MAX: usize = 7;
+
+/// How often a spinning receiver consumes its notifications
+/// ([`Receiver::consume_wakeups_every`]): news of a sender comes at most this late.
+pub const SPIN_WAKEUP_PERIOD: Duration = Duration::from_millis(1);
 
 /// How one kind of service is set up. Every process opens a service with the same spec.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -776,6 +781,10 @@ pub struct Receiver<M: Message> {
     stats: Cell<ReceiverStats>,
     senders: RefCell<HashMap<u64, SenderAccount>>,
     pending_wakeups: Cell<Wakeups>,
+    /// Set: [`take_wakeups`](Self::take_wakeups) consumes notifications at most once per this
+    /// period (see [`consume_wakeups_every`](Self::consume_wakeups_every)).
+    wakeup_period: Cell<Option<Duration>>,
+    last_consumed: Cell<Instant>,
     _kind: PhantomData<fn() -> M>,
     /// The process's membership of the vehicle, kept while the port lives.
     _session: Arc<Session>,
@@ -823,6 +832,8 @@ impl<M: Message> Receiver<M> {
             stats: Cell::new(ReceiverStats::default()),
             senders: RefCell::new(HashMap::new()),
             pending_wakeups: Cell::new(Wakeups::default()),
+            wakeup_period: Cell::new(None),
+            last_consumed: Cell::new(Instant::now()),
             _kind: PhantomData,
             _session: session,
         }
@@ -884,11 +895,32 @@ impl<M: Message> Receiver<M> {
     /// Consumes the notifications of the paired event service and returns them, with those a
     /// [`Reactor`](crate::reactor::Reactor) already consumed on this receiver's behalf.
     pub fn take_wakeups(&self) -> Result<Wakeups, RecvError> {
-        self.consume_notifications()?;
+        let due = match self.wakeup_period.get() {
+            None => true,
+            Some(period) => self.last_consumed.get().elapsed() >= period,
+        };
+        if due {
+            self.consume_notifications()?;
+        }
         Ok(self.pending_wakeups.replace(Wakeups::default()))
     }
 
+    /// For a receiver that spins: [`take_wakeups`](Self::take_wakeups) and
+    /// [`drain`](Self::drain) consume the notifications (a system call, or two) at most once per
+    /// `period` instead of at every call (`None`: at every call, the default).
+    ///
+    /// A spinning receiver sees its samples in shared memory and needs no notification; they
+    /// wait in the listener meanwhile. News of senders (joined, left, died) then comes up to
+    /// `period` late. A [`Reactor`](crate::reactor::Reactor) about to sleep still consumes
+    /// everything first (the waiting notifications wake it at once), so that nothing is missed.
+    pub fn consume_wakeups_every(&self, period: Option<Duration>) {
+        self.wakeup_period.set(period);
+    }
+
     pub(crate) fn consume_notifications(&self) -> Result<(), RecvError> {
+        if self.wakeup_period.get().is_some() {
+            self.last_consumed.set(Instant::now());
+        }
         let mut fresh = Wakeups::default();
         self.listener
             .try_wait(|activation| match activation.id.as_value() {

@@ -12,6 +12,7 @@
 //! polled without a system call, and its listener wakes a `WaitSet`), and [`FdSource`] wraps
 //! any other file descriptor, such as a CAN socket.
 
+use std::cell::Cell;
 use std::fmt;
 use std::os::fd::RawFd;
 use std::time::{Duration, Instant};
@@ -33,9 +34,13 @@ use crate::wire::Message;
 pub enum WaitStrategy {
     /// Sleep in the kernel until a source is signalled (about 55 µs to wake; no CPU used).
     Block,
-    /// Poll the sources' shared memory in a loop (about 1 µs to react; one core busy).
+    /// Poll the sources' shared memory in a loop (about 1 µs to react; one core busy and kept:
+    /// give a spinning process a core of its own, a peer that shares its core waits for the
+    /// scheduler to preempt it).
     Spin,
     /// Poll for this long, then sleep: fast answers to a quick exchange, no core burnt when idle.
+    /// While it polls it offers the core to other runnable threads every microsecond or so,
+    /// so that a peer sharing the core can answer within the window.
     ///
     /// Spin longer than the peer takes to wake up (100 µs or more here): with a shorter window
     /// two processes that talk back and forth both fall asleep before the answer comes, and
@@ -202,6 +207,33 @@ pub const MAX_SOURCES: usize = 64;
 /// While spinning, how often file descriptors without a shared-memory check are polled.
 const FD_POLL_PERIOD: Duration = Duration::from_micros(500);
 
+/// Under `spin-then-block`, while spinning, the CPU is offered to other runnable threads
+/// (`sched_yield`) every this many polls (a power of two: about a microsecond of polling).
+///
+/// Without it, a spinner that shares its core with the very process it waits for (two cores,
+/// more runnable processes than cores) holds the core for its whole spin window while the peer
+/// cannot run to answer: `spin-then-block:200` paid one or two 200 µs windows per round trip
+/// (p50 450 µs on the loaded machine, 462 µs with both processes on one core; 22 µs with the
+/// yield). Yielding only after some spinning costs the peer that long (after 20 µs: p50 67 µs,
+/// after 50 µs: 122 µs, docs/benchmarks.md).
+///
+/// `spin` does not yield: on a loaded machine each `sched_yield` hands the core to another
+/// process for a while, which doubled spin's p50 (10-13 µs without, 22-25 µs with, same runs),
+/// and a spinning process is meant to have its core.
+const YIELD_EVERY: u32 = 16;
+
+/// What a [`Reactor`] did since it was built: how its waits ended.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ReactorStats {
+    /// Calls to [`Reactor::wait`].
+    pub waits: u64,
+    /// Waits that went to sleep in the `WaitSet`: under `spin-then-block`, those whose spin
+    /// window ended with nothing to do.
+    pub sleeps: u64,
+    /// Times a spinning wait offered the CPU to another thread.
+    pub yields: u64,
+}
+
 /// Which sources are ready after a [`Reactor::wait`].
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Ready {
@@ -248,6 +280,7 @@ pub struct Reactor {
     strategy: WaitStrategy,
     /// SIGINT and SIGTERM are caught and reported (not left their default action).
     handles_signals: bool,
+    stats: Cell<ReactorStats>,
 }
 
 impl Reactor {
@@ -277,12 +310,24 @@ impl Reactor {
             waitset,
             strategy,
             handles_signals,
+            stats: Cell::new(ReactorStats::default()),
         })
     }
 
     /// The strategy.
     pub fn strategy(&self) -> WaitStrategy {
         self.strategy
+    }
+
+    /// How the waits ended so far.
+    pub fn stats(&self) -> ReactorStats {
+        self.stats.get()
+    }
+
+    fn count(&self, f: impl FnOnce(&mut ReactorStats)) {
+        let mut stats = self.stats.get();
+        f(&mut stats);
+        self.stats.set(stats);
     }
 
     /// Changes the strategy (for instance spin during a manoeuvre, block when idle).
@@ -304,6 +349,7 @@ impl Reactor {
         }
         let start = Instant::now();
         let deadline = timeout.map(|t| start + t);
+        self.count(|s| s.waits += 1);
         if sources.is_empty() {
             // A WaitSet refuses to wait on nothing: this is only a timer.
             let timeout = timeout.ok_or(ReactorError::NothingToWaitFor)?;
@@ -312,6 +358,7 @@ impl Reactor {
                 WaitStrategy::Spin => timeout,
                 WaitStrategy::SpinThenBlock(spin) => spin.min(timeout),
             };
+            let yields = matches!(self.strategy, WaitStrategy::SpinThenBlock(_));
             while start.elapsed() < spin {
                 if self.handles_signals && SignalHandler::termination_requested() {
                     return Ok(Ready {
@@ -319,7 +366,13 @@ impl Reactor {
                         ..Ready::default()
                     });
                 }
-                std::hint::spin_loop();
+                if yields {
+                    // No peer to starve, but other processes may want the core.
+                    self.count(|s| s.yields += 1);
+                    std::thread::yield_now();
+                } else {
+                    std::hint::spin_loop();
+                }
             }
             std::thread::sleep(timeout.saturating_sub(start.elapsed()));
             return Ok(Ready {
@@ -366,6 +419,7 @@ impl Reactor {
         let has_fd_only = sources.iter().any(|s| s.pending().is_none());
         let mut next_fd_poll = Instant::now() + FD_POLL_PERIOD;
         let mut spins: u32 = 0;
+        let yields = matches!(self.strategy, WaitStrategy::SpinThenBlock(_));
         loop {
             let ready = poll_pending(sources);
             if ready != 0 {
@@ -385,7 +439,11 @@ impl Reactor {
                 }));
             }
             // Reading the clock costs ~20 ns: do it every 16 rounds.
-            if spins & 15 == 0 {
+            if spins & (YIELD_EVERY - 1) == 0 {
+                if yields {
+                    self.count(|s| s.yields += 1);
+                    std::thread::yield_now();
+                }
                 let now = Instant::now();
                 if has_fd_only && now >= next_fd_poll {
                     let ready = self.epoll(sources, Some(Duration::ZERO))?;
@@ -408,6 +466,7 @@ impl Reactor {
         sources: &[&dyn Source],
         deadline: Option<Instant>,
     ) -> Result<Ready, ReactorError> {
+        let mut slept = false;
         loop {
             let remaining = match deadline {
                 Some(d) => {
@@ -422,6 +481,12 @@ impl Reactor {
                 }
                 None => None,
             };
+            if !slept {
+                // Counted once it is sure to sleep: a deadline that passed while spinning
+                // returns above without a system call.
+                slept = true;
+                self.count(|s| s.sleeps += 1);
+            }
             let ready = self.epoll(sources, remaining)?;
             if ready.any() || ready.termination_requested {
                 return Ok(ready);

@@ -399,3 +399,163 @@ fn a_receiver_lists_its_live_senders_and_forgets_departed_ones() {
     events.forget_sender(gone);
     assert_eq!(events.senders().len(), 1);
 }
+
+/// Pins the calling thread to `cpu` under `SCHED_FIFO`: threads of one priority on one core
+/// then run only when the running one blocks or yields, whatever else the machine does.
+/// False when the system refuses (it needs root or `CAP_SYS_NICE`).
+fn alone_on_one_core(cpu: usize) -> bool {
+    // SAFETY: `set` is a zeroed `cpu_set_t` filled by `CPU_SET` within its size; both calls
+    // only read their arguments and act on the calling thread (pid 0).
+    unsafe {
+        let mut set: libc::cpu_set_t = std::mem::zeroed();
+        libc::CPU_SET(cpu, &mut set);
+        if libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) != 0 {
+            return false;
+        }
+        let param = libc::sched_param { sched_priority: 1 };
+        libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) == 0
+    }
+}
+
+/// A spinning side that shares its core with the peer it waits for gives the core away: the
+/// peer answers within the spin window. Before, `spin-then-block` held the core for its whole
+/// window and every wait ended asleep (one or two spin windows per round trip: the bimodal
+/// 250 / 450 µs of docs/benchmarks.md).
+#[test]
+fn a_spinning_reactor_lets_its_peer_on_the_same_core_answer() {
+    const ROUNDS: i64 = 20;
+    // A window far longer than an answer: only a peer kept off the core makes it end.
+    let strategy = WaitStrategy::SpinThenBlock(Duration::from_millis(20));
+    let vehicle = TestVehicle::new("auv");
+    // SAFETY: sched_getcpu takes no argument and only reads the calling thread's state.
+    let cpu = unsafe { libc::sched_getcpu() }.max(0) as usize;
+    let ready = std::sync::Barrier::new(2);
+    let (player_side, program_side) = std::thread::scope(|s| {
+        let player = s.spawn(|| {
+            let fifo = alone_on_one_core(cpu);
+            let me = Participant::join(&vehicle, Role::Player).unwrap();
+            let events = me.event_receiver().unwrap();
+            let calls = me.call_sender("PLN").unwrap();
+            let reactor = Reactor::without_signal_handling(strategy).unwrap();
+            ready.wait();
+            let mut answered = 0;
+            while answered < ROUNDS {
+                let r = reactor
+                    .wait(&[&events], Some(Duration::from_secs(5)))
+                    .unwrap();
+                assert!(!r.timed_out(), "no event after {answered} rounds");
+                events
+                    .drain(|r| {
+                        let n = r.unwrap().msg.params[0].clone();
+                        calls.send(&CallMsg::new("ping", vec![n])).unwrap();
+                        answered += 1;
+                    })
+                    .unwrap();
+            }
+            (fifo, reactor.stats())
+        });
+        let program = s.spawn(|| {
+            let fifo = alone_on_one_core(cpu);
+            let me = Participant::join(&vehicle, Role::program("PLN").unwrap()).unwrap();
+            let calls = me.call_receiver().unwrap();
+            let events = me.event_sender().unwrap();
+            let reactor = Reactor::without_signal_handling(strategy).unwrap();
+            ready.wait();
+            for i in 0..ROUNDS {
+                events
+                    .send(&EventMsg::new("pong", vec![Value::Int(i)]))
+                    .unwrap();
+                let call = loop {
+                    let r = reactor
+                        .wait(&[&calls], Some(Duration::from_secs(5)))
+                        .unwrap();
+                    assert!(!r.timed_out(), "no call in round {i}");
+                    calls.take_wakeups().unwrap();
+                    if let Some(call) = calls.try_recv().unwrap() {
+                        break call;
+                    }
+                };
+                assert_eq!(call.msg.args, vec![Value::Int(i)]);
+            }
+            (fifo, reactor.stats())
+        });
+        (player.join().unwrap(), program.join().unwrap())
+    });
+    let ((fifo_a, player), (fifo_b, program)) = (player_side, program_side);
+    if !(fifo_a && fifo_b) {
+        eprintln!("not checked: SCHED_FIFO on one core is refused here (needs CAP_SYS_NICE)");
+        return;
+    }
+    assert!(player.waits >= ROUNDS as u64 && program.waits >= ROUNDS as u64);
+    assert_eq!(player.sleeps, 0, "player: {player:?}");
+    assert_eq!(program.sleeps, 0, "program: {program:?}");
+}
+
+/// A spinning receiver consumes its notifications now and then (`consume_wakeups_every`), not
+/// at every message: they wait in the listener meanwhile. When it then sleeps, the waiting
+/// notifications neither keep waking it (no sample is pending) nor hide a new one.
+#[test]
+fn a_lazily_consuming_receiver_neither_misses_a_wakeup_nor_wakes_for_old_ones() {
+    let vehicle = TestVehicle::new("auv");
+    let (player, pln) = pair(&vehicle);
+    let rx = player.event_receiver().unwrap();
+    let tx = pln.event_sender().unwrap();
+    // The sender's arrival is news (it wakes a reactor): taken now.
+    assert_eq!(rx.take_wakeups().unwrap().senders_joined, 1);
+    // A period not yet over: draining takes the samples, not their notifications.
+    rx.consume_wakeups_every(Some(Duration::from_secs(3600)));
+    for i in 0..5 {
+        tx.send(&EventMsg::new("depth", vec![Value::Int(i)]))
+            .unwrap();
+    }
+    let drained = rx.drain(|r| assert!(r.is_ok())).unwrap();
+    assert_eq!(drained.messages, 5);
+    assert_eq!(
+        drained.wakeups.samples, 0,
+        "consumed before the period ended"
+    );
+    // Asleep with only old notifications waiting: it times out rather than returning ready.
+    let reactor = Reactor::without_signal_handling(WaitStrategy::Block).unwrap();
+    let r = reactor
+        .wait(&[&rx], Some(Duration::from_millis(50)))
+        .unwrap();
+    assert!(
+        r.timed_out(),
+        "woken by notifications of samples already taken"
+    );
+    // The reactor consumed them on the receiver's behalf: they are reported, once.
+    rx.consume_wakeups_every(None);
+    assert!(rx.take_wakeups().unwrap().samples >= 1);
+    assert_eq!(rx.take_wakeups().unwrap().samples, 0);
+    // A new sample wakes it.
+    rx.consume_wakeups_every(Some(Duration::from_secs(3600)));
+    let (done, wait_done) = std::sync::mpsc::channel::<()>();
+    let vehicle = &vehicle;
+    std::thread::scope(|s| {
+        s.spawn(move || {
+            // iceoryx2's ports stay in their thread: a sender of another program, kept until
+            // its sample is taken (its shared memory goes with it).
+            let gui = Participant::join(vehicle, Role::program("GUI").unwrap()).unwrap();
+            let tx = gui.event_sender().unwrap();
+            std::thread::sleep(Duration::from_millis(20));
+            tx.send(&EventMsg::new("depth", vec![Value::Int(9)]))
+                .unwrap();
+            let _ = wait_done.recv_timeout(Duration::from_secs(30));
+        });
+        // Woken by the new sender's arrival, then by its sample.
+        let r = loop {
+            let r = reactor.wait(&[&rx], Some(Duration::from_secs(10))).unwrap();
+            if r.timed_out() || rx.has_pending() {
+                break r;
+            }
+            rx.take_wakeups().unwrap();
+        };
+        assert!(
+            !r.timed_out(),
+            "a new sample did not wake the sleeping receiver"
+        );
+        let got = rx.try_recv().unwrap().expect("the sample that woke it");
+        assert_eq!(got.msg.params, vec![Value::Int(9)]);
+        done.send(()).unwrap();
+    });
+}

@@ -235,7 +235,8 @@ impl Entry {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FlushPolicy {
     /// Written to the operating system after every record (survives a crash of the player, not
-    /// of the machine).
+    /// of the machine); the player writes the records of one round of work together, before it
+    /// sleeps, or within [`BATCH_DELAY`] while it spins ([`Journal::batch_records`]).
     EveryRecord,
     /// Written and synced to the disk (fdatasync) after every record: survives a power loss,
     /// costs a disk round trip per record.
@@ -586,6 +587,13 @@ pub enum RecorderChange {
 /// drops records (a minute of a busy vehicle's steps, and more).
 pub const DEFAULT_BACKLOG: usize = 32 << 20;
 
+/// Under a spinning wait strategy, how long the player may hold a round's records before it
+/// writes them ([`Journal::batch_records`]): the write (a system call of several
+/// microseconds) is then not on the path of the next event of a quick exchange, and a busy
+/// exchange writes once per this delay instead of once per event. Acknowledgements still wait
+/// for the write, so a crash of the player loses only events it never acknowledged.
+pub const BATCH_DELAY: Duration = Duration::from_millis(1);
+
 /// The journal of a running player: a writer, or none (`--no-journal`), and the recorder's
 /// state.
 ///
@@ -611,6 +619,11 @@ pub struct Journal {
     pub lost: u64,
     /// Of them, those a [`Entry::Gap`] on record accounts for.
     lost_in_gaps: u64,
+    /// Under `record` and `sync`, records wait for [`write_batch`](Self::write_batch) instead
+    /// of being written one by one.
+    batched: bool,
+    /// When the oldest record held for [`write_batch`](Self::write_batch) was appended.
+    batch_since: Option<Instant>,
 }
 
 impl Journal {
@@ -635,7 +648,45 @@ impl Journal {
             failures: 0,
             lost: 0,
             lost_in_gaps: 0,
+            batched: false,
+            batch_since: None,
         }
+    }
+
+    /// Under the `record` and `sync` policies, holds the records until
+    /// [`write_batch`](Self::write_batch) instead of writing each at once. The player's loop
+    /// calls it before it sleeps, and under a spinning wait strategy at most
+    /// [`BATCH_DELAY`] after the oldest record held: the records of one round of work (an
+    /// event taken, the steps it caused), or of the rounds of a quick exchange, then reach the
+    /// operating system in one system call, after the calls they made went out rather than
+    /// before, and always before any acknowledgement (which [`flush`](Self::flush) precedes).
+    pub fn batch_records(&mut self) {
+        self.batched = true;
+    }
+
+    /// Writes the records held by [`batch_records`](Self::batch_records) (nothing to do
+    /// otherwise, or under an interval policy, or while the recorder is not ok: the heartbeat's
+    /// [`flush`](Self::flush) retries).
+    pub fn write_batch(&mut self) {
+        let Some(w) = self.writer.as_mut() else {
+            return;
+        };
+        let due = self.batched
+            && self.state == RecorderState::Ok
+            && w.queued_records() > 0
+            && matches!(w.policy, FlushPolicy::EveryRecord | FlushPolicy::Sync);
+        if due {
+            if let Err(e) = w.flush() {
+                self.fail(&e);
+            }
+        }
+        self.batch_since = None;
+    }
+
+    /// When the oldest record held for [`write_batch`](Self::write_batch) was appended (`None`:
+    /// nothing held, or the recorder is not ok and the heartbeat's flush retries).
+    pub fn batch_since(&self) -> Option<Instant> {
+        self.batch_since
     }
 
     /// The recorder's state.
@@ -666,6 +717,7 @@ impl Journal {
     }
 
     fn fail(&mut self, e: &std::io::Error) {
+        self.batch_since = None;
         self.failures += 1;
         self.reason = e.to_string();
         if self.state == RecorderState::Ok {
@@ -680,6 +732,7 @@ impl Journal {
     }
 
     fn start_dropping(&mut self, why: String) {
+        self.batch_since = None;
         let dropped = self
             .writer
             .as_mut()
@@ -705,7 +758,12 @@ impl Journal {
                 Err(e) => self.start_dropping(format!("an entry cannot be recorded: {e}")),
                 Ok(()) => {
                     let due = match w.policy {
-                        FlushPolicy::EveryRecord | FlushPolicy::Sync => true,
+                        FlushPolicy::EveryRecord | FlushPolicy::Sync => {
+                            if self.batched && self.batch_since.is_none() {
+                                self.batch_since = Some(Instant::now());
+                            }
+                            !self.batched
+                        }
                         FlushPolicy::Interval(p) => w.last_flush.elapsed() >= p,
                     };
                     if due {
@@ -740,6 +798,7 @@ impl Journal {
             RecorderState::Dropping => Settlement::Lost,
             _ => match w.flush() {
                 Ok(()) => {
+                    self.batch_since = None;
                     if self.state == RecorderState::Failing {
                         tracing::warn!(
                             after_s = self.since.elapsed().as_secs_f64(),

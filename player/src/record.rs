@@ -263,3 +263,36 @@ pub fn marked_places(project: &CompiledProject, layout: &Layout, state: &[u64]) 
     }
     out
 }
+
+/// The places whose token changed from `before` to `after`, named as [`marked_places`] names
+/// them, in the same order: those that received a token, and those that lost one. Only the
+/// changed places are named (a step changes a few places of many).
+pub fn place_changes(
+    project: &CompiledProject,
+    layout: &Layout,
+    before: &[u64],
+    after: &[u64],
+) -> (Vec<String>, Vec<String>) {
+    let (mut marked, mut unmarked) = (Vec::new(), Vec::new());
+    let mut sort = |bit: u32, name: &dyn Fn() -> String| match (
+        Layout::bit(before, bit),
+        Layout::bit(after, bit),
+    ) {
+        (false, true) => marked.push(name()),
+        (true, false) => unmarked.push(name()),
+        _ => {}
+    };
+    for (n, net) in project.nets.iter().enumerate() {
+        for (i, p) in net.places.iter().enumerate() {
+            sort(layout.net_base[n] + i as u32, &|| {
+                format!("{}.{}", net.name, p.name)
+            });
+        }
+    }
+    for (g, gp) in project.globals.iter().enumerate() {
+        sort(layout.global_base + g as u32, &|| {
+            format!("global.{}", gp.name)
+        });
+    }
+    (marked, unmarked)
+}

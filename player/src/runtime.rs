@@ -18,16 +18,18 @@ use crate::ack::Ledger;
 use crate::engine::{Args, Engine, Micros, Refusal, Sink, Stats};
 use crate::journal::{
     Entry, FlushPolicy, Journal, JournalLock, JournalWriter, RecorderChange, Settlement,
+    BATCH_DELAY,
 };
-use crate::record::{marked_places, outcome_name, StepRecord};
+use crate::record::{marked_places, outcome_name, place_changes, StepRecord};
 use petrel_ipc::{
     CallMsg, CallSender, EventReceiver, Heartbeat, HeartbeatPublisher, MarkingMsg,
     MarkingPublisher, Participant, ProgramWatch, Reactor, RecvError, ReloadAnswer,
     ReloadAnswerPublisher, ReloadReceiver, ReloadRequest, Role, SendError, Vehicle, WaitStrategy,
 };
 use petrel_nets::compiled::{
-    CompiledProject, EventId, FunctionId, NetId, ProgramId, TimerId, Value,
+    CompiledProject, EventId, FunctionId, NetId, Program, ProgramId, TimerId, Value,
 };
+use petrel_nets::model::Type;
 use petrel_nets::semantics::Notice;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -175,11 +177,14 @@ impl Sink for RuntimeSink<'_, '_> {
     }
 
     fn call(&mut self, program: ProgramId, function: FunctionId, args: Args<'_>) {
-        self.record.call(program, function, args);
-        let prog = &self.record.project.programs[program as usize];
+        let project = self.record.project;
+        let prog = &project.programs[program as usize];
         let fname = &prog.functions[function as usize].name;
         let msg = CallMsg::new(fname.clone(), args.iter().map(|a| a.to_value()).collect());
-        match self.calls[program as usize].send(&msg) {
+        let sent = self.calls[program as usize].send(&msg);
+        // The call's text for the journal and the monitors once the call is out.
+        self.record.call(program, function, args);
+        match sent {
             Ok(_) => {
                 *self.sent += 1;
                 debug!(program = %prog.name, function = %fname, "call sent");
@@ -442,7 +447,7 @@ pub struct PlayerLoop<'p> {
     step_no: u64,
     next_heartbeat: Instant,
     next_liveness: Instant,
-    /// The next marking message is a snapshot (after a reload).
+    /// The next marking message is a snapshot (after a reload, or steps no monitor saw).
     snapshot_next: bool,
     /// The vehicle, for the programs' liveness watch of a reloaded version.
     vehicle: Vehicle,
@@ -529,7 +534,7 @@ impl<'p> PlayerLoop<'p> {
             calls: project
                 .programs
                 .iter()
-                .map(|p| me.call_sender(&p.name))
+                .map(|p| me.call_sender_sized(&p.name, call_bound(p)))
                 .collect::<Result<_, _>>()
                 .map_err(setup)?,
             marking: me.marking_publisher().map_err(setup)?,
@@ -538,6 +543,13 @@ impl<'p> PlayerLoop<'p> {
             reload_answers: me.reload_answer_publisher().map_err(setup)?,
             _me: me,
         };
+        if opts.wait != WaitStrategy::Block {
+            // Spinning, the player sees events in shared memory: their notifications are
+            // consumed now and then, not at every event (two system calls fewer each).
+            ports
+                .events
+                .consume_wakeups_every(Some(petrel_ipc::SPIN_WAKEUP_PERIOD));
+        }
         let watch = ProgramWatch::new(&vehicle, project.programs.iter().map(|p| p.name.clone()));
         let reactor = Reactor::new(opts.wait).map_err(|e| PlayError::Setup(e.to_string()))?;
 
@@ -566,6 +578,7 @@ impl<'p> PlayerLoop<'p> {
             }
         };
         let mut journal = Journal::with_backlog(writer, opts.journal_backlog);
+        journal.batch_records();
         let mut record = StepRecord::new(project);
         let mut failed = Vec::new();
         let mut report = PlayReport::default();
@@ -672,6 +685,22 @@ impl<'p> PlayerLoop<'p> {
         loop {
             self.process_queue();
             self.heartbeat_if_due();
+            // Everything journaled reaches the operating system before the player sleeps.
+            // A spinning player holds a round's records while the next event may come (at
+            // most BATCH_DELAY), so that their write is not on that event's path.
+            let hold = match self.reactor.strategy() {
+                WaitStrategy::Block => None,
+                WaitStrategy::Spin => Some(None),
+                WaitStrategy::SpinThenBlock(window) => Some(Some(window)),
+            }
+            .and_then(|window| {
+                let since = self.journal.batch_since()?;
+                let left = BATCH_DELAY.saturating_sub(since.elapsed());
+                (!left.is_zero()).then(|| window.map_or(left, |w| w.min(left)))
+            });
+            if hold.is_none() {
+                self.journal.write_batch();
+            }
             if self.journal.has_changes() {
                 // The heartbeat's flush changed the recorder's state: tell the nets now.
                 continue;
@@ -692,6 +721,10 @@ impl<'p> PlayerLoop<'p> {
             if self.pending.is_some() {
                 // The verifier's thread says nothing when it is done: look again soon.
                 timeout = timeout.min(Duration::from_millis(2));
+            }
+            if let Some(hold) = hold {
+                // Within a spin window, so that the wait ends before it could sleep.
+                timeout = timeout.min(hold);
             }
             let ready = match self
                 .reactor
@@ -1223,15 +1256,23 @@ impl<'p> PlayerLoop<'p> {
         let mut calls = Vec::new();
         let mut failed = None;
         for prog in &candidate.project.programs {
+            // A sender sized for the old version is kept if the new version's calls fit.
+            let bound = call_bound(prog);
             let kept = self
                 .project
                 .programs
                 .iter()
                 .position(|p| p.name == prog.name)
+                .filter(|&i| {
+                    old_calls[i].as_ref().is_some_and(|c| {
+                        c.spec().max_body_len
+                            >= bound.unwrap_or(petrel_ipc::port::CALLS.max_body_len)
+                    })
+                })
                 .and_then(|i| old_calls[i].take());
             match kept {
                 Some(c) => calls.push(c),
-                None => match self.ports._me.call_sender(&prog.name) {
+                None => match self.ports._me.call_sender_sized(&prog.name, bound) {
                     Ok(c) => calls.push(c),
                     Err(e) => {
                         failed = Some(setup(e));
@@ -1315,23 +1356,35 @@ impl<'p> PlayerLoop<'p> {
 
     /// Publishes what the last step changed (the first message of a run is a full snapshot).
     fn publish_delta(&mut self) {
+        if self.step_no != 0 && self.ports.marking.receivers() == 0 {
+            // No monitor follows: the delta's names would be built for nobody. The first
+            // monitor to come gets a snapshot (a monitor that just connected may miss this
+            // step: the snapshot makes up for it).
+            self.snapshot_next = true;
+            self.previous.clear();
+            self.previous.extend_from_slice(self.engine.state());
+            self.record.taken = None;
+            self.record.activated.clear();
+            self.record.deactivated.clear();
+            return;
+        }
         let project = self.project;
         let layout = self.engine.layout();
         let now = self.engine.state();
-        let before = marked_places(project, layout, &self.previous);
-        let after = marked_places(project, layout, now);
         let snapshot = self.step_no == 0 || std::mem::take(&mut self.snapshot_next);
+        // Only the places that changed are named (a snapshot names every marked one).
+        let (changed, unmarked) = place_changes(project, layout, &self.previous, now);
+        let marked = if snapshot {
+            marked_places(project, layout, now)
+        } else {
+            changed
+        };
         let record = &mut self.record;
         let net_names = |ids: &mut Vec<NetId>| -> Vec<String> {
             ids.drain(..)
                 .map(|n| project.nets[n as usize].name.clone())
                 .collect()
         };
-        // A snapshot lists the whole state: every active net.
-        let active: Vec<String> = (0..project.nets.len() as NetId)
-            .filter(|&n| self.engine.is_active(n))
-            .map(|n| project.nets[n as usize].name.clone())
-            .collect();
         let (event, params) = match record.taken.take() {
             Some((e, p)) => (Some(e), p),
             None => (None, Vec::new()),
@@ -1343,23 +1396,15 @@ impl<'p> PlayerLoop<'p> {
             params,
             actions: record.actions.clone(),
             fired: record.fired_names(),
-            marked: if snapshot {
-                after.clone()
-            } else {
-                after
-                    .iter()
-                    .filter(|p| !before.contains(p))
-                    .cloned()
-                    .collect()
-            },
-            unmarked: before
-                .iter()
-                .filter(|p| !after.contains(p))
-                .cloned()
-                .collect(),
+            marked,
+            unmarked,
             activated: if snapshot {
+                // A snapshot lists the whole state: every active net.
                 record.activated.clear();
-                active
+                (0..project.nets.len() as NetId)
+                    .filter(|&n| self.engine.is_active(n))
+                    .map(|n| project.nets[n as usize].name.clone())
+                    .collect()
             } else {
                 net_names(&mut record.activated)
             },
@@ -1556,6 +1601,29 @@ fn status_json(s: &StatusSnapshot) -> String {
 /// The length of the largest status JSON `project` can give: every net active with every place
 /// marked, the ledger full of senders whose origins need the most escaping, every counter at
 /// its largest. The heartbeat's publisher is sized from it, so that no status is ever refused.
+/// The longest call the project can make to `program`, encoded, when its functions take only
+/// fixed-size parameters (`None`: text or lists, whose length the project does not bound): the
+/// size of the player's call sender to it (docs/benchmarks.md, "Footprint").
+fn call_bound(program: &Program) -> Option<usize> {
+    let mut bound = 0;
+    for function in &program.functions {
+        // The longest encoding of each type: a varint takes the most bytes at i64::MIN.
+        let args = function
+            .params
+            .iter()
+            .map(|(_, ty)| match ty {
+                Type::Int => Some(Value::Int(i64::MIN)),
+                Type::Float => Some(Value::Float(f64::MAX)),
+                Type::Bool => Some(Value::Bool(true)),
+                Type::Text | Type::FloatList => None,
+            })
+            .collect::<Option<Vec<_>>>()?;
+        let len = petrel_ipc::wire::encoded_len(&CallMsg::new(function.name.clone(), args)).ok()?;
+        bound = bound.max(len);
+    }
+    Some(bound)
+}
+
 fn status_bound(project: &CompiledProject) -> usize {
     let mut marking: Vec<(String, Vec<String>)> = project
         .nets
@@ -1639,5 +1707,70 @@ mod tests {
         assert_eq!(doc["marking"]["A"].as_array().map(Vec::len), Some(2));
         assert_eq!(doc["senders"].as_object().map(|m| m.len()), Some(64));
         assert!(Heartbeat::max_encoded_len(bound) < petrel_ipc::wire::MAX_BODY_LEN);
+    }
+
+    #[test]
+    fn place_changes_name_what_the_two_markings_differ_in() {
+        let p = project();
+        let engine = Engine::new(&p);
+        let layout = engine.layout();
+        let words = engine.state().len();
+        // Pseudo-random markings (every bit pattern of the places matters, not realism).
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut state = || -> Vec<u64> {
+            (0..words)
+                .map(|_| {
+                    seed ^= seed << 13;
+                    seed ^= seed >> 7;
+                    seed ^= seed << 17;
+                    seed
+                })
+                .collect()
+        };
+        for _ in 0..200 {
+            let (before, after) = (state(), state());
+            let (b, a) = (
+                marked_places(&p, layout, &before),
+                marked_places(&p, layout, &after),
+            );
+            let expected_marked: Vec<_> = a.iter().filter(|x| !b.contains(x)).cloned().collect();
+            let expected_unmarked: Vec<_> = b.iter().filter(|x| !a.contains(x)).cloned().collect();
+            let (marked, unmarked) = place_changes(&p, layout, &before, &after);
+            assert_eq!(marked, expected_marked);
+            assert_eq!(unmarked, expected_unmarked);
+        }
+    }
+
+    fn programs() -> CompiledProject {
+        let manifest = "[project]\nname = \"p\"\nfiles = [\"a.pn\"]\nstart = [\"A\"]\n\n[events]\ngo = { category = \"nominal\" }\n\n[programs.NAV.functions]\ngoto = { params = [\"x: int\", \"speed: float\", \"fast: bool\"] }\nstop = []\n\n[programs.PLN.functions]\nroute = { params = [\"points: [float]\"] }\n\n[programs.LOG.functions]\nsay = { params = [\"what: text\"] }\n";
+        let net = "net A {\n    place a = 1\n    transition t on go: a -> a\n}\n";
+        let (_, c, d, _) = petrel_nets::project::from_sources(manifest, &[("a.pn", net)]);
+        assert!(!d.has_errors(), "{d:?}");
+        c.unwrap()
+    }
+
+    #[test]
+    fn a_call_bound_covers_the_longest_call_and_only_fixed_size_parameters_have_one() {
+        let p = programs();
+        let program = |name: &str| p.programs.iter().find(|q| q.name == name).unwrap();
+        let bound = call_bound(program("NAV")).expect("int, float and bool have a bound");
+        // Every extreme of each type encodes within it, the longest exactly at it.
+        let mut longest = 0;
+        for x in [0, 1, -1, i64::MAX, i64::MIN] {
+            for speed in [0.0, f64::MIN, f64::MAX, f64::NAN] {
+                for fast in [false, true] {
+                    let call = CallMsg::new(
+                        "goto",
+                        vec![Value::Int(x), Value::Float(speed), Value::Bool(fast)],
+                    );
+                    let len = petrel_ipc::wire::encoded_len(&call).unwrap();
+                    assert!(len <= bound, "{call:?}: {len} > {bound}");
+                    longest = longest.max(len);
+                }
+            }
+        }
+        assert_eq!(longest, bound);
+        assert_eq!(call_bound(program("PLN")), None, "a list has no bound");
+        assert_eq!(call_bound(program("LOG")), None, "a text has no bound");
     }
 }

@@ -230,6 +230,11 @@ impl Program {
             };
             let participant = Participant::join(vehicle, Role::program(name)?).map_err(setup)?;
             let calls = participant.call_receiver().map_err(setup)?;
+            if config.wait != WaitStrategy::Block {
+                // Spinning, calls are seen in shared memory: their notifications are consumed
+                // now and then, not at every call.
+                calls.consume_wakeups_every(Some(petrel_ipc::SPIN_WAKEUP_PERIOD));
+            }
             let events = participant.event_sender().map_err(setup)?;
             hosts.push(Hosted {
                 calls,
