@@ -167,6 +167,8 @@ fn std_data(frame: &CanFrame) -> Option<(u16, Vec<u8>)> {
 }
 
 /// A node's socket. A node that only sends receives nothing (its queue would just fill up).
+/// Open it before anything sends it frames: what it queued before its filters were set (the
+/// other nodes' frames, between the socket's bind and the filters) is dropped here.
 fn node_socket(iface: &str, listen: &[u16]) -> CanSocket {
     let s = CanSocket::open(iface).unwrap_or_else(|e| panic!("a node socket on {iface}: {e}"));
     if listen.is_empty() {
@@ -179,6 +181,11 @@ fn node_socket(iface: &str, listen: &[u16]) -> CanSocket {
             .collect();
         s.set_filters(&filters).unwrap();
     }
+    // The socket received every frame on the bus from its bind until the filters were set (a
+    // sensor node already sending got its frames in once, and the thrusters then read them).
+    s.set_nonblocking(true).unwrap();
+    while s.read_frame().is_ok() {}
+    s.set_nonblocking(false).unwrap();
     s
 }
 

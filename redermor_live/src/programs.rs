@@ -12,7 +12,7 @@
 
 use petrel_programs::{ArgError, Call, Value};
 use petrel_redermor::evt::{AlarmReason, EventListener, EvtConfig, MissionEvent, OperatorRequest};
-use petrel_redermor::gdd::Gdd;
+use petrel_redermor::gdd::{Gdd, NavState};
 use petrel_redermor::geom::{self, Position};
 use petrel_redermor::guidance::{Guidance, GuidanceConfig, GuidanceEvent, Setpoint};
 use petrel_redermor::mission::{Current, DepthTarget, Mission};
@@ -348,11 +348,46 @@ pub const SURFACE_DEPTH: f64 = 0.5;
 /// A sensor silent this long (µs of the vehicle's time) is not trusted.
 pub const SENSOR_TIMEOUT_US: u64 = 2_000_000;
 
+/// The speed through the water asked for while braking at the surface (m/s, astern): the
+/// thrusters' thrust goes as the square of their rpm, so braking needs a firm astern command.
+pub const BRAKE_SPEED: f64 = -0.5;
+
+/// Below this speed through the water (m/s) the vehicle is stopped: what it still drifts
+/// once its thrusters are off is a few metres at most.
+pub const STOPPED_SPEED: f64 = 0.05;
+
+/// The longest IDC brakes at the surface (µs of the vehicle's time) before it reports the
+/// vehicle surfaced all the same (a thruster that does not answer must not hold the mission).
+pub const BRAKE_TIMEOUT_US: u64 = 30_000_000;
+
+/// The longest IDC steers back to where it was to surface once at the surface (µs of the
+/// vehicle's time), before it stops where it is.
+pub const RETURN_TIMEOUT_US: u64 = 120_000_000;
+
+/// Turning towards a point more than this off the heading (radians: 45°), the vehicle slows
+/// to [`TURN_SPEED`] and gyrates nearly on the spot rather than sweeping a wide circle.
+pub const GYRATION_ANGLE: f64 = std::f64::consts::FRAC_PI_4;
+
 /// What GUI was told to do and has not answered yet.
 #[derive(Clone, Debug, PartialEq)]
 enum Order {
     ChangeCourse { heading: f64, depth: DepthTarget },
     FollowLeg,
+}
+
+/// IDC surfacing the vehicle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Surfacing {
+    /// Since when (µs of the vehicle's time): the depth sensor is judged from then on.
+    since: u64,
+    /// Where the vehicle surfaces: the end of the route it last flew to its end, or where it
+    /// was when told to surface. It comes up within GUI's arrival radius of that point, however
+    /// late the order came (a slow or loaded computer keeps it cruising meanwhile).
+    anchor: Position,
+    /// At the surface: since when (µs of the vehicle's time).
+    at_surface: Option<u64>,
+    /// At the surface at the anchor and braking: since when (µs of the vehicle's time).
+    braking: Option<u64>,
 }
 
 /// GDD, GUI and IDC: the vehicle's state, the route flown, the controllers.
@@ -369,8 +404,10 @@ pub struct Nav {
     suspended: Option<(Option<Guidance>, Option<Order>)>,
     hold: Option<Setpoint>,
     engaged: bool,
-    /// IDC is surfacing: since when (µs of the vehicle's time).
-    surfacing: Option<u64>,
+    /// The end of the route GUI last flew to its end, until it is given another.
+    route_end: Option<Position>,
+    /// IDC is surfacing.
+    surfacing: Option<Surfacing>,
     last_time_us: u64,
     commands: Commands,
 }
@@ -394,6 +431,7 @@ impl Nav {
             suspended: None,
             hold: None,
             engaged: false,
+            route_end: None,
             surfacing: None,
             last_time_us: 0,
             commands: Commands::default(),
@@ -427,6 +465,37 @@ impl Nav {
         }
     }
 
+    /// The setpoint that brings the vehicle up at `anchor`: half the cruise speed (the planes
+    /// need some speed to climb), heading back to the anchor whenever the vehicle is more than
+    /// the arrival radius from it; when that means turning round, braking first, then
+    /// gyrating nearly on the spot.
+    fn towards(
+        anchor: Position,
+        nav: &NavState,
+        cruise: f64,
+        guidance: GuidanceConfig,
+    ) -> Setpoint {
+        let (heading, speed) = if geom::distance(nav.position, anchor) > guidance.arrival_radius {
+            let heading = geom::heading_between(nav.position, anchor);
+            let speed = if geom::wrap_pi(heading - nav.heading).abs() <= GYRATION_ANGLE {
+                cruise * 0.5
+            } else if nav.water_speed > TURN_SPEED {
+                // Past the anchor at speed: brake, or the turn is a wide circle.
+                BRAKE_SPEED
+            } else {
+                TURN_SPEED
+            };
+            (heading, speed)
+        } else {
+            (nav.heading, cruise * 0.5)
+        };
+        Setpoint {
+            heading,
+            speed,
+            depth: DepthTarget::Depth(0.0),
+        }
+    }
+
     /// The answers to a call (GDD's comes at once; GUI's and IDC's when done, from
     /// [`Nav::tick`]).
     pub fn handle(&mut self, call: &Call) -> Result<Vec<Answer>, ArgError> {
@@ -452,6 +521,7 @@ impl Nav {
                 let legs = t.legs.len();
                 self.route = (legs > 0).then(|| Guidance::new(t, self.guidance));
                 self.order = None;
+                self.route_end = None;
                 out.push(answer(
                     "GUI",
                     "course_computed",
@@ -480,6 +550,7 @@ impl Nav {
             }
             ("GUI", "inspect") => {
                 let t = self.route(call, LegKind::Inspection)?;
+                self.route_end = None;
                 if t.legs.is_empty() {
                     out.push(answer("GUI", "inspection_flown", vec![]));
                 } else {
@@ -495,6 +566,7 @@ impl Nav {
                     self.route = route;
                     self.order = order;
                 }
+                self.route_end = None;
                 self.inspection = None;
             }
             ("GUI", "stop") => {
@@ -506,7 +578,12 @@ impl Nav {
             }
             ("IDC", "engage") => self.engaged = true,
             ("IDC", "surface") => {
-                self.surfacing = Some(self.tracker.time_us());
+                self.surfacing = Some(Surfacing {
+                    since: self.tracker.time_us(),
+                    anchor: self.route_end.unwrap_or(self.gdd.state().position),
+                    at_surface: None,
+                    braking: None,
+                });
             }
             ("IDC", "stop") | ("IDC", "emergency_surface") => {
                 self.engaged = false;
@@ -574,6 +651,7 @@ impl Nav {
                         setpoint = sp.or(setpoint);
                         if events.contains(&GuidanceEvent::Arrived) {
                             self.order = None;
+                            self.route_end = route.trajectory().legs.last().map(|l| l.to);
                             out.push(answer("GUI", "route_done", vec![]));
                         } else if let Some(leg) = events.iter().find_map(|e| match e {
                             GuidanceEvent::LegDone { leg } => Some(*leg),
@@ -591,21 +669,41 @@ impl Nav {
             self.hold = setpoint;
         }
 
-        if let Some(since) = self.surfacing {
-            let depth_known = !self
-                .gdd
-                .is_stale(Sensor::Depth, now, since, SENSOR_TIMEOUT_US);
-            if depth_known {
+        if let Some(surfacing) = &mut self.surfacing {
+            let depth_known =
+                !self
+                    .gdd
+                    .is_stale(Sensor::Depth, now, surfacing.since, SENSOR_TIMEOUT_US);
+            let surfaced = if !depth_known {
+                // No depth: stop the thrusters, the buoyant vehicle rises; the GPS's first fix
+                // says it is out.
+                setpoint = None;
+                gps_fix
+            } else if surfacing.at_surface.is_none() && nav.depth >= SURFACE_DEPTH && !gps_fix {
+                setpoint = Some(Self::towards(surfacing.anchor, &nav, cruise, self.guidance));
+                false
+            } else if surfacing.braking.is_none()
+                && geom::distance(nav.position, surfacing.anchor) > self.guidance.arrival_radius
+                && now.saturating_sub(*surfacing.at_surface.get_or_insert(now)) < RETURN_TIMEOUT_US
+            {
+                // Up, but carried past the anchor on the way: back to it at the surface.
+                setpoint = Some(Self::towards(surfacing.anchor, &nav, cruise, self.guidance));
+                false
+            } else {
+                // Up at the anchor: brake to a stop before saying so, so that the vehicle is
+                // where it surfaced when its thrusters go off (it would coast on for tens of
+                // metres).
+                surfacing.at_surface.get_or_insert(now);
+                let since = *surfacing.braking.get_or_insert(now);
                 setpoint = Some(Setpoint {
                     heading: nav.heading,
-                    speed: cruise * 0.5,
+                    speed: BRAKE_SPEED,
                     depth: DepthTarget::Depth(0.0),
                 });
-            } else {
-                // No depth: stop the thrusters, the buoyant vehicle rises.
-                setpoint = None;
-            }
-            if (depth_known && nav.depth < SURFACE_DEPTH) || gps_fix {
+                nav.water_speed.abs() <= STOPPED_SPEED
+                    || now.saturating_sub(since) >= BRAKE_TIMEOUT_US
+            };
+            if surfaced {
                 self.surfacing = None;
                 self.hold = None;
                 setpoint = None;

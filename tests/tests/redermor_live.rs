@@ -14,7 +14,7 @@ use std::process::Command;
 use petrel_tests::petrel_bin;
 use redermor_flight::{
     assert_clear_of_the_buoys, assert_covered, assert_flown_and_stopped, bench, check_alarm,
-    check_leak, check_nominal, fly,
+    check_leak, check_nominal, check_nominal_route, fly, fly_with,
 };
 
 #[test]
@@ -50,6 +50,25 @@ fn scenario_1_nominal_two_areas_surveyed_then_the_end_area() {
         .unwrap();
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("trace.csv"));
+}
+
+/// A slow or loaded vehicle computer: the simulator three times faster than in vehicle.toml, so
+/// that every wall-clock delay of the processes (NAV's control step, the player's answer to
+/// `route_done`, the stop) is three times longer in the vehicle's time, as under the VM
+/// bench's emulation. NAV still surfaces the vehicle where its route to the end area ended
+/// and stops it there (before NAV did so, it surfaced on the move and coasted on, ending 15 m
+/// outside the end area).
+#[test]
+fn scenario_1_on_a_slow_vehicle_computer_still_ends_in_the_end_area() {
+    let f = fly_with(
+        "vehicle.toml",
+        &[("\"--sim-speed\", \"20\"", "\"--sim-speed\", \"60\"")],
+        "nominal",
+        false,
+    );
+    // The route and the end; the survey's coverage to the metre is scenario 1's, at the
+    // vehicle's own pace.
+    check_nominal_route(&f);
 }
 
 #[test]

@@ -12,10 +12,13 @@
 //!
 //! ```sh
 //! cargo build -p petrel-cli -p petrel-redermor-live
-//! PETREL_REQUIRE_VCAN=1 scripts/vcan-vm.sh cargo-test --include "$PWD/target/debug/petrel" \
-//!     --include "$PWD/target/debug/redermor-program" --include "$PWD/target/debug/redermor-sim" \
-//!     --include "$PWD/missions/redermor" -p petrel-tests --test redermor_vcan
+//! PETREL_REQUIRE_VCAN=1 scripts/vcan-vm.sh cargo-test --timeout 900 \
+//!     --include "$PWD/target/debug/petrel" --include "$PWD/target/debug/redermor-program" \
+//!     --include "$PWD/target/debug/redermor-sim" --include "$PWD/missions/redermor" \
+//!     -p petrel-tests --test redermor_vcan -- --nocapture
 //! ```
+//!
+//! (about 9 minutes; `--nocapture` shows where each flight's vehicle ended.)
 //!
 //! The flights share vcan0, so they take turns (`BUS`).
 
