@@ -26,7 +26,7 @@ use super::env::Env;
 use super::explore::{run_step, Graph, Recorder};
 use super::timed::{TimerOps, Timing, INF};
 use super::{BoundFinding, BoundStatus, Trace};
-use crate::compiled::{Bound, CompiledProject, Guard, Occurrence};
+use crate::compiled::{Bound, CompiledProject, Occurrence};
 use crate::semantics::{Scratch, Semantics};
 use std::collections::HashMap;
 use std::fmt::Write as _;
@@ -69,16 +69,7 @@ pub(super) fn bounds(
     plain: &Timing,
     describe: &dyn Fn(&[u64]) -> Vec<String>,
 ) -> Vec<BoundFinding> {
-    let l = &sem.layout;
-    let guards: Vec<Option<Guard>> = l
-        .rules
-        .iter()
-        .map(|r| {
-            p.nets[r.net as usize].transitions[r.transition as usize]
-                .guard
-                .clone()
-        })
-        .collect();
+    let guards = super::explore::rule_guards(p, sem);
     // The compact graph names an edge's step kind; the search wants each edge whole (only
     // projects that declare bounds pay for this copy).
     let mut edges: Vec<BoundEdge> = Vec::with_capacity(g.edge_count());

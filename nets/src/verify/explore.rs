@@ -750,6 +750,19 @@ impl Ctx<'_> {
 /// Explores every stable state of `p` (with `reduce`, a subset that keeps what
 /// [`super::reduction`] says).
 #[allow(clippy::too_many_arguments)]
+/// The guard of each rule's transition, in the layout's rule order (what [`Recorder`] checks).
+pub(super) fn rule_guards(p: &CompiledProject, sem: &Semantics) -> Vec<Option<Guard>> {
+    sem.layout
+        .rules
+        .iter()
+        .map(|r| {
+            p.nets[r.net as usize].transitions[r.transition as usize]
+                .guard
+                .clone()
+        })
+        .collect()
+}
+
 pub(super) fn explore(
     p: &CompiledProject,
     sem: &Semantics,
@@ -760,15 +773,7 @@ pub(super) fn explore(
     start: Option<&[u64]>,
 ) -> Result<Graph, VerifyError> {
     let l = &sem.layout;
-    let guards: Vec<Option<Guard>> = l
-        .rules
-        .iter()
-        .map(|r| {
-            p.nets[r.net as usize].transitions[r.transition as usize]
-                .guard
-                .clone()
-        })
-        .collect();
+    let guards = rule_guards(p, sem);
     let deliveries = deliveries(p, l)?;
     let timing = opts.timed.then(|| Timing::new(p, env.words));
     let timer_of: Vec<Option<usize>> = deliveries

@@ -27,16 +27,7 @@ pub(super) struct Minimizer<'a> {
 impl<'a> Minimizer<'a> {
     /// A minimizer over the graph `g` built with `sem` and `env`.
     pub fn new(p: &'a CompiledProject, sem: &'a Semantics<'a>, env: &'a Env, g: &'a Graph) -> Self {
-        let guards = sem
-            .layout
-            .rules
-            .iter()
-            .map(|r| {
-                p.nets[r.net as usize].transitions[r.transition as usize]
-                    .guard
-                    .clone()
-            })
-            .collect();
+        let guards = super::explore::rule_guards(p, sem);
         Minimizer {
             sem,
             env,
