@@ -56,8 +56,11 @@ fn value(ty: Type, r: &mut Lcg) -> Value {
     }
 }
 
-/// Plays `runs` random scripts; returns every stable state met.
-fn scripts(p: &CompiledProject, runs: u64) -> HashSet<Vec<u64>> {
+/// Plays `runs` random scripts (seeds `0..runs` mixed with `salt`): outside events at random
+/// moments, the timers due before each expiring one deadline at a time, in order. `settle` is
+/// called after the start (with `true`) and after every expiry and accepted event, to let the
+/// engine run and look at it.
+fn play(p: &CompiledProject, runs: u64, salt: u64, mut settle: impl FnMut(&mut Engine, bool)) {
     let timer_events: Vec<u32> = p.timers.iter().map(|t| t.event).collect();
     let outside: Vec<u32> = (0..p.events.len() as u32)
         .filter(|e| !timer_events.contains(e))
@@ -72,20 +75,16 @@ fn scripts(p: &CompiledProject, runs: u64) -> HashSet<Vec<u64>> {
         60_000_000,
         700_000_000,
     ];
-    let mut met = HashSet::new();
     for seed in 0..runs {
-        let mut r = Lcg(seed);
+        let mut r = Lcg(seed ^ salt);
         let mut e = Engine::new(p);
         e.start(0, &mut NullSink);
-        e.run_until_idle(&mut NullSink);
-        met.insert(e.state().to_vec());
+        settle(&mut e, true);
         for _ in 0..12 {
             let target = e.now() + delays[r.next(delays.len() as u64) as usize];
-            // The timers due before then expire one deadline at a time, in order.
             while let Some(d) = e.next_deadline().filter(|&d| d <= target) {
                 e.advance_to(d);
-                e.run_until_idle(&mut NullSink);
-                met.insert(e.state().to_vec());
+                settle(&mut e, false);
             }
             e.advance_to(target);
             if e.is_over() || outside.is_empty() {
@@ -98,11 +97,19 @@ fn scripts(p: &CompiledProject, runs: u64) -> HashSet<Vec<u64>> {
                 .map(|(_, t)| value(*t, &mut r))
                 .collect();
             if e.submit(ev, params).is_ok() {
-                e.run_until_idle(&mut NullSink);
-                met.insert(e.state().to_vec());
+                settle(&mut e, false);
             }
         }
     }
+}
+
+/// Plays `runs` random scripts; returns every stable state met.
+fn scripts(p: &CompiledProject, runs: u64) -> HashSet<Vec<u64>> {
+    let mut met = HashSet::new();
+    play(p, runs, 0, |e, _| {
+        e.run_until_idle(&mut NullSink);
+        met.insert(e.state().to_vec());
+    });
     met
 }
 
@@ -210,55 +217,22 @@ impl Observer<'_> {
 /// The delays (microseconds) the engine shows between each occurrence of a bound's `from` and
 /// the next `to` on `runs` random scripts.
 fn observed(p: &CompiledProject, b: &Bound, runs: u64) -> Vec<u64> {
-    let timer_events: Vec<u32> = p.timers.iter().map(|t| t.event).collect();
-    let outside: Vec<u32> = (0..p.events.len() as u32)
-        .filter(|e| !timer_events.contains(e))
-        .collect();
-    let delays: [u64; 7] = [
-        0,
-        500_000,
-        1_000_000,
-        2_000_000,
-        3_000_000,
-        60_000_000,
-        700_000_000,
-    ];
     let mut o = Observer {
         b,
         pending: Vec::new(),
         from_held: false,
         out: Vec::new(),
     };
-    for seed in 0..runs {
-        let mut r = Lcg(seed ^ 0x5eed);
-        let mut e = Engine::new(p);
-        e.start(0, &mut NullSink);
-        o.pending.clear();
-        o.from_held = false;
-        // The initial state, where a `from` marking may already hold, then what start queued.
-        o.after(&e, &Taken::default());
-        o.steps(&mut e);
-        for _ in 0..12 {
-            let target = e.now() + delays[r.next(delays.len() as u64) as usize];
-            while let Some(d) = e.next_deadline().filter(|&d| d <= target) {
-                e.advance_to(d);
-                o.steps(&mut e);
-            }
-            e.advance_to(target);
-            if e.is_over() || outside.is_empty() {
-                continue;
-            }
-            let ev = outside[r.next(outside.len() as u64) as usize];
-            let params: Vec<Value> = p.events[ev as usize]
-                .params
-                .iter()
-                .map(|(_, t)| value(*t, &mut r))
-                .collect();
-            if e.submit(ev, params).is_ok() {
-                o.steps(&mut e);
-            }
+    play(p, runs, 0x5eed, |e, start| {
+        if start {
+            o.pending.clear();
+            o.from_held = false;
+            // The initial state, where a `from` marking may already hold, then what start
+            // queued.
+            o.after(e, &Taken::default());
         }
-    }
+        o.steps(e);
+    });
     o.out
 }
 
