@@ -570,6 +570,20 @@ pub(super) struct Loop {
     kinds: Vec<u32>,
 }
 
+impl Loop {
+    /// The events of its edges, sorted, each once.
+    fn events(&self, g: &Graph) -> Vec<EventId> {
+        let mut events: Vec<EventId> = self
+            .kinds
+            .iter()
+            .map(|&k| g.labels[g.steps()[k as usize].0 as usize].event)
+            .collect();
+        events.sort_unstable();
+        events.dedup();
+        events
+    }
+}
+
 /// The loops of the graph, in the order of their first states. One pass over the edges,
 /// component by component, the kinds marked in an array (a set of events or rules per edge
 /// cost more than the exploration on large graphs).
@@ -629,13 +643,7 @@ pub(super) fn starvation(
                     .copied()
             })
             .collect();
-        let mut events: Vec<EventId> = lp
-            .kinds
-            .iter()
-            .map(|&k| g.labels[g.steps()[k as usize].0 as usize].event)
-            .collect();
-        events.sort_unstable();
-        events.dedup();
+        let events = lp.events(g);
         // The states of the loop, in breadth-first order.
         let mut states: Vec<u32> = c.members(lp.comp).to_vec();
         states.sort_unstable();
@@ -734,14 +742,7 @@ pub(super) fn event_loops(
             .into_iter()
             .map(name)
             .collect();
-        let mut inside: Vec<EventId> = lp
-            .kinds
-            .iter()
-            .map(|&k| g.labels[g.steps()[k as usize].0 as usize].event)
-            .collect();
-        inside.sort_unstable();
-        inside.dedup();
-        let events: Vec<String> = inside.into_iter().map(name).collect();
+        let events: Vec<String> = lp.events(g).into_iter().map(name).collect();
         // The same loop in many components (a reaction possible in many states) is one finding.
         match out.iter_mut().find(|l| l.events == events) {
             Some(l) => {
