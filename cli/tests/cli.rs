@@ -560,6 +560,7 @@ fn verify_reports_time_bounds_declared_and_asked_for() {
         .expect("declared");
     assert_eq!(relay["met"], true);
     assert_eq!(relay["within_seconds"].as_f64(), Some(8.0));
+    assert_eq!(relay["within"], "8s");
     assert_eq!(relay["then"].as_array().map(Vec::len), Some(3));
     // A bound that does not read is a usage error naming it.
     let o = petrel(&["verify", &dir, "--bound", "go..M.nowhere"]);
@@ -578,7 +579,8 @@ fn verify_fails_on_a_bound_over_its_requirement() {
     let text = std::fs::read_to_string(&manifest).unwrap();
     std::fs::write(
         &manifest,
-        text.replace("within = \"8s\"", "within = \"7s\""),
+        // Written in milliseconds: the report quotes the requirement as written.
+        text.replace("within = \"8s\"", "within = \"7000ms\""),
     )
     .unwrap();
     let dir = copy.path().display().to_string();
@@ -586,7 +588,7 @@ fn verify_fails_on_a_bound_over_its_requirement() {
     let t = stdout(&o);
     assert_eq!(o.status.code(), Some(1), "{t}");
     assert!(
-        t.contains("[E0607] Error: bound `relay` is not met: M.done after go can take up to 8s, more than 7s"),
+        t.contains("[E0607] Error: bound `relay` is not met: M.done after go can take up to 8s, more than 7000ms"),
         "{t}"
     );
     assert!(t.contains("petrel.toml:31:49 ]"), "{t}");
@@ -594,7 +596,7 @@ fn verify_fails_on_a_bound_over_its_requirement() {
         t.contains("error[E0607]: bound relay (go .. M.done): 3s to 8s"),
         "{t}"
     );
-    assert!(t.contains("within 7s: VIOLATED"), "{t}");
+    assert!(t.contains("within 7000ms: VIOLATED"), "{t}");
     // Untimed, the requirement is not decided: no error.
     let o = petrel(&["verify", &dir]);
     assert_eq!(o.status.code(), Some(0), "{}", stdout(&o));

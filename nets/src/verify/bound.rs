@@ -347,6 +347,7 @@ impl Search<'_> {
             from: b.from_text.clone(),
             to: b.to_text.clone(),
             within_seconds: b.within_us.map(|us| us as f64 / 1e6),
+            within: b.within_text.clone(),
             status: BoundStatus::Bounded,
             reason: None,
             min_seconds: f.min.map(seconds),

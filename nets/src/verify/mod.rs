@@ -258,6 +258,8 @@ pub struct BoundFinding {
     pub to: String,
     /// The requirement (`within`), in seconds.
     pub within_seconds: Option<f64>,
+    /// The requirement as written in petrel.toml (`10min`).
+    pub within: Option<String>,
     /// Bounded, unbounded, `from` never happens, or not decided.
     pub status: BoundStatus,
     /// Why it is unbounded (what `to` may wait for forever), or not decided.
@@ -596,6 +598,7 @@ fn verify_inner(
                     from: b.from_text.clone(),
                     to: b.to_text.clone(),
                     within_seconds: b.within_us.map(|us| us as f64 / 1e6),
+                    within: b.within_text.clone(),
                     status: BoundStatus::NotDecided,
                     reason: Some(why.to_string()),
                     min_seconds: None,
