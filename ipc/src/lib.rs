@@ -57,6 +57,8 @@
 #![warn(missing_docs)]
 
 pub mod access;
+pub mod doorbell;
+mod epoll;
 pub mod liveness;
 pub mod naming;
 mod participant;
@@ -83,7 +85,9 @@ pub use port::{
     SendError, Sender, SenderAccount, SenderStats, Sent, ServiceSpec, SignalsPublisher,
     SignalsSubscriber, Wakeups, SPIN_WAKEUP_PERIOD,
 };
-pub use reactor::{FdSource, Reactor, ReactorError, ReactorStats, Ready, Source, WaitStrategy};
+pub use reactor::{
+    FdSource, Reactor, ReactorError, ReactorStats, Ready, Source, SourceKey, WaitStrategy,
+};
 pub use wire::{
     Ack, AckRefusal, CallMsg, EventMsg, Heartbeat, MarkingMsg, Origin, Recorder, RecorderState,
     ReloadAnswer, ReloadRequest, SignalsMsg, Value, WireError,
