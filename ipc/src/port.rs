@@ -12,6 +12,11 @@
 //! the gap ([`Received::missed`], [`ReceiverStats::missing`]): for every sender, messages
 //! sent = received + refused.
 //!
+//! **Waking the receiver.** After a delivery a sender rings the receivers' doorbells
+//! ([`crate::doorbell`]): one asleep on its futex word is woken, an awake one is left alone,
+//! and one asleep on its listener (or without a doorbell) is notified through the paired event
+//! service ([`SenderStats::notified`]).
+//!
 //! Ports of `ipc::Service` are single-threaded (not `Send`): create them on the thread that uses
 //! them. Their methods take `&self`, so a [`Reactor`](crate::reactor::Reactor) can watch
 //! receivers while the caller drains them.
