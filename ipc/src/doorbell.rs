@@ -78,8 +78,13 @@ pub struct Doorbell {
     shared: NonNull<Shared>,
     /// The receiver's doorbell removes its file when dropped.
     owned_path: Option<PathBuf>,
-    /// Receiver side: the news counter as last seen.
+    /// Receiver side: the news counter as the reactor last saw it.
     news_seen: Cell<u32>,
+    /// Receiver side: the news counter when the listener was last read.
+    news_consumed: Cell<u32>,
+    /// Receiver side: the listener may hold notifications not read yet (the receiver slept on
+    /// it, or has not been read since it was created).
+    listener_dirty: Cell<bool>,
 }
 
 impl Doorbell {
@@ -98,6 +103,8 @@ impl Doorbell {
                 shared,
                 owned_path: Some(path),
                 news_seen: Cell::new(0),
+                news_consumed: Cell::new(0),
+                listener_dirty: Cell::new(true),
             },
             Err(e) => {
                 let _ = fs::remove_file(&path);
@@ -132,6 +139,8 @@ impl Doorbell {
             shared: map(&file)?,
             owned_path: None,
             news_seen: Cell::new(0),
+            news_consumed: Cell::new(0),
+            listener_dirty: Cell::new(true),
         };
         if bell.shared().magic.load(Ordering::Acquire) != MAGIC {
             return Err(io::Error::new(
@@ -168,7 +177,27 @@ impl Doorbell {
     /// Announces how the receiver is about to sleep (`EPOLL` or `FUTEX`). The caller then
     /// issues a `SeqCst` fence ([`announced`]) before it looks for work one last time.
     pub(crate) fn announce(&self, how: u32) {
+        if how == EPOLL {
+            // Senders notify through iceoryx2 from now on.
+            self.listener_dirty.set(true);
+        }
         self.shared().mode.store(how, Ordering::SeqCst);
+    }
+
+    /// Whether the listener may hold notifications not read yet: the receiver slept on it (or
+    /// was never read), or news were rung since it was last read. A receiver that is only ever
+    /// awake or asleep on its doorbell is not notified of samples, and needs no read of its
+    /// listener (a system call) at every drain.
+    pub(crate) fn listener_may_hold(&self) -> bool {
+        self.listener_dirty.get()
+            || self.shared().news.load(Ordering::Acquire) != self.news_consumed.get()
+    }
+
+    /// Called before the listener is read: what it holds now is read.
+    pub(crate) fn reading_listener(&self) {
+        self.listener_dirty.set(false);
+        self.news_consumed
+            .set(self.shared().news.load(Ordering::Acquire));
     }
 
     /// The futex word's value, read after the announcement's fence and before the last look.
