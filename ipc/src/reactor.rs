@@ -269,6 +269,10 @@ const FD_POLL_PERIOD: Duration = Duration::from_micros(500);
 /// not ring (a process of another Petrel). See [`Reactor::set_doorbell_slice`].
 pub const DOORBELL_SLICE: Duration = Duration::from_millis(50);
 
+/// Doorbell sleeps that found a sample no doorbell rang for ([`ReactorStats::unrung`]) after
+/// which a reactor sleeps on epoll for good (see [`Reactor::doorbells`]).
+pub const UNRUNG_LIMIT: u64 = 3;
+
 /// Environment variable that, set to `off`, makes every reactor of the process sleep on epoll
 /// (iceoryx2's notifications) even when its sources have doorbells: to compare, or as a way
 /// out.
@@ -426,7 +430,9 @@ impl Reactor {
         self.doorbells.set(on);
     }
 
-    /// Whether this reactor sleeps on doorbells (see [`set_doorbells`](Self::set_doorbells)).
+    /// Whether this reactor sleeps on doorbells (see [`set_doorbells`](Self::set_doorbells)):
+    /// false after ENOSYS from `futex_waitv`, or after [`UNRUNG_LIMIT`] samples came that no
+    /// doorbell rang for.
     pub fn doorbells(&self) -> bool {
         self.doorbells.get()
     }
@@ -718,6 +724,12 @@ impl Reactor {
                     .all(|(word, seen)| word.load(Ordering::Acquire) == *seen);
                 if unchanged && poll_pending(sources) != 0 {
                     self.count(|s| s.unrung += 1);
+                    if self.stats().unrung >= UNRUNG_LIMIT {
+                        // Senders that do not ring (a process of an older Petrel): each of
+                        // their samples would wait for the end of a slice. Epoll from now on,
+                        // where their notifications wake this reactor.
+                        self.doorbells.set(false);
+                    }
                 }
                 Ok(Ready {
                     mask: look(true),

@@ -336,3 +336,62 @@ fn a_killed_receiver_leaves_no_doorbell_after_cleanup() {
     assert!(doorbells(&vehicle).is_empty(), "{:?}", doorbells(&vehicle));
     drop(tool);
 }
+
+/// A receiver whose senders cannot ring it (its doorbell removed, as with a sender of an older
+/// Petrel): each sample waits for the end of a doorbell slice, and after `UNRUNG_LIMIT` of them
+/// the reactor sleeps on epoll for good, where the senders' notifications wake it. Every
+/// message arrives either way.
+#[test]
+fn a_reactor_whose_senders_do_not_ring_falls_back_to_epoll() {
+    let vehicle = TestVehicle::new("auv");
+    let player = Participant::join(&vehicle, Role::Player).unwrap();
+    let rx = player.event_receiver().unwrap();
+    for name in doorbells(&vehicle) {
+        std::fs::remove_file(std::path::Path::new("/dev/shm").join(name)).unwrap();
+    }
+    let mut reactor = Reactor::without_signal_handling(WaitStrategy::Block).unwrap();
+    reactor.set_doorbell_slice(Duration::from_millis(10));
+    let (ack, acked) = mpsc::channel::<()>();
+    let (ready, is_ready) = mpsc::channel::<()>();
+    const N: i64 = 8;
+    std::thread::scope(|s| {
+        let vehicle = &vehicle;
+        s.spawn(move || {
+            let pln = Participant::join(vehicle, Role::program("PLN").unwrap()).unwrap();
+            let tx = pln.event_sender().unwrap();
+            ready.send(()).unwrap();
+            for i in 0..N {
+                // Long enough for the receiver to be asleep when the message comes.
+                std::thread::sleep(Duration::from_millis(30));
+                tx.send(&EventMsg::new("tick", vec![Value::Int(i)]))
+                    .unwrap();
+                if acked.recv_timeout(DEADLINE).is_err() {
+                    return;
+                }
+            }
+            assert!(tx.stats().notified >= N as u64 - 1);
+        });
+        is_ready.recv_timeout(DEADLINE).unwrap();
+        let start = Instant::now();
+        let mut got = 0;
+        while got < N {
+            assert!(start.elapsed() < DEADLINE, "only {got} of {N} arrived");
+            reactor.wait(&[&rx], Some(Duration::from_secs(5))).unwrap();
+            rx.drain(|r| {
+                assert_eq!(r.unwrap().msg.params, vec![Value::Int(got)]);
+                got += 1;
+                ack.send(()).unwrap();
+            })
+            .unwrap();
+        }
+    });
+    let stats = reactor.stats();
+    assert!(
+        stats.unrung >= petrel_ipc::reactor::UNRUNG_LIMIT,
+        "{stats:?}"
+    );
+    assert!(
+        !reactor.doorbells(),
+        "still sleeping on doorbells: {stats:?}"
+    );
+}
