@@ -940,7 +940,7 @@ impl<M: Message> Receiver<M> {
     /// or [`drain`](Self::drain), otherwise the `WaitSet` wakes again at once.
     ///
     /// Its senders then notify it through iceoryx2 at every sample, as without a
-    /// [doorbell](crate::doorbell), since nothing tells them when it sleeps.
+    /// doorbell ([`crate::doorbell`]), since nothing tells them when it sleeps.
     pub fn listener(&self) -> &Listener<ipc::Service> {
         if let Some(bell) = &self.doorbell {
             self.doorbell_off.set(true);
