@@ -305,7 +305,9 @@ pub struct ReactorStats {
     pub sleeps: u64,
     /// Times a spinning wait offered the CPU to another thread.
     pub yields: u64,
-    /// Sleeps on the sources' doorbells (futex) rather than epoll; counted in `sleeps` too.
+    /// Futex sleeps on the sources' doorbells rather than epoll, one per slice
+    /// ([`DOORBELL_SLICE`]): a wait that slept on them counts one `sleeps` and at least one of
+    /// these.
     pub doorbell_sleeps: u64,
     /// Doorbell sleeps that ran to the end of their slice ([`DOORBELL_SLICE`]) and then found
     /// a sample waiting that no doorbell rang for: a sender that does not ring, a sample sent
