@@ -10,23 +10,18 @@
 mod common;
 
 use std::collections::{BTreeSet, HashMap};
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{Read, Write};
 use std::os::fd::AsRawFd;
 use std::os::unix::net::UnixStream;
-use std::process::{Child, ChildStdin, Command, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use common::TestVehicle;
+use common::{child_role, wait_for_stdin_close, ChildProcess, TestVehicle};
 use petrel_ipc::{
     cleanup_dead_nodes, EventMsg, FdSource, Participant, Reactor, Role, Source, Value, Vehicle,
     WaitStrategy,
 };
 
-const CHILD_ENV: &str = "PETREL_DOORBELL_CHILD";
-const VEHICLE_ENV: &str = "PETREL_DOORBELL_VEHICLE";
-const PREFIX_ENV: &str = "PETREL_DOORBELL_PREFIX";
-const ARG_ENV: &str = "PETREL_DOORBELL_ARG";
 /// Messages per sender.
 const PER_SENDER: usize = 1_500;
 const SENDERS: usize = 3;
@@ -64,16 +59,12 @@ impl Gaps {
 // ---------------------------------------------------------------------------------------------
 // Child side
 
-/// Runs as a child process when `PETREL_DOORBELL_CHILD` is set; otherwise does nothing.
+/// Runs as a child process when `PETREL_IPC_CHILD` is set; otherwise does nothing.
 #[test]
 fn child() {
-    let Ok(mode) = std::env::var(CHILD_ENV) else {
+    let Some((mode, vehicle, arg)) = child_role() else {
         return;
     };
-    let name = std::env::var(VEHICLE_ENV).expect("vehicle name");
-    let prefix = std::env::var(PREFIX_ENV).expect("vehicle prefix");
-    let arg = std::env::var(ARG_ENV).unwrap_or_default();
-    let vehicle = Vehicle::with_prefix(&name, &prefix).expect("vehicle");
     match mode.as_str() {
         "receiver" => receive(&vehicle, &arg, false),
         "mixed" => receive(&vehicle, &arg, true),
@@ -163,79 +154,17 @@ fn receive(vehicle: &Vehicle, arg: &str, mixed: bool) {
     wait_for_stdin_close();
 }
 
-fn wait_for_stdin_close() {
-    let mut sink = Vec::new();
-    let _ = std::io::stdin().read_to_end(&mut sink);
-}
-
 // ---------------------------------------------------------------------------------------------
 // Parent side
 
-struct ChildProcess {
-    child: Child,
-    stdin: Option<ChildStdin>,
-    lines: mpsc::Receiver<String>,
-}
-
-impl ChildProcess {
-    fn spawn(vehicle: &Vehicle, mode: &str, arg: &str) -> Self {
-        let exe = std::env::current_exe().expect("test binary");
-        let mut child = Command::new(exe)
-            .args(["--exact", "child", "--nocapture", "--test-threads=1", "-q"])
-            .env(CHILD_ENV, mode)
-            .env(VEHICLE_ENV, vehicle.name())
-            .env(PREFIX_ENV, vehicle.prefix())
-            .env(ARG_ENV, arg)
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .spawn()
-            .expect("spawn the child");
-        let stdin = child.stdin.take();
-        let stdout = child.stdout.take().expect("child stdout");
-        let (tx, lines) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-                if let Some(report) = line.strip_prefix("@@ ") {
-                    if tx.send(report.to_owned()).is_err() {
-                        break;
-                    }
-                }
-            }
-        });
-        ChildProcess {
-            child,
-            stdin,
-            lines,
-        }
-    }
-
-    /// The numbers of the next report, which must start with `word` and come within `within`.
-    fn expect(&self, word: &str, within: Duration) -> Vec<u64> {
-        let line = self.lines.recv_timeout(within).unwrap_or_else(|e| {
-            panic!("no `{word}` within {within:?} ({e}): a lost wake-up stalls the receiver")
-        });
-        let rest = line
-            .strip_prefix(word)
-            .unwrap_or_else(|| panic!("expected `{word}`, got `{line}`"));
-        rest.split_whitespace()
-            .map(|x| x.parse().unwrap())
-            .collect()
-    }
-
-    fn finish(mut self) {
-        drop(self.stdin.take());
-        let status = self.child.wait().expect("wait for the child");
-        assert!(status.success(), "child failed: {status}");
-    }
-}
-
-impl Drop for ChildProcess {
-    fn drop(&mut self) {
-        if self.child.try_wait().ok().flatten().is_none() {
-            let _ = self.child.kill();
-            let _ = self.child.wait();
-        }
-    }
+/// The numbers of `child`'s next report, which must start with `word` and come within
+/// `within` (a lost wake-up stalls the receiver: the report never comes).
+fn expect(child: &ChildProcess, word: &str, within: Duration) -> Vec<u64> {
+    child
+        .report(word, within)
+        .split_whitespace()
+        .map(|x| x.parse().unwrap())
+        .collect()
 }
 
 fn doorbells(vehicle: &Vehicle) -> BTreeSet<String> {
@@ -257,19 +186,19 @@ fn stress(strategy: &str) {
     let vehicle = TestVehicle::new("auv");
     let start = Instant::now();
     let receiver = ChildProcess::spawn(&vehicle, "receiver", strategy);
-    receiver.expect("READY", DEADLINE);
+    expect(&receiver, "READY", DEADLINE);
     let senders: Vec<_> = (0..SENDERS)
         .map(|i| ChildProcess::spawn(&vehicle, "sender", &format!("P{i}")))
         .collect();
     let left = DEADLINE.saturating_sub(start.elapsed());
-    let got = receiver.expect("GOT", left);
+    let got = expect(&receiver, "GOT", left);
     assert_eq!(got[0], (SENDERS * PER_SENDER) as u64);
     assert!(
         got[3] > 0,
         "the receiver never slept on its doorbell: {got:?}"
     );
     for sender in &senders {
-        let sent = sender.expect("SENT", DEADLINE);
+        let sent = expect(sender, "SENT", DEADLINE);
         assert_eq!(sent[..2], [PER_SENDER as u64, 0]);
         assert_eq!(sent[2], 0, "a sender notified through iceoryx2");
     }
@@ -297,17 +226,17 @@ fn a_receiver_watching_a_descriptor_too_still_wakes() {
     let vehicle = TestVehicle::new("auv");
     let start = Instant::now();
     let receiver = ChildProcess::spawn(&vehicle, "mixed", "block");
-    receiver.expect("READY", DEADLINE);
+    expect(&receiver, "READY", DEADLINE);
     let senders: Vec<_> = (0..SENDERS)
         .map(|i| ChildProcess::spawn(&vehicle, "sender", &format!("P{i}")))
         .collect();
     let left = DEADLINE.saturating_sub(start.elapsed());
-    let got = receiver.expect("GOT", left);
+    let got = expect(&receiver, "GOT", left);
     assert_eq!(got[..2], [(SENDERS * PER_SENDER) as u64, 40]);
     assert_eq!(got[3], 0, "a mixed set sleeps on epoll, not on doorbells");
     assert!(got[2] > 0, "the receiver never slept");
     for sender in senders {
-        let sent = sender.expect("SENT", DEADLINE);
+        let sent = expect(&sender, "SENT", DEADLINE);
         assert_eq!(sent[..2], [PER_SENDER as u64, 0]);
         sender.finish();
     }
@@ -320,10 +249,9 @@ fn a_receiver_watching_a_descriptor_too_still_wakes() {
 fn a_killed_receiver_leaves_no_doorbell_after_cleanup() {
     let vehicle = TestVehicle::new("auv");
     let mut receiver = ChildProcess::spawn(&vehicle, "receiver", "block");
-    receiver.expect("READY", DEADLINE);
+    expect(&receiver, "READY", DEADLINE);
     assert_eq!(doorbells(&vehicle).len(), 1);
-    receiver.child.kill().unwrap(); // SIGKILL
-    receiver.child.wait().unwrap();
+    receiver.kill(); // SIGKILL
     assert_eq!(
         doorbells(&vehicle).len(),
         1,
