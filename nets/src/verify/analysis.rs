@@ -7,7 +7,7 @@
 //! over its strongly connected components ([`Scc`]), numbered so that every edge goes to a
 //! component numbered no higher, with no reversed copy of the edges.
 
-use super::explore::{Graph, NO_EVENT};
+use super::explore::{Edge, Edges, Graph, NO_EVENT};
 use super::{
     DeadFinding, InvariantFinding, LoopFinding, ProgressFinding, StarvationFinding, StuckFinding,
 };
@@ -111,7 +111,11 @@ pub(super) struct Scc {
 
 impl Scc {
     /// The components of `g`'s edges whose step kind `keep` keeps (every edge with `None`).
-    pub fn new(g: &Graph, keep: Option<&[bool]>) -> Scc {
+    ///
+    /// The edges of the state on top of the depth-first path are in one buffer: when the search
+    /// comes back to a state after a child, its edges are fetched again (recomputed, when the
+    /// graph does not keep them), so the search holds no edges of the states below.
+    pub fn new(g: &Graph, edges: &Edges, keep: Option<&[bool]>) -> Scc {
         let n = g.states.len();
         // Unvisited (0), then the depth-first index while the state is live, then its
         // component counted down from n - 1 (above every live index: Pearce's invariant).
@@ -125,6 +129,8 @@ impl Scc {
         let mut start: Vec<u32> = vec![0];
         let mut index = 1u32;
         let mut c = (n as u32).wrapping_sub(1);
+        let mut buf: Vec<Edge> = Vec::new();
+        let mut buf_of = u32::MAX;
         for r in 0..n as u32 {
             if rindex[r as usize] != 0 {
                 continue;
@@ -133,14 +139,18 @@ impl Scc {
             index += 1;
             call.push((r, ROOT));
             while let Some(&mut (v, ref mut off)) = call.last_mut() {
-                let range = g.edge_range(v);
-                let k = range.start + (*off & !ROOT) as usize;
-                if k < range.end {
+                if buf_of != v {
+                    edges.of(v, &mut buf);
+                    buf_of = v;
+                }
+                let k = (*off & !ROOT) as usize;
+                if k < buf.len() {
                     *off += 1;
-                    if keep.is_some_and(|kp| !kp[g.edge_kind(k)]) {
+                    let e = buf[k];
+                    if keep.is_some_and(|kp| !kp[e.kind as usize]) {
                         continue;
                     }
-                    let w = g.edge_target(k);
+                    let w = e.to;
                     if rindex[w as usize] == 0 {
                         rindex[w as usize] = index;
                         index += 1;
@@ -204,17 +214,25 @@ impl Scc {
     /// Per component: whether a state where `target` holds is reachable from it along the
     /// edges `keep` keeps (all with `None`; the components must be those of the same edges).
     /// The components are met in increasing number, so every one an edge leads to is done.
-    fn reach(&self, g: &Graph, keep: Option<&[bool]>, target: &dyn Fn(u32) -> bool) -> Vec<bool> {
+    fn reach(
+        &self,
+        edges: &Edges,
+        keep: Option<&[bool]>,
+        target: &dyn Fn(u32) -> bool,
+    ) -> Vec<bool> {
         let mut out: Vec<bool> = Vec::with_capacity(self.count());
+        let mut buf = Vec::new();
         for c in 0..self.count() as u32 {
             let r = self.members(c).iter().any(|&v| {
-                target(v)
-                    || g.edge_range(v).any(|k| {
-                        keep.is_none_or(|kp| kp[g.edge_kind(k)]) && {
-                            let d = self.comp[g.edge_target(k) as usize];
+                target(v) || {
+                    edges.of(v, &mut buf);
+                    buf.iter().any(|e| {
+                        keep.is_none_or(|kp| kp[e.kind as usize]) && {
+                            let d = self.comp[e.to as usize];
                             d != c && out[d as usize]
                         }
                     })
+                }
             });
             out.push(r);
         }
@@ -222,17 +240,134 @@ impl Scc {
     }
 }
 
+/// What one walk over the edges, component by component, answers (each part when asked):
+/// per component of the whole graph, whether an end is reachable from it (progress, when
+/// every edge counts) and which nets can still fire from it; and the loops. One walk where
+/// there were three: each walk over the edges is a replay of every state when the graph does
+/// not keep them.
+pub(super) struct Walk {
+    /// Per component: an end is reachable.
+    pub reach: Option<Vec<bool>>,
+    pub can: Option<CanFire>,
+    pub loops: Option<Vec<Loop>>,
+}
+
+impl Walk {
+    /// The walk over `all`, the components of the whole graph: `ends` (by state) for what
+    /// reaches one, `can` for the nets that can still fire, `loops` for the loops.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        p: &CompiledProject,
+        l: &Layout,
+        g: &Graph,
+        edges: &Edges,
+        all: &Scc,
+        ends: Option<&[bool]>,
+        can: bool,
+        loops: bool,
+    ) -> Walk {
+        let words = p.nets.len().div_ceil(64).max(1);
+        // The nets each step kind fires.
+        let fires = can.then(|| {
+            let mut fires = vec![0u64; g.steps().len() * words];
+            for (k, &(_, f)) in g.steps().iter().enumerate() {
+                for &r in &g.fired_sets[f as usize] {
+                    let net = l.rules[r as usize].net as usize;
+                    fires[k * words + net / 64] |= 1 << (net % 64);
+                }
+            }
+            fires
+        });
+        let mut bits = vec![0u64; if can { all.count() * words } else { 0 }];
+        let mut reach: Vec<bool> = Vec::with_capacity(if ends.is_some() { all.count() } else { 0 });
+        let mut found: Vec<Loop> = Vec::new();
+        let mut seen = vec![false; g.steps().len()];
+        let mut kinds: Vec<u32> = Vec::new();
+        let mut buf = Vec::new();
+        for c in 0..all.count() as u32 {
+            let mut r = false;
+            let mut first = u32::MAX;
+            kinds.clear();
+            let (here, done) = bits.split_at_mut(if can { c as usize * words } else { 0 });
+            for &v in all.members(c) {
+                r |= ends.is_some_and(|e| e[v as usize]);
+                edges.of(v, &mut buf);
+                for e in &buf {
+                    let d = all.comp[e.to as usize];
+                    if d != c {
+                        r |= ends.is_some() && reach[d as usize];
+                    } else if loops && e.to != v {
+                        first = first.min(v);
+                        if !seen[e.kind as usize] {
+                            seen[e.kind as usize] = true;
+                            kinds.push(e.kind);
+                        }
+                    }
+                    if let Some(fires) = &fires {
+                        let row = &mut done[..words];
+                        for w in 0..words {
+                            row[w] |= fires[e.kind as usize * words + w];
+                            if d != c {
+                                row[w] |= here[d as usize * words + w];
+                            }
+                        }
+                    }
+                }
+            }
+            if ends.is_some() {
+                reach.push(r);
+            }
+            for &k in &kinds {
+                seen[k as usize] = false;
+            }
+            if first != u32::MAX {
+                found.push(Loop {
+                    comp: c,
+                    first,
+                    kinds: kinds.clone(),
+                });
+            }
+        }
+        found.sort_unstable_by_key(|x| x.first);
+        Walk {
+            reach: ends.is_some().then_some(reach),
+            can: can.then(|| CanFire {
+                words,
+                bits,
+                no_transitions: p.nets.iter().map(|n| n.transitions.is_empty()).collect(),
+            }),
+            loops: loops.then_some(found),
+        }
+    }
+}
+
+/// Whether progress counts on every step kind of `g` (no edge's event is of a category it
+/// excludes): then the whole graph's components and [`Walk`] answer it.
+pub(super) fn progress_allowed(p: &CompiledProject, g: &Graph) -> Vec<bool> {
+    g.steps()
+        .iter()
+        .map(|&(label, _)| {
+            let e = g.labels[label as usize].event;
+            e == NO_EVENT || !p.progress_excludes.contains(&p.events[e as usize].category)
+        })
+        .collect()
+}
+
 /// Progress: from every reachable state, an end stays reachable without the events of the
 /// excluded categories (AG EF end, over the stable states). The first state (in breadth-first
 /// order) that fails, how many do, and the first state the mission stays in for good once it
 /// failed (a failing state in a bottom loop of the graph without the excluded events), with
-/// their indices.
+/// their indices. `all_reach`: per component of `all`, whether an end is reachable from it
+/// ([`Walk`]), when every edge counts ([`progress_allowed`]).
+#[allow(clippy::too_many_arguments)]
 pub(super) fn progress(
     p: &CompiledProject,
     l: &Layout,
     g: &Graph,
+    edges: &Edges,
     all: &Scc,
     ends: &[bool],
+    all_reach: Option<&[bool]>,
     describe: &dyn Fn(&[u64]) -> Vec<String>,
 ) -> Option<(ProgressFinding, u32, u32, Vec<bool>)> {
     let n = g.states.len();
@@ -241,34 +376,31 @@ pub(super) fn progress(
         return None;
     }
     // The step kinds progress counts on.
-    let allowed: Vec<bool> = g
-        .steps()
-        .iter()
-        .map(|&(label, _)| {
-            let e = g.labels[label as usize].event;
-            e == NO_EVENT || !p.progress_excludes.contains(&p.events[e as usize].category)
-        })
-        .collect();
+    let allowed = progress_allowed(p, g);
     // Over the allowed edges: their own components, unless every edge is allowed.
     let own;
-    let (scc, keep) = if allowed.iter().all(|&a| a) {
-        (all, None)
-    } else {
-        own = Scc::new(g, Some(&allowed));
-        (&own, Some(allowed.as_slice()))
+    let owned;
+    let (scc, keep, creach) = match all_reach {
+        Some(r) if allowed.iter().all(|&a| a) => (all, None, r),
+        _ => {
+            let keep = (!allowed.iter().all(|&a| a)).then_some(allowed.as_slice());
+            own = Scc::new(g, edges, keep);
+            owned = own.reach(edges, keep, &|v| ends[v as usize]);
+            (&own, keep, owned.as_slice())
+        }
     };
-    let creach = scc.reach(g, keep, &|v| ends[v as usize]);
     let reach: Vec<bool> = (0..n).map(|i| creach[scc.comp[i] as usize]).collect();
     let first = (0..n).find(|&i| !reach[i])?;
     let failing = reach.iter().filter(|&&r| !r).count();
     // Where the mission stays: a failing state whose loop (allowed edges only) has no way out.
     // Every allowed successor of a failing state fails too (it is in a component numbered no
     // higher, whose states all fail or all reach), so such a loop exists below each.
-    let has_exit = |c: u32| {
+    let mut buf = Vec::new();
+    let mut has_exit = |c: u32| {
         scc.members(c).iter().any(|&v| {
-            g.edge_range(v).any(|k| {
-                keep.is_none_or(|kp| kp[g.edge_kind(k)]) && scc.comp[g.edge_target(k) as usize] != c
-            })
+            edges.of(v, &mut buf);
+            buf.iter()
+                .any(|e| keep.is_none_or(|kp| kp[e.kind as usize]) && scc.comp[e.to as usize] != c)
         })
     };
     let mut exit_known: HashMap<u32, bool> = HashMap::new();
@@ -350,11 +482,11 @@ pub(super) fn stuck_nets(
     l: &Layout,
     g: &Graph,
     all: &Scc,
+    can: CanFire,
     describe: &dyn Fn(&[u64]) -> Vec<String>,
 ) -> (Vec<Stuck>, CanFire) {
     let n = g.states.len();
     let mut out = Vec::new();
-    let can = CanFire::new(p, l, g, all);
     for net in 0..p.nets.len() {
         let found = (0..n).find(|&i| {
             let s = &g.states[i];
@@ -399,40 +531,6 @@ pub(super) struct CanFire {
 }
 
 impl CanFire {
-    fn new(p: &CompiledProject, l: &Layout, g: &Graph, all: &Scc) -> CanFire {
-        let words = p.nets.len().div_ceil(64).max(1);
-        // The nets each step kind fires.
-        let mut fires = vec![0u64; g.steps().len() * words];
-        for (k, &(_, f)) in g.steps().iter().enumerate() {
-            for &r in &g.fired_sets[f as usize] {
-                let net = l.rules[r as usize].net as usize;
-                fires[k * words + net / 64] |= 1 << (net % 64);
-            }
-        }
-        let mut bits = vec![0u64; all.count() * words];
-        for c in 0..all.count() as u32 {
-            let (here, done) = bits.split_at_mut(c as usize * words);
-            let row = &mut done[..words];
-            for &v in all.members(c) {
-                for k in g.edge_range(v) {
-                    let kind = g.edge_kind(k);
-                    let d = all.comp[g.edge_target(k) as usize];
-                    for w in 0..words {
-                        row[w] |= fires[kind * words + w];
-                        if d != c {
-                            row[w] |= here[d as usize * words + w];
-                        }
-                    }
-                }
-            }
-        }
-        CanFire {
-            words,
-            bits,
-            no_transitions: p.nets.iter().map(|n| n.transitions.is_empty()).collect(),
-        }
-    }
-
     /// Whether net `net` can still fire from state `i` (`all`: the components it was built on).
     pub fn can(&self, all: &Scc, net: NetId, i: u32) -> bool {
         let net = net as usize;
@@ -556,9 +654,9 @@ fn resource_cycle(
     None
 }
 
-/// Loops of stable states: the strongly connected components of the whole graph.
-pub(super) fn components(g: &Graph) -> Scc {
-    Scc::new(g, None)
+/// The strongly connected components of the whole graph.
+pub(super) fn components(g: &Graph, edges: &Edges) -> Scc {
+    Scc::new(g, edges, None)
 }
 
 /// A loop of stable states: a component with edges inside it between two different states.
@@ -582,40 +680,6 @@ impl Loop {
         events.dedup();
         events
     }
-}
-
-/// The loops of the graph, in the order of their first states. One pass over the edges,
-/// component by component, the kinds marked in an array (a set of events or rules per edge
-/// cost more than the exploration on large graphs).
-pub(super) fn loops(g: &Graph, c: &Scc) -> Vec<Loop> {
-    let mut seen = vec![false; g.steps().len()];
-    let mut out = Vec::new();
-    for comp in 0..c.count() as u32 {
-        let mut first = u32::MAX;
-        let mut kinds: Vec<u32> = Vec::new();
-        for &v in c.members(comp) {
-            for k in g.edge_range(v) {
-                let to = g.edge_target(k);
-                if to == v || c.comp[to as usize] != comp {
-                    continue;
-                }
-                first = first.min(v);
-                let kind = g.edge_kind(k);
-                if !seen[kind] {
-                    seen[kind] = true;
-                    kinds.push(kind as u32);
-                }
-            }
-        }
-        for &k in &kinds {
-            seen[k as usize] = false;
-        }
-        if first != u32::MAX {
-            out.push(Loop { comp, first, kinds });
-        }
-    }
-    out.sort_unstable_by_key(|x| x.first);
-    out
 }
 
 /// Starvation: a loop of stable states the environment can keep the mission in forever, in
@@ -719,14 +783,17 @@ pub(super) fn starvation(
 pub(super) fn event_loops(
     p: &CompiledProject,
     g: &Graph,
+    edges: &Edges,
     c: &Scc,
     loops: &[Loop],
 ) -> Vec<LoopFinding> {
     // The edges that move, with their events.
     let moves = |a: u32| {
-        g.edges(a)
+        let mut buf = Vec::new();
+        edges.of(a, &mut buf);
+        buf.into_iter()
             .filter(move |e| e.to != a)
-            .map(|e| (e.to, g.labels[e.label as usize].event))
+            .map(|e| (e.to, g.labels[g.label_of(e.kind) as usize].event))
     };
     let name = |e: EventId| {
         if e == NO_EVENT {
@@ -832,7 +899,8 @@ mod tests {
                 .map(|_| (0..rnd(4)).map(|_| rnd(n as u64) as u32).collect())
                 .collect();
             let g = tests_graph(&adj);
-            let scc = super::Scc::new(&g, None);
+            let edges = super::Edges::new(&g, None);
+            let scc = super::Scc::new(&g, &edges, None);
             let reach = naive(n, &adj);
             for a in 0..n {
                 for b in 0..n {
@@ -853,7 +921,7 @@ mod tests {
             assert_eq!(seen, n);
             // Reachability through the components, against the brute force.
             let target = |v: u32| v.is_multiple_of(5);
-            let creach = scc.reach(&g, None, &target);
+            let creach = scc.reach(&edges, None, &target);
             for a in 0..n {
                 let expect = (0..n).any(|b| reach[a][b] && target(b as u32));
                 assert_eq!(creach[scc.comp[a] as usize], expect, "{adj:?} {a}");
