@@ -112,57 +112,158 @@ pub(super) struct Scc {
 impl Scc {
     /// The components of `g`'s edges whose step kind `keep` keeps (every edge with `None`).
     ///
-    /// The edges of the state on top of the depth-first path are in one buffer: when the search
-    /// comes back to a state after a child, its edges are fetched again (recomputed, when the
-    /// graph does not keep them), so the search holds no edges of the states below.
+    /// Each state's edges are fetched (recomputed, when the graph does not keep them) when the
+    /// search enters it, and its targets not visited yet are kept for the search to come back
+    /// to, in one vector for the whole depth-first path, while they fit in a budget of half a
+    /// word per state; beyond it, a state's edges are fetched again each time the search comes
+    /// back to it after a child.
     pub fn new(g: &Graph, edges: &Edges, keep: Option<&[bool]>) -> Scc {
+        Scc::search(g, edges, keep, None)
+    }
+
+    /// The components of the whole graph, and what [`Walk`] answers, in the same search: each
+    /// edge is looked at when its source is entered or left, when its target is either done
+    /// (in a component numbered lower) or live (in the source's component), so the walk needs
+    /// no pass of its own over the edges.
+    pub fn with_walk(g: &Graph, edges: &Edges, mut want: Folded) -> (Scc, Walk) {
+        let scc = Scc::search(g, edges, None, Some(&mut want));
+        (scc, want.finish())
+    }
+
+    fn search(
+        g: &Graph,
+        edges: &Edges,
+        keep: Option<&[bool]>,
+        mut walk: Option<&mut Folded>,
+    ) -> Scc {
         let n = g.states.len();
+        let top = (n as u32).wrapping_sub(1);
         // Unvisited (0), then the depth-first index while the state is live, then its
         // component counted down from n - 1 (above every live index: Pearce's invariant).
         let mut rindex = vec![0u32; n];
         let mut stack: Vec<u32> = Vec::new();
-        // The depth-first path: each state and how many of its edges were looked at, with
+        // The depth-first path: each state and how many of its targets were looked at, with
         // ROOT while no edge led lower.
         const ROOT: u32 = 1 << 31;
         let mut call: Vec<(u32, u32)> = Vec::new();
+        // Per state on the path, where its unvisited targets start in `pending` (the top
+        // state's run to the end), or NOT_KEPT.
+        const NOT_KEPT: u32 = u32::MAX;
+        const FEW: usize = 4;
+        let mut starts: Vec<u32> = Vec::new();
+        let mut pending: Vec<Edge> = Vec::new();
+        let budget = (n / 2).max(1 << 16);
         let mut order: Vec<u32> = Vec::with_capacity(n);
         let mut start: Vec<u32> = vec![0];
         let mut index = 1u32;
         let mut c = (n as u32).wrapping_sub(1);
         let mut buf: Vec<Edge> = Vec::new();
         let mut buf_of = u32::MAX;
+        let kept = |e: &Edge| keep.is_none_or(|kp| kp[e.kind as usize]);
         for r in 0..n as u32 {
             if rindex[r as usize] != 0 {
                 continue;
             }
-            rindex[r as usize] = index;
-            index += 1;
-            call.push((r, ROOT));
-            while let Some(&mut (v, ref mut off)) = call.last_mut() {
-                if buf_of != v {
-                    edges.of(v, &mut buf);
-                    buf_of = v;
-                }
-                let k = (*off & !ROOT) as usize;
-                if k < buf.len() {
-                    *off += 1;
-                    let e = buf[k];
-                    if keep.is_some_and(|kp| !kp[e.kind as usize]) {
-                        continue;
+            let mut entering = Some(r);
+            loop {
+                if let Some(w) = entering.take() {
+                    rindex[w as usize] = index;
+                    index += 1;
+                    edges.of(w, &mut buf);
+                    buf_of = w;
+                    let mut flags = ROOT;
+                    // The targets already visited are looked at now (an edge's order does not
+                    // matter to the algorithm), the others kept if they are few.
+                    let from = pending.len();
+                    for e in buf.iter().filter(|e| kept(e)) {
+                        let x = rindex[e.to as usize];
+                        if x == 0 {
+                            pending.push(*e);
+                        } else if x < rindex[w as usize] {
+                            rindex[w as usize] = x;
+                            flags = 0;
+                        }
                     }
-                    let w = e.to;
+                    if let Some(f) = walk.as_deref_mut() {
+                        // A state that may be a component's root gathers for it; the others
+                        // for the nearest one below them on the path, in their component.
+                        if flags == ROOT {
+                            f.open();
+                        }
+                        f.state(w);
+                        for e in &buf {
+                            let x = rindex[e.to as usize];
+                            f.edge(w, e, (x != 0).then(|| f.done(e.to).then(|| top - x)));
+                        }
+                    }
+                    if pending.len() - from <= FEW && pending.len() <= budget {
+                        starts.push(from as u32);
+                    } else {
+                        pending.truncate(from);
+                        starts.push(NOT_KEPT);
+                    }
+                    call.push((w, flags));
+                }
+                let Some(&mut (v, ref mut off)) = call.last_mut() else {
+                    break;
+                };
+                let from = starts[starts.len() - 1];
+                let next = if from != NOT_KEPT {
+                    let k = from as usize + (*off & !ROOT) as usize;
+                    (k < pending.len()).then(|| {
+                        *off += 1;
+                        pending[k].to
+                    })
+                } else {
+                    if buf_of != v {
+                        edges.of(v, &mut buf);
+                        buf_of = v;
+                    }
+                    let mut found = None;
+                    while let Some(e) = buf.get((*off & !ROOT) as usize) {
+                        *off += 1;
+                        if kept(e) {
+                            found = Some(e.to);
+                            break;
+                        }
+                    }
+                    found
+                };
+                if let Some(w) = next {
                     if rindex[w as usize] == 0 {
-                        rindex[w as usize] = index;
-                        index += 1;
-                        call.push((w, ROOT));
+                        entering = Some(w);
                     } else if rindex[w as usize] < rindex[v as usize] {
                         rindex[v as usize] = rindex[w as usize];
-                        *off &= !ROOT;
+                        if *off & ROOT != 0 {
+                            *off &= !ROOT;
+                            if let Some(f) = walk.as_deref_mut() {
+                                f.merge();
+                            }
+                        }
                     }
                     continue;
                 }
                 let root = *off & ROOT != 0;
+                if let Some(f) = walk.as_deref_mut() {
+                    // Every target is visited now: the edges not looked at when `v` was
+                    // entered (those to targets then unvisited; all of them again when they
+                    // were not kept, which changes nothing).
+                    let rest = if from != NOT_KEPT {
+                        &pending[from as usize..]
+                    } else {
+                        debug_assert_eq!(buf_of, v);
+                        &buf[..]
+                    };
+                    for e in rest {
+                        let x = rindex[e.to as usize];
+                        f.edge(v, e, Some(f.done(e.to).then(|| top - x)));
+                    }
+                }
                 call.pop();
+                if from != NOT_KEPT {
+                    pending.truncate(from as usize);
+                }
+                starts.pop();
                 if root {
                     index -= 1;
                     while let Some(&w) = stack.last() {
@@ -176,6 +277,9 @@ impl Scc {
                     }
                     rindex[v as usize] = c;
                     order.push(v);
+                    if let Some(f) = walk.as_deref_mut() {
+                        f.close(top - c, &order[start[start.len() - 1] as usize..]);
+                    }
                     c = c.wrapping_sub(1);
                     start.push(order.len() as u32);
                 } else {
@@ -184,13 +288,17 @@ impl Scc {
                 if let Some(&mut (u, ref mut uoff)) = call.last_mut() {
                     if rindex[v as usize] < rindex[u as usize] {
                         rindex[u as usize] = rindex[v as usize];
-                        *uoff &= !ROOT;
+                        if *uoff & ROOT != 0 {
+                            *uoff &= !ROOT;
+                            if let Some(f) = walk.as_deref_mut() {
+                                f.merge();
+                            }
+                        }
                     }
                 }
             }
         }
         // Number the components from 0 in the order they completed.
-        let top = (n as u32).wrapping_sub(1);
         for x in &mut rindex {
             *x = top - *x;
         }
@@ -240,11 +348,12 @@ impl Scc {
     }
 }
 
-/// What one walk over the edges, component by component, answers (each part when asked):
-/// per component of the whole graph, whether an end is reachable from it (progress, when
-/// every edge counts) and which nets can still fire from it; and the loops. One walk where
-/// there were three: each walk over the edges is a replay of every state when the graph does
-/// not keep them.
+/// What the search for the components of the whole graph answers besides them
+/// ([`Scc::with_walk`], each part when asked): per component, whether an end is reachable from
+/// it (progress, when every edge counts) and which nets can still fire from it; and the loops.
+/// No pass over the edges of its own, where there were three: each is a replay of every state
+/// when the graph does not keep its edges.
+#[cfg_attr(test, derive(Debug, PartialEq))]
 pub(super) struct Walk {
     /// Per component: an end is reachable.
     pub reach: Option<Vec<bool>>,
@@ -252,43 +361,220 @@ pub(super) struct Walk {
     pub loops: Option<Vec<Loop>>,
 }
 
-impl Walk {
-    /// The walk over `all`, the components of the whole graph: `ends` (by state) for what
-    /// reaches one, `can` for the nets that can still fire, `loops` for the loops.
-    #[allow(clippy::too_many_arguments)]
+/// The nets each step kind of `g` fires (`words` words of bits per kind), the words, and the
+/// nets with no transition (a store of places: never stuck), for [`CanFire`].
+pub(super) fn nets_fired(
+    p: &CompiledProject,
+    l: &Layout,
+    g: &Graph,
+) -> (Vec<u64>, usize, Vec<bool>) {
+    let words = p.nets.len().div_ceil(64).max(1);
+    let mut fires = vec![0u64; g.steps().len() * words];
+    for (k, &(_, f)) in g.steps().iter().enumerate() {
+        for &r in &g.fired_sets[f as usize] {
+            let net = l.rules[r as usize].net as usize;
+            fires[k * words + net / 64] |= 1 << (net % 64);
+        }
+    }
+    (
+        fires,
+        words,
+        p.nets.iter().map(|n| n.transitions.is_empty()).collect(),
+    )
+}
+
+/// What [`Scc::with_walk`] gathers, for each component while it is being found: one set of
+/// values per state of the depth-first path that may still be a component's root (a state
+/// that turns out not to be one hands its values to the next such state below it, which is
+/// in its component), closed into the component's when its root is left.
+pub(super) struct Folded<'x> {
+    ends: Option<&'x [bool]>,
+    /// The nets each step kind fires, `words` words each (when the nets that can fire are
+    /// asked; `words` is 0 otherwise), and the nets with no transition.
+    fires: Vec<u64>,
+    words: usize,
+    no_transitions: Vec<bool>,
+    /// Words of a set of step kinds (0 when the loops are not asked).
+    kw: usize,
+    /// Per open set: an end is reachable (0 or 1), the first state with an edge inside the
+    /// component to another state (`u64::MAX`: none yet), the nets that can fire (`words`),
+    /// the step kinds of those inner edges (`kw`).
+    open: Vec<u64>,
+    reach: Vec<bool>,
+    bits: Vec<u64>,
+    found: Vec<Loop>,
+    /// A bit per state whose component is complete.
+    done: Vec<u64>,
+}
+
+impl<'x> Folded<'x> {
+    /// What to gather over `g`: what reaches `ends` (when given), the nets that can still fire
+    /// (`nets`, from [`nets_fired`], when given), the loops (when `loops`).
     pub fn new(
-        p: &CompiledProject,
-        l: &Layout,
         g: &Graph,
+        ends: Option<&'x [bool]>,
+        nets: Option<(Vec<u64>, usize, Vec<bool>)>,
+        loops: bool,
+    ) -> Folded<'x> {
+        let (fires, words, no_transitions) = nets.unwrap_or_default();
+        Folded {
+            ends,
+            fires,
+            words,
+            no_transitions,
+            kw: if loops {
+                g.steps().len().div_ceil(64).max(1)
+            } else {
+                0
+            },
+            open: Vec::new(),
+            reach: Vec::new(),
+            bits: Vec::new(),
+            found: Vec::new(),
+            done: vec![0; g.states.len().div_ceil(64)],
+        }
+    }
+
+    fn stride(&self) -> usize {
+        2 + self.words + self.kw
+    }
+
+    /// A state that may be a component's root is entered.
+    fn open(&mut self) {
+        let st = self.stride();
+        self.open.resize(self.open.len() + st, 0);
+        let k = self.open.len() - st;
+        self.open[k + 1] = u64::MAX;
+    }
+
+    /// State `v` is in the component of the top set.
+    fn state(&mut self, v: u32) {
+        if self.ends.is_some_and(|e| e[v as usize]) {
+            let k = self.open.len() - self.stride();
+            self.open[k] = 1;
+        }
+    }
+
+    /// Edge `e` out of `v`, in the component of the top set, to a target not visited yet
+    /// (`None`), in component `d` (`Some(Some(d))`, done), or live (`Some(None)`: in the
+    /// component of `v`).
+    fn edge(&mut self, v: u32, e: &Edge, target: Option<Option<u32>>) {
+        debug_assert!(!self.open.is_empty());
+        let (words, st) = (self.words, self.stride());
+        let k = self.open.len() - st;
+        let kind = e.kind as usize;
+        for w in 0..words {
+            self.open[k + 2 + w] |= self.fires[kind * words + w];
+        }
+        match target {
+            None => {}
+            Some(Some(d)) => {
+                if self.ends.is_some() && self.reach[d as usize] {
+                    self.open[k] = 1;
+                }
+                for w in 0..words {
+                    self.open[k + 2 + w] |= self.bits[d as usize * words + w];
+                }
+            }
+            Some(None) if self.kw > 0 && e.to != v => {
+                self.open[k + 1] = self.open[k + 1].min(u64::from(v));
+                self.open[k + 2 + words + kind / 64] |= 1 << (kind % 64);
+            }
+            Some(None) => {}
+        }
+    }
+
+    /// The top set's state is not a component's root: its values go to the set below.
+    fn merge(&mut self) {
+        let st = self.stride();
+        let k = self.open.len() - st;
+        debug_assert!(k >= st);
+        let below = k - st;
+        self.open[below] |= self.open[k];
+        self.open[below + 1] = self.open[below + 1].min(self.open[k + 1]);
+        for w in 2..st {
+            self.open[below + w] |= self.open[k + w];
+        }
+        self.open.truncate(k);
+    }
+
+    /// Whether state `v`'s component is complete (its number is then final; a live state's
+    /// depth-first index may equal a complete component's number).
+    fn done(&self, v: u32) -> bool {
+        self.done
+            .get(v as usize / 64)
+            .is_some_and(|w| w & (1 << (v % 64)) != 0)
+    }
+
+    /// The top set's state is the root of component `comp`, now complete with `members`.
+    fn close(&mut self, comp: u32, members: &[u32]) {
+        for &v in members {
+            let w = v as usize / 64;
+            if self.done.len() <= w {
+                self.done.resize(w + 1, 0);
+            }
+            self.done[w] |= 1 << (v % 64);
+        }
+        let (words, st) = (self.words, self.stride());
+        let k = self.open.len() - st;
+        debug_assert_eq!(self.reach.len(), comp as usize);
+        self.reach.push(self.open[k] != 0);
+        self.bits
+            .extend_from_slice(&self.open[k + 2..k + 2 + words]);
+        if self.open[k + 1] != u64::MAX {
+            let mut kinds = Vec::new();
+            for (w, &bits) in self.open[k + 2 + words..k + st].iter().enumerate() {
+                let mut b = bits;
+                while b != 0 {
+                    kinds.push((w * 64) as u32 + b.trailing_zeros());
+                    b &= b - 1;
+                }
+            }
+            self.found.push(Loop {
+                comp,
+                first: self.open[k + 1] as u32,
+                kinds,
+            });
+        }
+        self.open.truncate(k);
+    }
+
+    fn finish(mut self) -> Walk {
+        self.found.sort_unstable_by_key(|x| x.first);
+        Walk {
+            reach: self.ends.is_some().then_some(self.reach),
+            can: (self.words > 0).then_some(CanFire {
+                words: self.words,
+                bits: self.bits,
+                no_transitions: self.no_transitions,
+            }),
+            loops: (self.kw > 0).then_some(self.found),
+        }
+    }
+}
+
+#[cfg(test)]
+impl Walk {
+    /// The same answers as [`Scc::with_walk`], by a pass of their own over the edges,
+    /// component by component (what the search does at once; the tests compare them).
+    fn separate(
         edges: &Edges,
         all: &Scc,
         ends: Option<&[bool]>,
-        can: bool,
+        nets: Option<(Vec<u64>, usize, Vec<bool>)>,
         loops: bool,
     ) -> Walk {
-        let words = p.nets.len().div_ceil(64).max(1);
-        // The nets each step kind fires.
-        let fires = can.then(|| {
-            let mut fires = vec![0u64; g.steps().len() * words];
-            for (k, &(_, f)) in g.steps().iter().enumerate() {
-                for &r in &g.fired_sets[f as usize] {
-                    let net = l.rules[r as usize].net as usize;
-                    fires[k * words + net / 64] |= 1 << (net % 64);
-                }
-            }
-            fires
-        });
-        let mut bits = vec![0u64; if can { all.count() * words } else { 0 }];
-        let mut reach: Vec<bool> = Vec::with_capacity(if ends.is_some() { all.count() } else { 0 });
+        let can = nets.is_some();
+        let (fires, words, no_transitions) = nets.unwrap_or_default();
+        let mut bits = vec![0u64; all.count() * words];
+        let mut reach: Vec<bool> = Vec::new();
         let mut found: Vec<Loop> = Vec::new();
-        let mut seen = vec![false; g.steps().len()];
-        let mut kinds: Vec<u32> = Vec::new();
         let mut buf = Vec::new();
         for c in 0..all.count() as u32 {
             let mut r = false;
             let mut first = u32::MAX;
-            kinds.clear();
-            let (here, done) = bits.split_at_mut(if can { c as usize * words } else { 0 });
+            let mut kinds: Vec<u32> = Vec::new();
+            let (here, done) = bits.split_at_mut(c as usize * words);
             for &v in all.members(c) {
                 r |= ends.is_some_and(|e| e[v as usize]);
                 edges.of(v, &mut buf);
@@ -298,43 +584,35 @@ impl Walk {
                         r |= ends.is_some() && reach[d as usize];
                     } else if loops && e.to != v {
                         first = first.min(v);
-                        if !seen[e.kind as usize] {
-                            seen[e.kind as usize] = true;
+                        if !kinds.contains(&e.kind) {
                             kinds.push(e.kind);
                         }
                     }
-                    if let Some(fires) = &fires {
-                        let row = &mut done[..words];
-                        for w in 0..words {
-                            row[w] |= fires[e.kind as usize * words + w];
-                            if d != c {
-                                row[w] |= here[d as usize * words + w];
-                            }
+                    for w in 0..words {
+                        done[w] |= fires[e.kind as usize * words + w];
+                        if d != c {
+                            done[w] |= here[d as usize * words + w];
                         }
                     }
                 }
             }
-            if ends.is_some() {
-                reach.push(r);
-            }
-            for &k in &kinds {
-                seen[k as usize] = false;
-            }
+            reach.push(r);
+            kinds.sort_unstable();
             if first != u32::MAX {
                 found.push(Loop {
                     comp: c,
                     first,
-                    kinds: kinds.clone(),
+                    kinds,
                 });
             }
         }
         found.sort_unstable_by_key(|x| x.first);
         Walk {
             reach: ends.is_some().then_some(reach),
-            can: can.then(|| CanFire {
+            can: can.then_some(CanFire {
                 words,
                 bits,
-                no_transitions: p.nets.iter().map(|n| n.transitions.is_empty()).collect(),
+                no_transitions,
             }),
             loops: loops.then_some(found),
         }
@@ -523,6 +801,7 @@ pub(super) fn stuck_nets(
 
 /// Per component of the whole graph: the nets that can still fire from its states (a set of
 /// nets, one bit each).
+#[cfg_attr(test, derive(Debug, PartialEq))]
 pub(super) struct CanFire {
     words: usize,
     bits: Vec<u64>,
@@ -654,12 +933,8 @@ fn resource_cycle(
     None
 }
 
-/// The strongly connected components of the whole graph.
-pub(super) fn components(g: &Graph, edges: &Edges) -> Scc {
-    Scc::new(g, edges, None)
-}
-
 /// A loop of stable states: a component with edges inside it between two different states.
+#[cfg_attr(test, derive(Debug, PartialEq))]
 pub(super) struct Loop {
     comp: u32,
     /// Its first state (in breadth-first order) with such an edge.
@@ -926,6 +1201,26 @@ mod tests {
                 let expect = (0..n).any(|b| reach[a][b] && target(b as u32));
                 assert_eq!(creach[scc.comp[a] as usize], expect, "{adj:?} {a}");
             }
+            // The walk folded into the search, against a pass of its own: the same
+            // components, reach, nets that can fire (each step kind firing one of 70 nets:
+            // two words) and loops.
+            let ends: Vec<bool> = (0..n as u32).map(target).collect();
+            let kinds = g.steps().len();
+            let words = 2;
+            let mut fires = vec![0u64; kinds * words];
+            for k in 0..kinds {
+                let net = (k * 37) % 70;
+                fires[k * words + net / 64] |= 1 << (net % 64);
+            }
+            let nets = || Some((fires.clone(), words, vec![false; 70]));
+            let (folded_scc, folded) = super::Scc::with_walk(
+                &g,
+                &edges,
+                super::Folded::new(&g, Some(&ends), nets(), true),
+            );
+            assert_eq!(folded_scc.comp, scc.comp, "{adj:?}");
+            let separate = super::Walk::separate(&edges, &scc, Some(&ends), nets(), true);
+            assert_eq!(folded, separate, "{adj:?}");
         }
     }
 }

@@ -1397,8 +1397,8 @@ pub(super) fn explore<'a>(
 /// state").
 const KEEP_EDGES: u64 = 1 << 20;
 
-/// A graph with the edges `adj` (state `i`'s targets), every edge of one step kind, for the
-/// analyses' unit tests.
+/// A graph with the edges `adj` (state `i`'s targets), of 70 step kinds (edge `k` of state `i`
+/// of kind `(7i + k) % 70`, two words of kinds), for the analyses' unit tests.
 #[cfg(test)]
 pub(super) fn tests_graph(adj: &[Vec<u32>]) -> Graph {
     let mut g = Graph::new(1, 0, 0);
@@ -1413,12 +1413,12 @@ pub(super) fn tests_graph(adj: &[Vec<u32>]) -> Graph {
         counter: None,
     });
     g.fired_sets.push(Vec::new());
-    g.steps.push((0, 0));
-    for succ in adj {
+    g.steps.extend((0..70).map(|_| (0, 0)));
+    for (i, succ) in adj.iter().enumerate() {
         g.edge_start.push(g.edge_to.len() as u64);
-        for &j in succ {
+        for (k, &j) in succ.iter().enumerate() {
             g.edge_to.push(u64::from(j));
-            g.edge_step.push(0);
+            g.edge_step.push(((7 * i + k) % 70) as u64);
             g.edges += 1;
         }
     }

@@ -593,23 +593,22 @@ fn verify_inner(
     let ends = analysis::ends(p, l, &g);
     // The strongly connected components of the whole graph, for what is reachable from each
     // state (progress, stuck nets) and for the loops.
-    let all = (!opts.skip_liveness || whole).then(|| analysis::components(&g, &edges));
-    // One walk over the edges for what reaches an end (when progress counts every edge), the
-    // nets that can still fire, and the loops.
+    // In the same search: what reaches an end (when progress counts every edge), the nets
+    // that can still fire, and the loops.
     let declares_ends = !p.finals.is_empty() || !p.goals.is_empty();
     let every_edge = analysis::progress_allowed(p, &g).iter().all(|&a| a);
-    let mut walk = all.as_ref().map(|all| {
-        analysis::Walk::new(
-            p,
-            l,
+    let (all, mut walk) = if !opts.skip_liveness || whole {
+        let want = analysis::Folded::new(
             &g,
-            &edges,
-            all,
             (!opts.skip_liveness && declares_ends && every_edge).then_some(ends.as_slice()),
-            !opts.skip_liveness,
+            (!opts.skip_liveness).then(|| analysis::nets_fired(p, l, &g)),
             whole,
-        )
-    });
+        );
+        let (all, walk) = analysis::Scc::with_walk(&g, &edges, want);
+        (Some(all), Some(walk))
+    } else {
+        (None, None)
+    };
     if let (false, Some(all), Some(walk)) = (opts.skip_liveness, &all, &mut walk) {
         report.no_progress = analysis::progress(
             p,
