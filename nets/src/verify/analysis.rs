@@ -114,11 +114,16 @@ impl Scc {
     ///
     /// Each state's edges are fetched (recomputed, when the graph does not keep them) when the
     /// search enters it, and its targets not visited yet are kept for the search to come back
-    /// to, in one vector for the whole depth-first path, while they fit in a budget of half a
-    /// word per state; beyond it, a state's edges are fetched again each time the search comes
+    /// to, in one vector for the whole depth-first path, while they fit in a budget of half an
+    /// edge (4 bytes) per state; beyond it, a state's edges are fetched again each time the search comes
     /// back to it after a child.
     pub fn new(g: &Graph, edges: &Edges, keep: Option<&[bool]>) -> Scc {
-        Scc::search(g, edges, keep, None)
+        Scc::search(g, edges, keep, None, Scc::budget(g))
+    }
+
+    /// Unvisited targets the search keeps at most: half an edge per state.
+    fn budget(g: &Graph) -> usize {
+        (g.states.len() / 2).max(1 << 16)
     }
 
     /// The components of the whole graph, and what [`Walk`] answers, in the same search: each
@@ -126,7 +131,14 @@ impl Scc {
     /// (in a component numbered lower) or live (in the source's component), so the walk needs
     /// no pass of its own over the edges.
     pub fn with_walk(g: &Graph, edges: &Edges, mut want: Folded) -> (Scc, Walk) {
-        let scc = Scc::search(g, edges, None, Some(&mut want));
+        let scc = Scc::search(g, edges, None, Some(&mut want), Scc::budget(g));
+        (scc, want.finish())
+    }
+
+    /// [`Scc::with_walk`] keeping at most `budget` unvisited targets (the tests try 0).
+    #[cfg(test)]
+    fn with_walk_within(g: &Graph, edges: &Edges, mut want: Folded, budget: usize) -> (Scc, Walk) {
+        let scc = Scc::search(g, edges, None, Some(&mut want), budget);
         (scc, want.finish())
     }
 
@@ -135,6 +147,7 @@ impl Scc {
         edges: &Edges,
         keep: Option<&[bool]>,
         mut walk: Option<&mut Folded>,
+        budget: usize,
     ) -> Scc {
         let n = g.states.len();
         let top = (n as u32).wrapping_sub(1);
@@ -149,10 +162,8 @@ impl Scc {
         // Per state on the path, where its unvisited targets start in `pending` (the top
         // state's run to the end), or NOT_KEPT.
         const NOT_KEPT: u32 = u32::MAX;
-        const FEW: usize = 4;
         let mut starts: Vec<u32> = Vec::new();
         let mut pending: Vec<Edge> = Vec::new();
-        let budget = (n / 2).max(1 << 16);
         let mut order: Vec<u32> = Vec::with_capacity(n);
         let mut start: Vec<u32> = vec![0];
         let mut index = 1u32;
@@ -173,7 +184,7 @@ impl Scc {
                     buf_of = w;
                     let mut flags = ROOT;
                     // The targets already visited are looked at now (an edge's order does not
-                    // matter to the algorithm), the others kept if they are few.
+                    // matter to the algorithm), the others kept within the budget.
                     let from = pending.len();
                     for e in buf.iter().filter(|e| kept(e)) {
                         let x = rindex[e.to as usize];
@@ -196,7 +207,7 @@ impl Scc {
                             f.edge(w, e, (x != 0).then(|| f.done(e.to).then(|| top - x)));
                         }
                     }
-                    if pending.len() - from <= FEW && pending.len() <= budget {
+                    if pending.len() <= budget {
                         starts.push(from as u32);
                     } else {
                         pending.truncate(from);
@@ -1213,14 +1224,15 @@ mod tests {
                 fires[k * words + net / 64] |= 1 << (net % 64);
             }
             let nets = || Some((fires.clone(), words, vec![false; 70]));
-            let (folded_scc, folded) = super::Scc::with_walk(
-                &g,
-                &edges,
-                super::Folded::new(&g, Some(&ends), nets(), true),
-            );
-            assert_eq!(folded_scc.comp, scc.comp, "{adj:?}");
             let separate = super::Walk::separate(&edges, &scc, Some(&ends), nets(), true);
-            assert_eq!(folded, separate, "{adj:?}");
+            // Every unvisited target kept, none, or some (the search comes back to a state
+            // whose targets it did not keep by fetching its edges again).
+            for budget in [usize::MAX, 0, 3] {
+                let want = super::Folded::new(&g, Some(&ends), nets(), true);
+                let (folded_scc, folded) = super::Scc::with_walk_within(&g, &edges, want, budget);
+                assert_eq!(folded_scc.comp, scc.comp, "{adj:?} {budget}");
+                assert_eq!(folded, separate, "{adj:?} {budget}");
+            }
         }
     }
 }
