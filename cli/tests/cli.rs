@@ -973,3 +973,37 @@ fn verify_deadlocks_reduces_a_pnml_net_and_refuses_a_project() {
         stderr(&o)
     );
 }
+
+#[test]
+fn verify_finds_the_same_with_edges_kept_or_replayed() {
+    // Redermor explored in full, its edges kept or recomputed by the firing code: the same
+    // report (but for the time taken), every finding and trace.
+    let dir = repo().join("missions/redermor").display().to_string();
+    let report = |edges: &str| {
+        let o = petrel(&[
+            "verify",
+            &dir,
+            "--no-reduction",
+            "--edges",
+            edges,
+            "--format",
+            "json",
+        ]);
+        assert_eq!(o.status.code(), Some(0), "{}", stdout(&o));
+        let mut v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+        v["seconds"] = serde_json::Value::Null;
+        v
+    };
+    let kept = report("keep");
+    assert!(
+        kept["states"].as_u64().unwrap() > 1000,
+        "{}",
+        kept["states"]
+    );
+    assert_eq!(kept, report("replay"));
+    assert_eq!(kept, report("auto"));
+    // A wrong value is a usage error naming the choices.
+    let o = petrel(&["verify", &dir, "--edges", "some"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("keep"));
+}
