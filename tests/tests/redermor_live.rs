@@ -13,8 +13,9 @@ use std::process::Command;
 
 use petrel_tests::petrel_bin;
 use redermor_flight::{
-    assert_clear_of_the_buoys, assert_covered, assert_flown_and_stopped, bench, check_alarm,
-    check_leak, check_nominal, check_nominal_route, fly, fly_killing, fly_with, thruster_commands,
+    assert_clear_of_the_buoys, assert_covered, assert_flown_and_stopped, assert_only_emergency,
+    bench, check_alarm, check_leak, check_nominal, check_nominal_route, fly, fly_killing, fly_with,
+    thruster_commands,
 };
 
 #[test]
@@ -153,14 +154,7 @@ fn scenario_7_planner_crash_mid_transit_surfaces_where_the_vehicle_is() {
 #[test]
 fn scenario_8_pilot_crash_stops_the_thrusters_through_the_data_server() {
     let f = fly_killing("nominal", "NAV", 2.0);
-    assert!(f.marked("EMERGENCY", "unpiloted"), "{}", f.marking);
-    for net in ["MISSION", "DECISION", "ACTION"] {
-        assert!(
-            f.marking.get(net).is_none(),
-            "{net} still active: {}",
-            f.marking
-        );
-    }
+    assert_only_emergency(&f, "unpiloted");
     assert!(f.called("call CAN.ThrusterCmd(0.0, 0.0, false)"));
     // IDC's own commands enable the thrusters, and a killed IDC sends nothing more: the last
     // command on the bus is the supervisor's. (The run ends at that final marking, so the

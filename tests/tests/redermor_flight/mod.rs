@@ -412,11 +412,9 @@ pub fn check_alarm(f: &Flight) {
     assert_ends_in_the_end_area(f);
 }
 
-/// Scenario 5: the leak ends the mission (the nominal and non-nominal nets gone, the emergency
-/// surfacing), nothing is called after it but the surfacing, and on the bus every thruster
-/// command after the stop disables the thrusters.
-pub fn check_leak(f: &Flight) {
-    assert!(f.marked("EMERGENCY", "surfacing"), "{}", f.marking);
+/// EMERGENCY alone runs, in `place`: the nominal and non-nominal nets are gone.
+pub fn assert_only_emergency(f: &Flight, place: &str) {
+    assert!(f.marked("EMERGENCY", place), "{}", f.marking);
     for net in ["MISSION", "DECISION", "ACTION"] {
         assert!(
             f.marking.get(net).is_none(),
@@ -424,6 +422,13 @@ pub fn check_leak(f: &Flight) {
             f.marking
         );
     }
+}
+
+/// Scenario 5: the leak ends the mission (the nominal and non-nominal nets gone, the emergency
+/// surfacing), nothing is called after it but the surfacing, and on the bus every thruster
+/// command after the stop disables the thrusters.
+pub fn check_leak(f: &Flight) {
+    assert_only_emergency(f, "surfacing");
     assert_eq!(f.took("leak"), 1);
     assert!(f.called("call IDC.emergency_surface"));
     // Nothing was called after the leak but the emergency surfacing.
