@@ -559,3 +559,21 @@ fn a_lazily_consuming_receiver_neither_misses_a_wakeup_nor_wakes_for_old_ones() 
         done.send(()).unwrap();
     });
 }
+
+#[test]
+fn a_sender_made_before_the_player_keeps_the_defaults_and_still_delivers() {
+    let vehicle = TestVehicle::new("early");
+    // The program comes first: it creates the events service, with no bound.
+    let gui = Participant::join(&vehicle, Role::program("GUI").unwrap()).unwrap();
+    let tx = gui.event_sender_sized().unwrap();
+    assert_eq!(tx.fixed_len(), None);
+    // The player opens it as it is (its bound cannot be recorded any more).
+    let player = Participant::join(&vehicle, Role::Player).unwrap();
+    let events = player.event_receiver_sized(40).unwrap();
+    assert_eq!(player.max_event_len().unwrap(), None);
+    let text = EventMsg::new("log", vec![Value::Text("é".repeat(10_000))]);
+    tx.send(&text).unwrap();
+    assert_eq!(events.try_recv().unwrap().unwrap().msg, text);
+    // A later sender of the same process reads no bound either.
+    assert_eq!(gui.event_sender_sized().unwrap().fixed_len(), None);
+}
