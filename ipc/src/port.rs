@@ -83,7 +83,10 @@ pub struct ServiceSpec {
 /// samples, and iceoryx2 0.10 keeps, in the sender's own memory, a reference counter per
 /// sample for each of the 255 segments a power-of-two publisher may grow to: about 2 KiB of
 /// resident memory per sample, whatever the body's size. 16,384 events cost every program
-/// 33 MB; 2,048 cost it 4 MB (docs/benchmarks.md, "Footprint").
+/// 33 MB; 2,048 cost it 4 MB (docs/benchmarks.md, "Footprint"). A sender of one fixed
+/// segment keeps 8 bytes per sample: what
+/// [`Participant::event_sender_sized`](crate::Participant::event_sender_sized) gives a program
+/// once the player recorded its project's longest event.
 pub const EVENTS: ServiceSpec = ServiceSpec {
     kind: MsgKind::Event,
     subscriber_buffer: 2_048,
@@ -117,8 +120,10 @@ pub const CALLS: ServiceSpec = ServiceSpec {
 
 /// Marking deltas to monitors. A monitor that falls 128 steps behind is refused further
 /// deltas (counted by the player, seen as a gap by the monitor) until it catches up, and must
-/// wait for a snapshot. Eight monitors of 128 deltas cost the player about 2 MB (see
-/// [`EVENTS`]).
+/// wait for a snapshot. Eight monitors of 128 deltas cost a growing publisher about 2 MB (see
+/// [`EVENTS`]); the player's is one fixed segment sized from its project
+/// ([`Participant::marking_publisher_sized`](crate::Participant::marking_publisher_sized)), a
+/// few KB.
 pub const MARKING: ServiceSpec = ServiceSpec {
     kind: MsgKind::Marking,
     subscriber_buffer: 128,
