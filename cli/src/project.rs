@@ -121,11 +121,39 @@ pub struct VerifyArgs {
     /// `[verify.bounds]` declares them. Implies --timed. May be given more than once.
     #[arg(long, value_name = "FROM..TO")]
     bound: Vec<String>,
+    /// Where the analyses find the explored graph's edges: `auto` keeps them up to about a
+    /// million and recomputes them with the firing code beyond, `keep` always keeps them
+    /// (fastest, a few bytes per edge), `replay` never does (a state costs about 20 bytes, the
+    /// analyses take longer). The findings are the same. The partial-order reduction and
+    /// --net keep theirs.
+    #[arg(long, value_enum, default_value = "auto")]
+    edges: EdgesArg,
     /// A PNML file only: decide deadlocks alone, with stubborn sets (a partial-order reduction
     /// that reaches every dead marking through fewer markings); bounds and safety are then not
     /// decided.
     #[arg(long)]
     deadlocks: bool,
+}
+
+/// `--edges`: [`verify::EdgeMemory`] on the command line.
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum EdgesArg {
+    /// Kept up to about a million edges, recomputed beyond.
+    Auto,
+    /// Always kept.
+    Keep,
+    /// Always recomputed.
+    Replay,
+}
+
+impl From<EdgesArg> for verify::EdgeMemory {
+    fn from(e: EdgesArg) -> Self {
+        match e {
+            EdgesArg::Auto => verify::EdgeMemory::Auto,
+            EdgesArg::Keep => verify::EdgeMemory::Keep,
+            EdgesArg::Replay => verify::EdgeMemory::Replay,
+        }
+    }
 }
 
 /// Verifies a project (or one of its nets), or explores a PNML file as a P/T net.
@@ -162,6 +190,7 @@ pub fn verify(a: VerifyArgs) -> Outcome {
         no_reduction: a.no_reduction,
         // A bound asked for on the command line needs the timed exploration.
         timed: a.timed || !a.bound.is_empty(),
+        edges: a.edges.into(),
         progress: interactive.then(|| {
             Box::new(|states: u64, rate: f64| {
                 eprint!("\r{states} states, {rate:.0} states/s   ");

@@ -560,6 +560,7 @@ fn verify_reports_time_bounds_declared_and_asked_for() {
         .expect("declared");
     assert_eq!(relay["met"], true);
     assert_eq!(relay["within_seconds"].as_f64(), Some(8.0));
+    assert_eq!(relay["within"], "8s");
     assert_eq!(relay["then"].as_array().map(Vec::len), Some(3));
     // A bound that does not read is a usage error naming it.
     let o = petrel(&["verify", &dir, "--bound", "go..M.nowhere"]);
@@ -578,7 +579,8 @@ fn verify_fails_on_a_bound_over_its_requirement() {
     let text = std::fs::read_to_string(&manifest).unwrap();
     std::fs::write(
         &manifest,
-        text.replace("within = \"8s\"", "within = \"7s\""),
+        // Written in milliseconds: the report quotes the requirement as written.
+        text.replace("within = \"8s\"", "within = \"7000ms\""),
     )
     .unwrap();
     let dir = copy.path().display().to_string();
@@ -586,7 +588,7 @@ fn verify_fails_on_a_bound_over_its_requirement() {
     let t = stdout(&o);
     assert_eq!(o.status.code(), Some(1), "{t}");
     assert!(
-        t.contains("[E0607] Error: bound `relay` is not met: M.done after go can take up to 8s, more than 7s"),
+        t.contains("[E0607] Error: bound `relay` is not met: M.done after go can take up to 8s, more than 7000ms"),
         "{t}"
     );
     assert!(t.contains("petrel.toml:31:49 ]"), "{t}");
@@ -594,7 +596,7 @@ fn verify_fails_on_a_bound_over_its_requirement() {
         t.contains("error[E0607]: bound relay (go .. M.done): 3s to 8s"),
         "{t}"
     );
-    assert!(t.contains("within 7s: VIOLATED"), "{t}");
+    assert!(t.contains("within 7000ms: VIOLATED"), "{t}");
     // Untimed, the requirement is not decided: no error.
     let o = petrel(&["verify", &dir]);
     assert_eq!(o.status.code(), Some(0), "{}", stdout(&o));
@@ -970,4 +972,38 @@ fn verify_deadlocks_reduces_a_pnml_net_and_refuses_a_project() {
         "{}",
         stderr(&o)
     );
+}
+
+#[test]
+fn verify_finds_the_same_with_edges_kept_or_replayed() {
+    // Redermor explored in full, its edges kept or recomputed by the firing code: the same
+    // report (but for the time taken), every finding and trace.
+    let dir = repo().join("missions/redermor").display().to_string();
+    let report = |edges: &str| {
+        let o = petrel(&[
+            "verify",
+            &dir,
+            "--no-reduction",
+            "--edges",
+            edges,
+            "--format",
+            "json",
+        ]);
+        assert_eq!(o.status.code(), Some(0), "{}", stdout(&o));
+        let mut v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+        v["seconds"] = serde_json::Value::Null;
+        v
+    };
+    let kept = report("keep");
+    assert!(
+        kept["states"].as_u64().unwrap() > 1000,
+        "{}",
+        kept["states"]
+    );
+    assert_eq!(kept, report("replay"));
+    assert_eq!(kept, report("auto"));
+    // A wrong value is a usage error naming the choices.
+    let o = petrel(&["verify", &dir, "--edges", "some"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("keep"));
 }

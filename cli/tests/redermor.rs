@@ -22,14 +22,15 @@ fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
 }
 
-/// The scenarios of issue 14, by script name.
-const SCENARIOS: [&str; 6] = [
+/// The scenarios of issue 14, and a crashed program's, by script name.
+const SCENARIOS: [&str; 7] = [
     "nominal",
     "alarm",
     "current",
     "inspection",
     "leak",
     "depth_sensor",
+    "program_lost",
 ];
 
 #[test]
@@ -131,20 +132,27 @@ fn every_scenario_of_the_issue_has_a_script() {
 }
 
 #[test]
-fn the_six_scenarios_end_as_planned() {
-    // Every scenario but the leak ends with the mission stopped, flown, thrusters off, at the
-    // surface: either by its phases or recovered by ACTION.
+fn the_scenarios_end_as_planned() {
+    // Every scenario but the leak and the lost pilot ends with the mission stopped, flown,
+    // thrusters off, at the surface: either by its phases or recovered by ACTION.
     for name in SCENARIOS {
         let steps = run(name);
         let m = final_marking(&steps);
         let fired = fired(&steps);
-        if name == "leak" {
+        if name == "leak" || name == "program_lost" {
+            // EMERGENCY alone: after the leak, surfacing; after the pilot (IDC) was lost,
+            // unpiloted, the thrusters stopped through the data server.
             assert_eq!(
                 m.keys().collect::<Vec<_>>(),
                 ["EMERGENCY", "global"],
                 "{m:?}"
             );
-            assert_eq!(m["EMERGENCY"], ["surfacing"]);
+            let end = if name == "leak" {
+                "surfacing"
+            } else {
+                "unpiloted"
+            };
+            assert_eq!(m["EMERGENCY"], [end]);
             assert!(!has(&m["global"], "thrusters_on"), "{m:?}");
             continue;
         }

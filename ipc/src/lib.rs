@@ -25,6 +25,8 @@
 //!   [`CallSender`], [`CallReceiver`], [`MarkingPublisher`], [`MarkingSubscriber`],
 //!   [`HeartbeatPublisher`], [`HeartbeatSubscriber`]), buffer sizes, accounting of every message.
 //! - [`reactor`] holds [`Reactor`] and [`WaitStrategy`] (block, spin, spin then block).
+//! - [`doorbell`] lets a sender wake a receiver asleep on a futex word, and skip waking one
+//!   that is awake; iceoryx2's notifications remain for receivers asleep on epoll.
 //! - [`liveness`] tells nodes alive and dead, cleanup of dead ones, program status.
 //! - [`access`] puts a vehicle's files where only its user (and an optional group) can reach
 //!   them, and removes them when its last process leaves.
@@ -57,6 +59,8 @@
 #![warn(missing_docs)]
 
 pub mod access;
+pub mod doorbell;
+mod epoll;
 pub mod liveness;
 pub mod naming;
 mod participant;
@@ -83,7 +87,9 @@ pub use port::{
     SendError, Sender, SenderAccount, SenderStats, Sent, ServiceSpec, SignalsPublisher,
     SignalsSubscriber, Wakeups, SPIN_WAKEUP_PERIOD,
 };
-pub use reactor::{FdSource, Reactor, ReactorError, ReactorStats, Ready, Source, WaitStrategy};
+pub use reactor::{
+    FdSource, Reactor, ReactorError, ReactorStats, Ready, Source, SourceKey, WaitStrategy,
+};
 pub use wire::{
     Ack, AckRefusal, CallMsg, EventMsg, Heartbeat, MarkingMsg, Origin, Recorder, RecorderState,
     ReloadAnswer, ReloadRequest, SignalsMsg, Value, WireError,

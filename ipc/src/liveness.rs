@@ -200,6 +200,17 @@ pub fn cleanup_dead_nodes(
             Err(error) => report.failed.push((info, error)),
         }
     }
+    // The doorbells of the nodes that are gone (cleaned now, or earlier by iceoryx2 itself),
+    // and news for the receivers asleep on theirs (crate::doorbell).
+    if let Ok(prefix) = vehicle.shm_prefix() {
+        let remaining = || {
+            let mut ids = Vec::new();
+            visit(vehicle, |state| ids.push(info(&state).id))
+                .ok()
+                .map(|()| ids)
+        };
+        crate::doorbell::after_cleanup(&prefix, remaining, !report.cleaned.is_empty());
+    }
     Ok(report)
 }
 

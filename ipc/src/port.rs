@@ -12,6 +12,11 @@
 //! the gap ([`Received::missed`], [`ReceiverStats::missing`]): for every sender, messages
 //! sent = received + refused.
 //!
+//! **Waking the receiver.** After a delivery a sender rings the receivers' doorbells
+//! ([`crate::doorbell`]): one asleep on its futex word is woken, an awake one is left alone,
+//! and one asleep on its listener (or without a doorbell) is notified through the paired event
+//! service ([`SenderStats::notified`]).
+//!
 //! Ports of `ipc::Service` are single-threaded (not `Send`): create them on the thread that uses
 //! them. Their methods take `&self`, so a [`Reactor`](crate::reactor::Reactor) can watch
 //! receivers while the caller drains them.
@@ -20,6 +25,7 @@ use std::cell::{Cell, RefCell};
 use std::collections::HashMap;
 use std::fmt;
 use std::marker::PhantomData;
+use std::mem::ManuallyDrop;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -32,6 +38,7 @@ use iceoryx2::prelude::{ipc, EventId, PortFactory};
 use iceoryx2::service::port_factory::publish_subscribe;
 
 use crate::access::Session;
+use crate::doorbell::{self, Bells, Doorbell};
 use crate::wire::{self, Message, MsgHeader, MsgKind, Origin, WireError, WIRE_VERSION};
 
 /// Event id a sender notifies after delivering a sample.
@@ -217,6 +224,10 @@ pub struct SenderStats {
     /// Deliveries whose wake-up notification failed (the receiver finds the sample at its next
     /// wake-up).
     pub wake_failures: u64,
+    /// Deliveries that notified the receivers through iceoryx2 (a receiver asleep on its
+    /// listener, or without a doorbell). The others rang a doorbell or found every receiver
+    /// awake: see [`crate::doorbell`].
+    pub notified: u64,
 }
 
 /// A message could not be sent, or not to everyone.
@@ -351,12 +362,16 @@ pub struct Sender<M: Message> {
     spec: ServiceSpec,
     origin: Origin,
     sender_id: u64,
-    publisher: Publisher<ipc::Service, [u8], MsgHeader>,
+    // Dropped by hand, publisher then notifier, before the receivers' doorbells ring the news
+    // (see `Drop`).
+    publisher: ManuallyDrop<Publisher<ipc::Service, [u8], MsgHeader>>,
     /// `Some`: the port's samples are one fixed segment of this many bytes, and a longer body
     /// (up to `spec.max_body_len`) goes in pieces of this size ([`wire::FRAGMENT`]).
     fixed_len: Option<usize>,
-    notifier: Notifier<ipc::Service>,
+    notifier: ManuallyDrop<Notifier<ipc::Service>>,
     factory: publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>,
+    /// The doorbells of the service's receivers.
+    bells: RefCell<Bells>,
     next_seq: Cell<u64>,
     stats: Cell<SenderStats>,
     _kind: PhantomData<fn(&M)>,
@@ -391,6 +406,23 @@ impl<M: Message> fmt::Debug for Sender<M> {
     }
 }
 
+/// The node id of subscriber `subscriber` of the service.
+fn own_node_id(
+    factory: &publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>,
+    subscriber: u128,
+) -> Option<u128> {
+    let mut node = None;
+    factory.dynamic_config().list_subscribers(|d| {
+        if d.subscriber_id.value() == subscriber {
+            node = Some(d.node_id.value());
+            iceoryx2::prelude::CallbackProgression::Stop
+        } else {
+            iceoryx2::prelude::CallbackProgression::Continue
+        }
+    });
+    node
+}
+
 fn fold_id(id: u128) -> u64 {
     (id as u64) ^ ((id >> 64) as u64)
 }
@@ -408,20 +440,39 @@ impl<M: Message> Sender<M> {
         session: Arc<Session>,
     ) -> Self {
         let sender_id = fold_id(publisher.id().value());
-        Sender {
+        let sender = Sender {
             service,
             spec,
             origin,
             sender_id,
-            publisher,
+            publisher: ManuallyDrop::new(publisher),
             fixed_len,
-            notifier,
+            notifier: ManuallyDrop::new(notifier),
             factory,
+            bells: RefCell::new(Bells::default()),
             next_seq: Cell::new(1),
             stats: Cell::new(SenderStats::default()),
             _kind: PhantomData,
             _session: session,
-        }
+        };
+        // iceoryx2 told the receivers' listeners that this sender joined (its notifier was
+        // created): a receiver asleep on its doorbell must look.
+        sender.ring_bells(true);
+        sender
+    }
+
+    /// Rings the doorbells of the service's receivers (the news, or a delivery); returns
+    /// whether some receiver must be notified through iceoryx2.
+    fn ring_bells(&self, news: bool) -> bool {
+        let config = self.factory.dynamic_config();
+        self.bells
+            .borrow_mut()
+            .ring(self._session.shm_prefix(), news, |f| {
+                config.list_subscribers(|d| {
+                    f(d.node_id.value(), d.subscriber_id.value());
+                    iceoryx2::prelude::CallbackProgression::Continue
+                })
+            })
     }
 
     /// The service this sender publishes on.
@@ -635,11 +686,17 @@ impl<M: Message> Sender<M> {
             }
         };
         if delivered > 0 {
-            let woke = self
-                .notifier
-                .notify_with_custom_event_id(EventId::new(WAKE_SAMPLE));
-            if woke.is_err() {
-                self.update(|s| s.wake_failures += 1);
+            // Every receiver that sleeps on its doorbell is rung; the awake ones are left
+            // alone; those asleep on their listener (or without a doorbell) are notified.
+            doorbell::delivered();
+            if self.ring_bells(false) {
+                self.update(|s| s.notified += 1);
+                let woke = self
+                    .notifier
+                    .notify_with_custom_event_id(EventId::new(WAKE_SAMPLE));
+                if woke.is_err() {
+                    self.update(|s| s.wake_failures += 1);
+                }
             }
         }
         let receivers = self.receivers();
@@ -668,6 +725,21 @@ impl<M: Message> Sender<M> {
                 receivers,
             })
         }
+    }
+}
+
+impl<M: Message> Drop for Sender<M> {
+    fn drop(&mut self) {
+        // SAFETY: both fields are dropped once, here, and not used afterwards (the struct is
+        // being dropped).
+        unsafe {
+            ManuallyDrop::drop(&mut self.publisher);
+            ManuallyDrop::drop(&mut self.notifier);
+        }
+        // The notifier's drop told the listeners this sender left, the publisher being gone
+        // already (as a receiver that looks at the live senders expects): now the receivers
+        // asleep on their doorbell must look.
+        self.ring_bells(true);
     }
 }
 
@@ -859,6 +931,14 @@ pub struct Receiver<M: Message> {
     /// period (see [`consume_wakeups_every`](Self::consume_wakeups_every)).
     wakeup_period: Cell<Option<Duration>>,
     last_consumed: Cell<Instant>,
+    /// Tells this receiver from every other source of a reactor.
+    key: crate::reactor::SourceKey,
+    /// How this receiver sleeps, for its senders (`None`: it could not be created; senders
+    /// notify through iceoryx2).
+    doorbell: Option<Doorbell>,
+    /// Set once the listener was handed out: someone may wait on it outside a reactor, so
+    /// senders must always notify.
+    doorbell_off: Cell<bool>,
     _kind: PhantomData<fn() -> M>,
     /// The process's membership of the vehicle, kept while the port lives.
     _session: Arc<Session>,
@@ -897,7 +977,12 @@ impl<M: Message> Receiver<M> {
         factory: publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>,
         session: Arc<Session>,
     ) -> Self {
+        let doorbell = own_node_id(&factory, subscriber.id().value()).and_then(|node| {
+            Doorbell::create(session.shm_prefix(), node, subscriber.id().value()).ok()
+        });
         Receiver {
+            doorbell,
+            doorbell_off: Cell::new(false),
             service,
             spec,
             subscriber,
@@ -909,6 +994,7 @@ impl<M: Message> Receiver<M> {
             pending_wakeups: Cell::new(Wakeups::default()),
             wakeup_period: Cell::new(None),
             last_consumed: Cell::new(Instant::now()),
+            key: crate::reactor::SourceKey::new(),
             _kind: PhantomData,
             _session: session,
         }
@@ -927,8 +1013,37 @@ impl<M: Message> Receiver<M> {
     /// The listener of the paired event service, to attach to an iceoryx2 `WaitSet` (it is
     /// file-descriptor based). After it wakes a `WaitSet`, call [`take_wakeups`](Self::take_wakeups)
     /// or [`drain`](Self::drain), otherwise the `WaitSet` wakes again at once.
+    ///
+    /// Its senders then notify it through iceoryx2 at every sample, as without a
+    /// doorbell ([`crate::doorbell`]), since nothing tells them when it sleeps.
     pub fn listener(&self) -> &Listener<ipc::Service> {
+        if let Some(bell) = &self.doorbell {
+            self.doorbell_off.set(true);
+            bell.announce(doorbell::EPOLL);
+        }
         &self.listener
+    }
+
+    /// The listener, for a reactor (which keeps the doorbell told how it sleeps).
+    pub(crate) fn listener_fd(&self) -> &Listener<ipc::Service> {
+        &self.listener
+    }
+
+    /// The doorbell a reactor announces this receiver's sleeps in, if its senders can ring it.
+    pub(crate) fn doorbell(&self) -> Option<&Doorbell> {
+        if self.doorbell_off.get() {
+            return None;
+        }
+        self.doorbell.as_ref()
+    }
+
+    /// Whether senders can wake this receiver through its doorbell (see [`crate::doorbell`]).
+    pub fn has_doorbell(&self) -> bool {
+        self.doorbell().is_some()
+    }
+
+    pub(crate) fn source_key(&self) -> crate::reactor::SourceKey {
+        self.key
     }
 
     /// The counters of this receiver.
@@ -970,9 +1085,20 @@ impl<M: Message> Receiver<M> {
 
     /// Consumes the notifications of the paired event service and returns them, with those a
     /// [`Reactor`](crate::reactor::Reactor) already consumed on this receiver's behalf.
+    ///
+    /// A receiver that has a doorbell and was neither asleep on its listener nor told of news
+    /// since its listener was last read skips the read (a system call), unless the last read
+    /// is [`DOORBELL_SLICE`](crate::reactor::DOORBELL_SLICE) old: news iceoryx2 gives without
+    /// a ring (a dead node it cleaned up by itself) then come at most that late.
     pub fn take_wakeups(&self) -> Result<Wakeups, RecvError> {
         let due = match self.wakeup_period.get() {
-            None => true,
+            None => match self.doorbell() {
+                None => true,
+                Some(bell) => {
+                    bell.listener_may_hold()
+                        || self.last_consumed.get().elapsed() >= crate::reactor::DOORBELL_SLICE
+                }
+            },
             Some(period) => self.last_consumed.get().elapsed() >= period,
         };
         if due {
@@ -994,7 +1120,10 @@ impl<M: Message> Receiver<M> {
     }
 
     pub(crate) fn consume_notifications(&self) -> Result<(), RecvError> {
-        if self.wakeup_period.get().is_some() {
+        if let Some(bell) = self.doorbell() {
+            bell.reading_listener();
+            self.last_consumed.set(Instant::now());
+        } else if self.wakeup_period.get().is_some() {
             self.last_consumed.set(Instant::now());
         }
         let mut fresh = Wakeups::default();

@@ -1,4 +1,4 @@
-//! Waiting for something to do: a small reactor around iceoryx2's `WaitSet`, with the wait
+//! Waiting for something to do: a small reactor around an epoll instance of its own, with the wait
 //! strategy chosen per process.
 //!
 //! Measured on the project's machines (2 vCPUs, `examples/latency.rs`, call then event between
@@ -9,30 +9,30 @@
 //! cannot spin: each process chooses its [`WaitStrategy`].
 //!
 //! The reactor watches [`Source`]s: every [`Receiver`] is one (its shared-memory buffer can be
-//! polled without a system call, and its listener wakes a `WaitSet`), and [`FdSource`] wraps
+//! polled without a system call, and its listener's descriptor wakes epoll), and [`FdSource`] wraps
 //! any other file descriptor, such as a CAN socket.
 
-use std::cell::Cell;
+use std::cell::{Cell, RefCell};
 use std::fmt;
+use std::io;
 use std::os::fd::RawFd;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-use iceoryx2::prelude::{
-    ipc, CallbackProgression, FileDescriptor, FileDescriptorBased, SignalHandlingMode,
-    SynchronousMultiplexing, WaitSet, WaitSetBuilder,
-};
-use iceoryx2::waitset::{
-    WaitSetAttachmentError, WaitSetCreateError, WaitSetRunError, WaitSetRunResult,
-};
+use iceoryx2::prelude::FileDescriptorBased;
 use iceoryx2_bb_posix::signal::SignalHandler;
 
+use crate::doorbell::{self, Doorbell, Slept};
+use crate::epoll::Epoll;
 use crate::port::Receiver;
 use crate::wire::Message;
 
 /// How a process waits for work.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum WaitStrategy {
-    /// Sleep in the kernel until a source is signalled (about 55 µs to wake; no CPU used).
+    /// Sleep in the kernel until a source is signalled (no CPU used). A round trip between two
+    /// sleeping receivers costs about 7 µs on busy CPUs through their doorbells (about 10 µs
+    /// through epoll), and the idle CPU's wake-up (45-60 µs here) when the CPUs idle.
     Block,
     /// Poll the sources' shared memory in a loop (about 1 µs to react; one core busy and kept:
     /// give a spinning process a core of its own, a peer that shares its core waits for the
@@ -79,9 +79,26 @@ impl fmt::Display for WaitStrategy {
     }
 }
 
-/// Something a `WaitSet` can wait on: file-descriptor based and printable.
-pub trait Waitable: SynchronousMultiplexing + fmt::Debug {}
-impl<T: SynchronousMultiplexing + fmt::Debug + ?Sized> Waitable for T {}
+/// A number that tells one [`Source`] from every other of the process, for as long as the
+/// process lives (never reused): the [`Reactor`] keeps a source registered between waits while
+/// the same source comes back, and registers anew a source it has not seen, even if it got the
+/// file descriptor number of one that was closed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct SourceKey(u64);
+
+impl SourceKey {
+    /// A key no other source of this process has.
+    pub fn new() -> Self {
+        static NEXT: AtomicU64 = AtomicU64::new(1);
+        SourceKey(NEXT.fetch_add(1, Ordering::Relaxed))
+    }
+}
+
+impl Default for SourceKey {
+    fn default() -> Self {
+        Self::new()
+    }
+}
 
 /// Something the [`Reactor`] watches.
 pub trait Source {
@@ -89,16 +106,27 @@ pub trait Source {
     /// descriptor can tell.
     fn pending(&self) -> Option<bool>;
 
-    /// What the `WaitSet` waits on.
-    fn waitable(&self) -> &dyn Waitable;
+    /// The file descriptor that becomes readable when the source is signalled. It must stay
+    /// open, and the same, for as long as the source lives.
+    fn fd(&self) -> RawFd;
 
-    /// Called when the `WaitSet` reported the source signalled, to consume the wake-up (a
-    /// `WaitSet` wakes again at once on a wake-up left unconsumed). Returns whether the caller
-    /// has something to do. Receivers consume their notifications, keep them for
+    /// This source's key (keep one [`SourceKey`] per source, made when the source is).
+    fn key(&self) -> SourceKey;
+
+    /// Called when the file descriptor was found readable, to consume the wake-up (a
+    /// level-triggered wait wakes again at once on a wake-up left unconsumed). Returns whether
+    /// the caller has something to do. Receivers consume their notifications, keep them for
     /// [`Receiver::take_wakeups`], and report work when samples wait or a sender joined, left or
     /// died; a raw file descriptor reports work and the caller reads it.
     fn signalled(&self) -> bool {
         true
+    }
+
+    /// The source's doorbell, when its senders ring it (a [`Receiver`]'s): a reactor whose
+    /// sources all have one sleeps on their futex words instead of epoll (see
+    /// [`crate::doorbell`]).
+    fn doorbell(&self) -> Option<&Doorbell> {
+        None
     }
 }
 
@@ -107,8 +135,18 @@ impl<M: Message> Source for Receiver<M> {
         Some(self.has_pending())
     }
 
-    fn waitable(&self) -> &dyn Waitable {
-        self.listener()
+    fn fd(&self) -> RawFd {
+        // SAFETY: the descriptor is only read (registered with epoll), never closed or used
+        // for I/O here; the listener owns it for as long as the receiver lives.
+        unsafe { self.listener_fd().file_descriptor().native_handle() }
+    }
+
+    fn key(&self) -> SourceKey {
+        self.source_key()
+    }
+
+    fn doorbell(&self) -> Option<&Doorbell> {
+        Receiver::doorbell(self)
     }
 
     fn signalled(&self) -> bool {
@@ -122,53 +160,63 @@ impl<M: Message> Source for Receiver<M> {
 }
 
 /// Any file descriptor (a CAN socket, a timerfd...) as a [`Source`]. It does not own the
-/// descriptor: keep it open while it is watched.
+/// descriptor: keep it open while it is watched, and make a new `FdSource` for a new
+/// descriptor.
 #[derive(Debug)]
 pub struct FdSource {
-    fd: FileDescriptor,
+    fd: RawFd,
+    key: SourceKey,
 }
 
 impl FdSource {
     /// Watches `fd`.
     pub fn new(fd: RawFd) -> Result<Self, ReactorError> {
-        FileDescriptor::non_owning_new(fd)
-            .map(|fd| FdSource { fd })
-            .ok_or(ReactorError::InvalidFd(fd))
+        // SAFETY: F_GETFD only reads the descriptor's flags; it fails with EBADF on a
+        // descriptor that is not open.
+        if fd < 0 || unsafe { libc::fcntl(fd, libc::F_GETFD) } < 0 {
+            return Err(ReactorError::InvalidFd(fd));
+        }
+        Ok(FdSource {
+            fd,
+            key: SourceKey::new(),
+        })
     }
 }
-
-impl FileDescriptorBased for FdSource {
-    fn file_descriptor(&self) -> &FileDescriptor {
-        &self.fd
-    }
-}
-
-impl SynchronousMultiplexing for FdSource {}
 
 impl Source for FdSource {
     fn pending(&self) -> Option<bool> {
         None
     }
 
-    fn waitable(&self) -> &dyn Waitable {
-        self
+    fn fd(&self) -> RawFd {
+        self.fd
+    }
+
+    fn key(&self) -> SourceKey {
+        self.key
     }
 }
 
 /// The reactor failed.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum ReactorError {
-    /// The `WaitSet` could not be created.
-    Create(WaitSetCreateError),
-    /// A source could not be attached to the `WaitSet`.
+    /// The epoll instance could not be created.
+    Create {
+        /// The system's error number.
+        errno: i32,
+    },
+    /// A source could not be watched.
     Attach {
         /// Index of the source in the slice given to [`Reactor::wait`].
         source: usize,
-        /// iceoryx2's reason.
-        error: WaitSetAttachmentError,
+        /// The system's error number.
+        errno: i32,
     },
     /// Waiting failed.
-    Wait(WaitSetRunError),
+    Wait {
+        /// The system's error number.
+        errno: i32,
+    },
     /// No source and no timeout: the wait would never end.
     NothingToWaitFor,
     /// More sources than [`MAX_SOURCES`].
@@ -180,11 +228,21 @@ pub enum ReactorError {
 impl fmt::Display for ReactorError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            ReactorError::Create(e) => write!(f, "cannot create the wait set: {e}"),
-            ReactorError::Attach { source, error } => {
-                write!(f, "cannot watch source {source}: {error}")
-            }
-            ReactorError::Wait(e) => write!(f, "waiting failed: {e}"),
+            ReactorError::Create { errno } => write!(
+                f,
+                "cannot create the reactor's epoll instance: {}",
+                io::Error::from_raw_os_error(*errno)
+            ),
+            ReactorError::Attach { source, errno } => write!(
+                f,
+                "cannot watch source {source}: {}",
+                io::Error::from_raw_os_error(*errno)
+            ),
+            ReactorError::Wait { errno } => write!(
+                f,
+                "waiting failed: {}",
+                io::Error::from_raw_os_error(*errno)
+            ),
             ReactorError::NothingToWaitFor => {
                 f.write_str("waiting on no source without a timeout would never end")
             }
@@ -207,6 +265,21 @@ pub const MAX_SOURCES: usize = 64;
 /// While spinning, how often file descriptors without a shared-memory check are polled.
 const FD_POLL_PERIOD: Duration = Duration::from_micros(500);
 
+/// Longest sleep on doorbells before the reactor looks at its receivers' listeners anyway: news
+/// of senders that iceoryx2 gives without a ring (a dead node it cleaned up by itself while
+/// another process started) comes at most this late, and so would a sample whose sender did
+/// not ring (a process of another Petrel). See [`Reactor::set_doorbell_slice`].
+pub const DOORBELL_SLICE: Duration = Duration::from_millis(50);
+
+/// Doorbell sleeps that found a sample no doorbell rang for ([`ReactorStats::unrung`]) after
+/// which a reactor sleeps on epoll for good (see [`Reactor::doorbells`]).
+pub const UNRUNG_LIMIT: u64 = 3;
+
+/// Environment variable that, set to `off`, makes every reactor of the process sleep on epoll
+/// (iceoryx2's notifications) even when its sources have doorbells: to compare, or as a way
+/// out.
+pub const DOORBELL_ENV: &str = "PETREL_DOORBELL";
+
 /// Under `spin-then-block`, while spinning, the CPU is offered to other runnable threads
 /// (`sched_yield`) every this many polls (a power of two: about a microsecond of polling).
 ///
@@ -227,11 +300,19 @@ const YIELD_EVERY: u32 = 16;
 pub struct ReactorStats {
     /// Calls to [`Reactor::wait`].
     pub waits: u64,
-    /// Waits that went to sleep in the `WaitSet`: under `spin-then-block`, those whose spin
+    /// Waits that went to sleep: under `spin-then-block`, those whose spin
     /// window ended with nothing to do.
     pub sleeps: u64,
     /// Times a spinning wait offered the CPU to another thread.
     pub yields: u64,
+    /// Futex sleeps on the sources' doorbells rather than epoll, one per slice
+    /// ([`DOORBELL_SLICE`]): a wait that slept on them counts one `sleeps` and at least one of
+    /// these.
+    pub doorbell_sleeps: u64,
+    /// Doorbell sleeps that ran to the end of their slice ([`DOORBELL_SLICE`]) and then found
+    /// a sample waiting that no doorbell rang for: a sender that does not ring, a sample sent
+    /// just as the slice ended, or a lost wake-up.
+    pub unrung: u64,
 }
 
 /// Which sources are ready after a [`Reactor::wait`].
@@ -271,45 +352,57 @@ impl Ready {
 
 /// Waits on several sources with a [`WaitStrategy`].
 ///
-/// Each [`wait`](Self::wait) attaches the sources to the `WaitSet` only if it has to sleep (two
-/// `epoll_ctl` calls per source, small beside a wake-up), so the sources stay free for the
-/// caller between waits.
+/// The reactor registers a source's file descriptor with its own epoll instance the first time
+/// it has to sleep on it and keeps it registered while the following waits name the same
+/// sources (by [`SourceKey`]): a caller that waits on the same sources in a loop pays no
+/// `epoll_ctl` per wait. A wait on other sources unregisters those no longer named. The sources
+/// stay free for the caller between waits (the reactor keeps their numbers, not them).
 #[derive(Debug)]
 pub struct Reactor {
-    waitset: WaitSet<ipc::Service>,
+    epoll: Epoll,
+    /// The sources registered with `epoll` now: key and file descriptor.
+    attached: RefCell<Vec<(SourceKey, RawFd)>>,
     strategy: WaitStrategy,
     /// SIGINT and SIGTERM are caught and reported (not left their default action).
     handles_signals: bool,
+    /// Sleep on doorbells when every source has one (off: after ENOSYS, or by choice).
+    doorbells: Cell<bool>,
+    /// Longest doorbell sleep.
+    slice: Duration,
     stats: Cell<ReactorStats>,
 }
 
 impl Reactor {
     /// A reactor that reports SIGINT and SIGTERM as [`Ready::termination_requested`], whatever
-    /// its strategy: iceoryx2 installs its handlers at the first wait (a sleeping wait's, or
-    /// a spinning wait's first poll for them), and a spinning wait polls them.
+    /// its strategy: iceoryx2's signal handler is installed at the first wait (a sleeping
+    /// wait's look before it sleeps, or a spinning wait's first poll), and a spinning wait polls
+    /// it.
     pub fn new(strategy: WaitStrategy) -> Result<Self, ReactorError> {
-        Self::build(strategy, SignalHandlingMode::HandleTerminationRequests)
+        Self::build(strategy, true)
     }
 
-    /// A reactor that leaves signals alone.
+    /// A reactor that leaves signals alone. A signal that interrupts its sleep (one the caller
+    /// handles itself) is reported as [`Ready::termination_requested`].
     pub fn without_signal_handling(strategy: WaitStrategy) -> Result<Self, ReactorError> {
-        Self::build(strategy, SignalHandlingMode::Disabled)
+        Self::build(strategy, false)
     }
 
-    fn build(strategy: WaitStrategy, mode: SignalHandlingMode) -> Result<Self, ReactorError> {
-        let waitset = WaitSetBuilder::new()
-            .signal_handling_mode(mode)
-            .create::<ipc::Service>()
-            .map_err(ReactorError::Create)?;
+    fn build(strategy: WaitStrategy, handles_signals: bool) -> Result<Self, ReactorError> {
+        let epoll = Epoll::new().map_err(|e| ReactorError::Create {
+            errno: e.raw_os_error().unwrap_or(0),
+        })?;
         // iceoryx2 installs its SIGINT/SIGTERM handlers at the first look for a termination
-        // request: the WaitSet's first sleep, or (below) a spinning wait's first poll, which a
-        // spinning reactor needs since it may never sleep. Not earlier: a process that only
-        // blocks keeps exactly iceoryx2's own timing of the install.
-        let handles_signals = mode == SignalHandlingMode::HandleTerminationRequests;
+        // request: the first sleep, or a spinning wait's first poll, which a spinning reactor
+        // needs since it may never sleep. Not earlier: the install keeps the timing iceoryx2's
+        // own WaitSet gave it.
+        let doorbells = std::env::var(DOORBELL_ENV).map_or(true, |v| v != "off");
         Ok(Reactor {
-            waitset,
+            epoll,
+            attached: RefCell::new(Vec::new()),
             strategy,
             handles_signals,
+            doorbells: Cell::new(doorbells),
+            slice: DOORBELL_SLICE,
             stats: Cell::new(ReactorStats::default()),
         })
     }
@@ -335,6 +428,25 @@ impl Reactor {
         self.strategy = strategy;
     }
 
+    /// Whether this reactor sleeps on its sources' doorbells when they all have one (the
+    /// default, unless `PETREL_DOORBELL=off`), or always on epoll.
+    pub fn set_doorbells(&mut self, on: bool) {
+        self.doorbells.set(on);
+    }
+
+    /// Whether this reactor sleeps on doorbells (see [`set_doorbells`](Self::set_doorbells)):
+    /// false after ENOSYS from `futex_waitv`, or after [`UNRUNG_LIMIT`] samples came that no
+    /// doorbell rang for.
+    pub fn doorbells(&self) -> bool {
+        self.doorbells.get()
+    }
+
+    /// Changes the longest doorbell sleep ([`DOORBELL_SLICE`] by default). A test that must
+    /// see a lost wake-up as a failure sets it far beyond its own deadline.
+    pub fn set_doorbell_slice(&mut self, slice: Duration) {
+        self.slice = slice.max(Duration::from_millis(1));
+    }
+
     /// Waits until a source has work or `timeout` has passed (`None`: no timeout).
     ///
     /// Sources with work already waiting are reported at once. A receiver reported ready may
@@ -350,8 +462,15 @@ impl Reactor {
         let start = Instant::now();
         let deadline = timeout.map(|t| start + t);
         self.count(|s| s.waits += 1);
+        // Inside a wait and between waits the reactor looks at the receivers before it
+        // sleeps: their senders need not wake them.
+        for source in sources {
+            if let Some(bell) = source.doorbell() {
+                bell.set_awake();
+            }
+        }
         if sources.is_empty() {
-            // A WaitSet refuses to wait on nothing: this is only a timer.
+            // Nothing to watch: this is only a timer.
             let timeout = timeout.ok_or(ReactorError::NothingToWaitFor)?;
             let spin = match self.strategy {
                 WaitStrategy::Block => Duration::ZERO,
@@ -460,7 +579,7 @@ impl Reactor {
         }
     }
 
-    /// Sleeps in the `WaitSet` until a source is signalled or `deadline` passes.
+    /// Sleeps in epoll until a source is signalled or `deadline` passes.
     fn block(
         &self,
         sources: &[&dyn Source],
@@ -487,46 +606,215 @@ impl Reactor {
                 slept = true;
                 self.count(|s| s.sleeps += 1);
             }
-            let ready = self.epoll(sources, remaining)?;
+            let on_doorbells =
+                self.doorbells.get() && sources.iter().all(|s| s.doorbell().is_some());
+            let ready = if on_doorbells {
+                self.count(|s| s.doorbell_sleeps += 1);
+                self.doorbell_sleep(sources, remaining)?
+            } else {
+                self.epoll_sleep(sources, remaining)?
+            };
             if ready.any() || ready.termination_requested {
                 return Ok(ready);
             }
         }
     }
 
-    /// One `WaitSet` round: attach, wait up to `timeout` (`None`: forever), consume the
-    /// wake-ups of the signalled sources, detach.
+    /// Sleeps in epoll, the receivers' doorbells saying so (their senders notify through
+    /// iceoryx2), after a last look for samples.
+    fn epoll_sleep(
+        &self,
+        sources: &[&dyn Source],
+        timeout: Option<Duration>,
+    ) -> Result<Ready, ReactorError> {
+        let mut bells = false;
+        for bell in sources.iter().filter_map(|s| s.doorbell()) {
+            bell.announce(doorbell::EPOLL);
+            bells = true;
+        }
+        if bells {
+            doorbell::announced();
+            let mask = poll_pending(sources);
+            if mask != 0 {
+                wake_all(sources);
+                return Ok(Ready {
+                    mask,
+                    ..Ready::default()
+                });
+            }
+        }
+        let ready = self.epoll(sources, timeout);
+        if bells {
+            wake_all(sources);
+        }
+        ready
+    }
+
+    /// Sleeps on the futex words of the sources' doorbells (all have one) for at most
+    /// `timeout` and the slice, after a last look for samples and news.
+    fn doorbell_sleep(
+        &self,
+        sources: &[&dyn Source],
+        timeout: Option<Duration>,
+    ) -> Result<Ready, ReactorError> {
+        if self.handles_signals && SignalHandler::termination_requested() {
+            return Ok(Ready {
+                termination_requested: true,
+                ..Ready::default()
+            });
+        }
+        let bells: Vec<&Doorbell> = sources.iter().filter_map(|s| s.doorbell()).collect();
+        for bell in &bells {
+            bell.announce(doorbell::FUTEX);
+        }
+        doorbell::announced();
+        // The words before the last look: a ring after this changes them, so the sleep below
+        // returns at once (the module's argument).
+        let words: Vec<_> = bells.iter().map(|b| (b.word_ref(), b.word())).collect();
+        let look = |listeners: bool| {
+            let mut mask = 0u64;
+            for (index, (source, bell)) in sources.iter().zip(&bells).enumerate() {
+                let news = bell.take_news();
+                let ready = if news || listeners {
+                    source.signalled()
+                } else {
+                    source.pending() == Some(true)
+                };
+                if ready {
+                    mask |= 1 << index;
+                }
+            }
+            mask
+        };
+        let mask = look(false);
+        if mask != 0 {
+            wake_all(sources);
+            return Ok(Ready {
+                mask,
+                ..Ready::default()
+            });
+        }
+        let slice = timeout.map_or(self.slice, |t| t.min(self.slice));
+        let slept = match words.as_slice() {
+            [(word, expected)] => doorbell::futex_wait(word, *expected, slice),
+            _ => doorbell::futex_waitv(&words, slice),
+        };
+        wake_all(sources);
+        match slept {
+            Slept::Interrupted => {
+                // As in `epoll`: with our handler only SIGINT/SIGTERM end the wait.
+                let terminate = !self.handles_signals || SignalHandler::termination_requested();
+                if terminate {
+                    return Ok(Ready {
+                        termination_requested: true,
+                        ..Ready::default()
+                    });
+                }
+                Ok(Ready::default())
+            }
+            Slept::Unsupported => {
+                // A kernel before 5.16: epoll from now on (the caller's loop sleeps again).
+                self.doorbells.set(false);
+                Ok(Ready::default())
+            }
+            Slept::Woken => Ok(Ready {
+                mask: look(false),
+                ..Ready::default()
+            }),
+            Slept::TimedOut => {
+                // The slice ran out: the listeners may hold news iceoryx2 gave without a ring.
+                let unchanged = words
+                    .iter()
+                    .all(|(word, seen)| word.load(Ordering::Acquire) == *seen);
+                if unchanged && poll_pending(sources) != 0 {
+                    self.count(|s| s.unrung += 1);
+                    if self.stats().unrung >= UNRUNG_LIMIT {
+                        // Senders that do not ring (a process of an older Petrel): each of
+                        // their samples would wait for the end of a slice. Epoll from now on,
+                        // where their notifications wake this reactor.
+                        self.doorbells.set(false);
+                    }
+                }
+                Ok(Ready {
+                    mask: look(true),
+                    ..Ready::default()
+                })
+            }
+        }
+    }
+
+    /// Registers with epoll the sources not registered yet, and unregisters those registered
+    /// that `sources` no longer names. Nothing to do (no system call) when the caller waits on
+    /// the same sources as last time.
+    fn attach(&self, sources: &[&dyn Source]) -> Result<(), ReactorError> {
+        let mut attached = self.attached.borrow_mut();
+        let same = attached.len() == sources.len()
+            && attached
+                .iter()
+                .zip(sources)
+                .all(|(&(key, fd), s)| key == s.key() && fd == s.fd());
+        if same {
+            return Ok(());
+        }
+        // Unregister first: a source that is gone may have left its descriptor number to one
+        // of the new sources, which must then be registered afresh.
+        attached.retain(|&(key, fd)| {
+            let named = sources.iter().any(|s| s.key() == key && s.fd() == fd);
+            if !named {
+                self.epoll.delete(fd);
+            }
+            named
+        });
+        for (index, source) in sources.iter().enumerate() {
+            let entry = (source.key(), source.fd());
+            if attached.contains(&entry) {
+                continue;
+            }
+            self.epoll.add(entry.1).map_err(|e| ReactorError::Attach {
+                source: index,
+                errno: e.raw_os_error().unwrap_or(0),
+            })?;
+            attached.push(entry);
+        }
+        Ok(())
+    }
+
+    /// One epoll round: register the sources (if they changed), wait up to `timeout` (`None`:
+    /// forever), consume the wake-ups of the signalled sources.
     fn epoll(
         &self,
         sources: &[&dyn Source],
         timeout: Option<Duration>,
     ) -> Result<Ready, ReactorError> {
-        let mut guards = Vec::with_capacity(sources.len());
-        for (index, source) in sources.iter().enumerate() {
-            let guard = self
-                .waitset
-                .attach_notification(source.waitable())
-                .map_err(|error| ReactorError::Attach {
-                    source: index,
-                    error,
-                })?;
-            guards.push(guard);
+        self.attach(sources)?;
+        if self.handles_signals && SignalHandler::termination_requested() {
+            return Ok(Ready {
+                termination_requested: true,
+                ..Ready::default()
+            });
         }
         let mut signalled = 0u64;
-        let on_event = |id: iceoryx2::prelude::WaitSetAttachmentId<ipc::Service>| {
-            for (index, guard) in guards.iter().enumerate() {
-                if id.has_event_from(guard) {
+        let result = self.epoll.wait(timeout, |fd| {
+            for (index, source) in sources.iter().enumerate() {
+                if source.fd() == fd {
                     signalled |= 1 << index;
                 }
             }
-            CallbackProgression::Continue
-        };
-        let result = match timeout {
-            Some(t) => self.waitset.wait_and_process_once_with_timeout(on_event, t),
-            None => self.waitset.wait_and_process_once(on_event),
+        });
+        if let Err(e) = result {
+            if e.kind() != io::ErrorKind::Interrupted {
+                return Err(ReactorError::Wait {
+                    errno: e.raw_os_error().unwrap_or(0),
+                });
+            }
+            // A signal: with our handler, SIGINT/SIGTERM end the wait and others do not (the
+            // caller's loop sleeps again); without, the caller handles its signals and is told.
+            let terminate = !self.handles_signals || SignalHandler::termination_requested();
+            return Ok(Ready {
+                termination_requested: terminate,
+                ..Ready::default()
+            });
         }
-        .map_err(ReactorError::Wait)?;
-        drop(guards);
         // A signalled receiver whose samples were already taken is not reported (the wake-up
         // is consumed, the caller has nothing to do); a source with data but no signal is.
         let mut mask = 0u64;
@@ -543,11 +831,15 @@ impl Reactor {
         Ok(Ready {
             mask,
             timed_out: false,
-            termination_requested: matches!(
-                result,
-                WaitSetRunResult::Interrupt | WaitSetRunResult::TerminationRequest
-            ),
+            termination_requested: false,
         })
+    }
+}
+
+/// The receivers are awake again: their senders need not ring.
+fn wake_all(sources: &[&dyn Source]) {
+    for bell in sources.iter().filter_map(|s| s.doorbell()) {
+        bell.set_awake();
     }
 }
 

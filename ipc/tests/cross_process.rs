@@ -7,20 +7,14 @@
 mod common;
 
 use std::collections::BTreeSet;
-use std::io::{BufRead, BufReader, Read};
-use std::process::{Child, ChildStdin, Command, Stdio};
-use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use common::TestVehicle;
+use common::{child_role, wait_for_stdin_close, ChildProcess, TestVehicle};
 use petrel_ipc::{
     cleanup_dead_nodes, dead_nodes, list_nodes, program_status, EventMsg, NodeStatus, Participant,
-    ProgramStatus, ProgramWatch, Reactor, RecvError, Role, SendError, Value, Vehicle, WaitStrategy,
+    ProgramStatus, ProgramWatch, Reactor, RecvError, Role, SendError, Value, WaitStrategy,
 };
 
-const CHILD_ENV: &str = "PETREL_IPC_CHILD";
-const VEHICLE_ENV: &str = "PETREL_IPC_VEHICLE";
-const PREFIX_ENV: &str = "PETREL_IPC_PREFIX";
 /// A burst as large as the player's event buffer (2,048: ipc/src/port.rs sizes it for the
 /// memory it costs every program).
 const BURST: usize = petrel_ipc::port::EVENTS.subscriber_buffer;
@@ -55,12 +49,9 @@ fn value_events() -> Vec<EventMsg> {
 /// Runs as a child process when `PETREL_IPC_CHILD` is set; otherwise does nothing.
 #[test]
 fn child() {
-    let Ok(mode) = std::env::var(CHILD_ENV) else {
+    let Some((mode, vehicle, _)) = child_role() else {
         return;
     };
-    let name = std::env::var(VEHICLE_ENV).expect("vehicle name");
-    let prefix = std::env::var(PREFIX_ENV).expect("vehicle prefix");
-    let vehicle = Vehicle::with_prefix(&name, &prefix).expect("vehicle");
     match mode.as_str() {
         "values" => {
             let me = Participant::join(&vehicle, Role::program("PLN").unwrap()).unwrap();
@@ -128,86 +119,19 @@ fn report_and_wait(stats: &petrel_ipc::SenderStats) {
     wait_for_stdin_close();
 }
 
-fn wait_for_stdin_close() {
-    let mut sink = Vec::new();
-    let _ = std::io::stdin().read_to_end(&mut sink);
-}
-
 // ---------------------------------------------------------------------------------------------
 // Parent side
 
-struct ChildProcess {
-    child: Child,
-    stdin: Option<ChildStdin>,
-    lines: mpsc::Receiver<String>,
+/// The next report starting with `word`, without it.
+fn expect(child: &ChildProcess, word: &str) -> String {
+    child.report(word, TIMEOUT)
 }
 
-impl ChildProcess {
-    fn spawn(vehicle: &Vehicle, mode: &str) -> Self {
-        let exe = std::env::current_exe().expect("test binary");
-        let mut child = Command::new(exe)
-            .args(["--exact", "child", "--nocapture", "--test-threads=1", "-q"])
-            .env(CHILD_ENV, mode)
-            .env(VEHICLE_ENV, vehicle.name())
-            .env(PREFIX_ENV, vehicle.prefix())
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .spawn()
-            .expect("spawn the child");
-        let stdin = child.stdin.take();
-        let stdout = child.stdout.take().expect("child stdout");
-        let (tx, lines) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-                if let Some(report) = line.strip_prefix("@@ ") {
-                    if tx.send(report.to_owned()).is_err() {
-                        break;
-                    }
-                }
-            }
-        });
-        ChildProcess {
-            child,
-            stdin,
-            lines,
-        }
-    }
-
-    /// The next report starting with `word`, without it.
-    fn expect(&self, word: &str) -> String {
-        let line = self
-            .lines
-            .recv_timeout(TIMEOUT)
-            .unwrap_or_else(|e| panic!("no `{word}` from the child: {e}"));
-        line.strip_prefix(word)
-            .unwrap_or_else(|| panic!("expected `{word}`, got `{line}`"))
-            .trim()
-            .to_owned()
-    }
-
-    /// Reads "SENT sent refused not_sent".
-    fn sent(&self) -> (u64, u64, u64) {
-        let report = self.expect("SENT");
-        let n: Vec<u64> = report.split(' ').map(|x| x.parse().unwrap()).collect();
-        (n[0], n[1], n[2])
-    }
-
-    /// Closes the child's standard input and waits for it to exit.
-    fn finish(mut self) {
-        drop(self.stdin.take());
-        let status = self.child.wait().expect("wait for the child");
-        assert!(status.success(), "child failed: {status}");
-    }
-}
-
-impl Drop for ChildProcess {
-    fn drop(&mut self) {
-        // On a failed assertion, do not leave the child behind.
-        if self.child.try_wait().ok().flatten().is_none() {
-            let _ = self.child.kill();
-            let _ = self.child.wait();
-        }
-    }
+/// Reads "SENT sent refused not_sent".
+fn sent(child: &ChildProcess) -> (u64, u64, u64) {
+    let report = expect(child, "SENT");
+    let n: Vec<u64> = report.split(' ').map(|x| x.parse().unwrap()).collect();
+    (n[0], n[1], n[2])
 }
 
 /// Drains `rx` with a blocking reactor until `n` messages and errors arrived.
@@ -250,7 +174,7 @@ fn every_value_type_crosses_processes() {
     let vehicle = TestVehicle::new("auv");
     let player = Participant::join(&vehicle, Role::Player).unwrap();
     let rx = player.event_receiver().unwrap();
-    let child = ChildProcess::spawn(&vehicle, "values");
+    let child = ChildProcess::spawn(&vehicle, "values", "");
     let expected = value_events();
     let got = collect_events(&rx, expected.len());
     for (i, (r, want)) in got.into_iter().zip(&expected).enumerate() {
@@ -260,7 +184,7 @@ fn every_value_type_crosses_processes() {
         assert_eq!(r.missed, 0);
         assert_eq!(r.origin.as_str(), "program/PLN");
     }
-    let (sent, refused, not_sent) = child.sent();
+    let (sent, refused, not_sent) = sent(&child);
     assert_eq!((sent, refused, not_sent), (expected.len() as u64, 0, 0));
     assert_eq!(rx.stats().received, sent);
     child.finish();
@@ -271,9 +195,9 @@ fn a_burst_the_size_of_the_buffer_is_fully_received() {
     let vehicle = TestVehicle::new("auv");
     let player = Participant::join(&vehicle, Role::Player).unwrap();
     let rx = player.event_receiver().unwrap();
-    let child = ChildProcess::spawn(&vehicle, "burst");
+    let child = ChildProcess::spawn(&vehicle, "burst", "");
     // The player reads nothing until the whole burst is sent: the buffer must hold it.
-    let (sent, refused, not_sent) = child.sent();
+    let (sent, refused, not_sent) = sent(&child);
     assert_eq!((sent, refused, not_sent), (BURST as u64, 0, 0));
     let mut next = 0i64;
     let drained = rx
@@ -301,7 +225,7 @@ fn an_undecodable_body_is_a_typed_error_and_the_receiver_carries_on() {
     let vehicle = TestVehicle::new("auv");
     let player = Participant::join(&vehicle, Role::Player).unwrap();
     let rx = player.event_receiver().unwrap();
-    let child = ChildProcess::spawn(&vehicle, "garbage");
+    let child = ChildProcess::spawn(&vehicle, "garbage", "");
     let got = collect_events(&rx, 4);
     assert_eq!(got[0].as_ref().unwrap().msg.name, "before");
     for (r, seq) in got[1..3].iter().zip([2, 3]) {
@@ -322,7 +246,7 @@ fn an_undecodable_body_is_a_typed_error_and_the_receiver_carries_on() {
         (stats.received, stats.undecodable, stats.missing),
         (4, 2, 0)
     );
-    let (sent, refused, _) = child.sent();
+    let (sent, refused, _) = sent(&child);
     assert_eq!(sent, stats.received + refused);
     child.finish();
 }
@@ -335,8 +259,8 @@ fn a_sigkilled_program_is_reported_dead_and_cleaned() {
     let mut watch = ProgramWatch::new(&vehicle, ["GDD", "PLN"]);
     assert!(watch.check().unwrap().is_empty());
     let before = shm_files(&vehicle.shm_prefix().unwrap());
-    let mut child = ChildProcess::spawn(&vehicle, "sleeper");
-    child.expect("READY");
+    let mut child = ChildProcess::spawn(&vehicle, "sleeper", "");
+    expect(&child, "READY");
     let changes = watch.check().unwrap();
     assert_eq!(changes.len(), 1);
     assert_eq!(
@@ -347,7 +271,7 @@ fn a_sigkilled_program_is_reported_dead_and_cleaned() {
         program_status(&vehicle, "GDD").unwrap(),
         ProgramStatus::Alive
     );
-    let pid = child.child.id() as i32;
+    let pid = child.id() as i32;
     let nodes = list_nodes(&vehicle).unwrap();
     let gdd = nodes.iter().find(|n| n.name == "program/GDD").unwrap();
     assert_eq!((gdd.status, gdd.pid), (NodeStatus::Alive, Some(pid)));
@@ -360,8 +284,7 @@ fn a_sigkilled_program_is_reported_dead_and_cleaned() {
     );
     assert!(rx.take_wakeups().unwrap().senders_died == 0);
 
-    child.child.kill().unwrap(); // SIGKILL: no chance to clean up
-    child.child.wait().unwrap();
+    child.kill(); // SIGKILL: no chance to clean up
 
     assert_eq!(
         program_status(&vehicle, "GDD").unwrap(),
@@ -409,9 +332,9 @@ fn two_vehicles_with_different_prefixes_do_not_meet() {
     assert_eq!(ours.events_service(), theirs.events_service());
     let player = Participant::join(&ours, Role::Player).unwrap();
     let rx = player.event_receiver().unwrap();
-    let child = ChildProcess::spawn(&theirs, "other_vehicle");
-    assert_eq!(child.expect("OUTCOME"), "no_receiver");
-    assert_eq!(child.expect("NODES"), "program/PLN");
+    let child = ChildProcess::spawn(&theirs, "other_vehicle", "");
+    assert_eq!(expect(&child, "OUTCOME"), "no_receiver");
+    assert_eq!(expect(&child, "NODES"), "program/PLN");
     let our_nodes: Vec<String> = list_nodes(&ours)
         .unwrap()
         .into_iter()

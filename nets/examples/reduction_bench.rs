@@ -11,12 +11,14 @@
 //!   per state (microseconds, and bytes of peak memory above that of the smallest project);
 //!   with `--baseline`, another build of this program (built from an older commit, say) runs
 //!   the same full explorations in the same run, before and after side by side.
-//! - `reduction_bench --one (DIR | toggles:N) (reduced | full)`: one verification; prints
-//!   `states edges seconds peak_kb errors warnings graph_bytes` on one line (`graph_bytes`:
-//!   what the explored graph's states, parent pointers and edges hold).
+//! - `reduction_bench --one (DIR | toggles:N) (reduced | full) [auto | keep | replay]`: one
+//!   verification (the edges kept or recomputed as the last word says, `auto` by default:
+//!   `VerifyOptions::edges`); prints `states edges seconds peak_kb errors warnings graph_bytes`
+//!   on one line (`graph_bytes`: what the explored graph's states, parent pointers and edges
+//!   hold).
 
 use petrel_nets::project::{from_sources, load_and_check};
-use petrel_nets::verify::{verify, VerifyOptions};
+use petrel_nets::verify::{verify, EdgeMemory, VerifyOptions};
 use std::path::Path;
 use std::process::{Command, ExitCode};
 use std::time::Instant;
@@ -52,7 +54,7 @@ fn peak_kb() -> u64 {
         .unwrap_or(0)
 }
 
-fn one(what: &str, reduced: bool) -> Result<String, String> {
+fn one(what: &str, reduced: bool, edges: EdgeMemory) -> Result<String, String> {
     let project = if let Some(n) = what.strip_prefix("toggles:") {
         let n: usize = n.parse().map_err(|_| format!("bad N in `{what}`"))?;
         let (manifest, nets) = toggles(n);
@@ -67,6 +69,7 @@ fn one(what: &str, reduced: bool) -> Result<String, String> {
         &project,
         VerifyOptions {
             no_reduction: !reduced,
+            edges,
             ..Default::default()
         },
     )
@@ -104,11 +107,21 @@ fn child(exe: &Path, what: &str, reduced: bool) -> Result<[f64; 7], String> {
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.first().map(String::as_str) == Some("--one") {
+        let usage = "usage: reduction_bench --one (DIR | toggles:N) (reduced | full) [auto | keep | replay]";
         let (Some(what), Some(mode)) = (args.get(1), args.get(2)) else {
-            eprintln!("usage: reduction_bench --one (DIR | toggles:N) (reduced | full)");
+            eprintln!("{usage}");
             return ExitCode::from(2);
         };
-        return match one(what, mode == "reduced") {
+        let edges = match args.get(3).map(String::as_str) {
+            None | Some("auto") => EdgeMemory::Auto,
+            Some("keep") => EdgeMemory::Keep,
+            Some("replay") => EdgeMemory::Replay,
+            Some(_) => {
+                eprintln!("{usage}");
+                return ExitCode::from(2);
+            }
+        };
+        return match one(what, mode == "reduced", edges) {
             Ok(line) => {
                 println!("{line}");
                 ExitCode::SUCCESS

@@ -1194,6 +1194,7 @@ impl<'p> Checker<'p> {
                     from_text: b.from.text().trim().to_string(),
                     to_text: b.to.text().trim().to_string(),
                     within_us,
+                    within_text: b.within.as_ref().map(|w| w.text.trim().to_string()),
                 });
             }
         }
@@ -2389,6 +2390,7 @@ pub fn command_line_bound(project: &c::CompiledProject, text: &str) -> Result<c:
         from_text: from.trim().to_string(),
         to_text: to.trim().to_string(),
         within_us: None,
+        within_text: None,
     })
 }
 

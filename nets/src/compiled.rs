@@ -364,6 +364,8 @@ pub struct Bound {
     pub to_text: String,
     /// The requirement, in microseconds: a greater (or no) bound is an error (E0607).
     pub within_us: Option<u64>,
+    /// The requirement as written (`10min`), for the reports.
+    pub within_text: Option<String>,
 }
 
 impl CompiledProject {

@@ -5,7 +5,7 @@
 
 use petrel_nets::compiled::CompiledProject;
 use petrel_nets::project::{from_sources, load_and_check};
-use petrel_nets::verify::{verify, Report, VerifyOptions};
+use petrel_nets::verify::{check_replay, verify, EdgeMemory, Report, VerifyOptions};
 use proptest::prelude::*;
 use std::collections::BTreeSet;
 use std::path::Path;
@@ -353,4 +353,79 @@ fn most_generated_projects_check() {
     assert!(ok >= 60, "{ok} of 100 generated projects check");
     eprintln!("{ok} of 100 check, the reduction applies to {partial}");
     assert!(partial >= 10, "the reduction applies to {partial} of them");
+}
+
+/// The verification with every edge recomputed (`EdgeMemory::Replay`) against the one that
+/// keeps them: the same report, but for the time and the graph's bytes.
+fn same_report_replayed(c: &CompiledProject, timed: bool) -> Result<(), String> {
+    let run = |edges: EdgeMemory| {
+        verify(
+            c,
+            VerifyOptions {
+                no_reduction: true,
+                timed,
+                edges,
+                ..Default::default()
+            },
+        )
+        .map(|mut r| {
+            r.seconds = 0.0;
+            r.graph_bytes = 0;
+            r
+        })
+        .map_err(|e| e.to_string())
+    };
+    let (kept, replayed) = (run(EdgeMemory::Keep)?, run(EdgeMemory::Replay)?);
+    // Everything it reports (the report has no equality of its own).
+    let json = |r: &Report| serde_json::to_value(r).map_err(|e| e.to_string());
+    if json(&kept)? != json(&replayed)? {
+        return Err(format!("kept {kept:?}\nreplayed {replayed:?}"));
+    }
+    Ok(())
+}
+
+#[test]
+fn every_mission_verifies_the_same_with_its_edges_replayed() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut dirs: Vec<_> = std::fs::read_dir(root.join("../missions"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|d| d.join("petrel.toml").is_file())
+        .collect();
+    dirs.push(root.join("tests/data/verify/flawed"));
+    for sub in ["tests/data/progress", "tests/data/timed"] {
+        for d in std::fs::read_dir(root.join(sub)).unwrap() {
+            dirs.push(d.unwrap().path());
+        }
+    }
+    dirs.sort();
+    for dir in &dirs {
+        let (_, c, d) = load_and_check(dir).expect("reads");
+        assert!(!d.has_errors(), "{}", dir.display());
+        let c = c.expect("compiles");
+        // The replayed edges are the explored ones, edge for edge.
+        let compared = check_replay(&c, VerifyOptions::default())
+            .unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
+        assert!(compared > 0, "{}", dir.display());
+        for timed in [false, true] {
+            if let Err(e) = same_report_replayed(&c, timed) {
+                panic!("{} (timed: {timed}): {e}", dir.display());
+            }
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 120, ..ProptestConfig::default() })]
+
+    #[test]
+    fn generated_projects_replay_the_edges_they_explored(seed in any::<u64>()) {
+        let (manifest, nets) = generated(seed);
+        let (_, c, _, _) = from_sources(&manifest, &[("a.pn", &nets)]);
+        let Some(c) = c else { return Ok(()) };
+        let compared = check_replay(&c, VerifyOptions::default());
+        prop_assert!(compared.is_ok(), "{:?}\n{}\n{}", compared, manifest, nets);
+        let same = same_report_replayed(&c, false);
+        prop_assert!(same.is_ok(), "{:?}\n{}\n{}", same, manifest, nets);
+    }
 }

@@ -7,7 +7,7 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use petrel_tests::{example_bin, petrel_bin, repo, unique_vehicle, Player, Processes};
+use petrel_tests::{example_bin, petrel_bin, repo, unique_vehicle, Player, Processes, TempProject};
 
 fn marked(s: &serde_json::Value, net: &str, place: &str) -> bool {
     s["marking"][net]
@@ -15,12 +15,38 @@ fn marked(s: &serde_json::Value, net: &str, place: &str) -> bool {
         .is_some_and(|m| m.iter().any(|p| p == place))
 }
 
+/// missions/auv with its sensors' staleness bounds loosened from 300-500 ms to 30 s: they
+/// count in wall-clock time, and on a loaded 2-core machine the data server's in-process
+/// simulator once stalled long enough to raise `sensor_lost` mid-dive (the staleness rules have
+/// tests of their own in can_bridge). The dive is what these tests are about.
+fn auv_project() -> TempProject {
+    TempProject::copy(&repo().join("missions/auv"), |name, text| {
+        if name != "can.toml" {
+            return text;
+        }
+        for bound in ["periods = 3 ", "timeout = \"500ms\""] {
+            assert!(
+                text.contains(bound),
+                "missions/auv/can.toml has no `{bound}`"
+            );
+        }
+        text.replace("periods = 3 ", "timeout = \"30s\" ")
+            .replace("timeout = \"500ms\"", "timeout = \"30s\"")
+    })
+}
+
 /// The data server (recording the bus to `log`, its standard error to `stderr`) and the
 /// guidance program; returns once both are on the vehicle.
-fn start_vehicle(vehicle: &str, log: &Path, stderr: &Path, bridge_flags: &[&str]) -> Processes {
+fn start_vehicle(
+    project: &Path,
+    vehicle: &str,
+    log: &Path,
+    stderr: &Path,
+    bridge_flags: &[&str],
+) -> Processes {
     let bridge = Command::new(petrel_bin())
         .arg("bridge")
-        .arg(repo().join("missions/auv"))
+        .arg(project)
         .args(["--vehicle", vehicle, "--bus", "memory", "--record"])
         .arg(log)
         .args(bridge_flags)
@@ -50,10 +76,10 @@ fn start_vehicle(vehicle: &str, log: &Path, stderr: &Path, bridge_flags: &[&str]
 }
 
 /// The events the recorded bus gives offline (`petrel bridge --replay`), as (name, params).
-fn replayed(log: &Path) -> Vec<(String, Vec<serde_json::Value>)> {
+fn replayed(project: &Path, log: &Path) -> Vec<(String, Vec<serde_json::Value>)> {
     let out = Command::new(petrel_bin())
         .arg("bridge")
-        .arg(repo().join("missions/auv"))
+        .arg(project)
         .arg("--replay")
         .arg(log)
         .output()
@@ -85,8 +111,10 @@ fn dive(
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("bus.log");
     let bridge_err = dir.path().join("bridge.err");
-    let player = Player::start(&repo().join("missions/auv"), &vehicle);
-    let vehicle_processes = start_vehicle(&vehicle, &log, &bridge_err, bridge_flags);
+    let project = auv_project();
+    let player = Player::start(project.path(), &vehicle);
+    let vehicle_processes =
+        start_vehicle(project.path(), &vehicle, &log, &bridge_err, bridge_flags);
     let o = player.send("start_mission", 1);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let s = player.wait_for(60.0, &done);
@@ -100,7 +128,7 @@ fn dive(
         "{report}"
     );
     assert!(player.stop().success());
-    (s, replayed(&log))
+    (s, replayed(project.path(), &log))
 }
 
 fn depth(params: &[serde_json::Value]) -> f64 {

@@ -14,7 +14,7 @@ use std::process::Command;
 use petrel_tests::petrel_bin;
 use redermor_flight::{
     assert_clear_of_the_buoys, assert_covered, assert_flown_and_stopped, bench, check_alarm,
-    check_leak, check_nominal, check_nominal_route, fly, fly_with,
+    check_leak, check_nominal, check_nominal_route, fly, fly_killing, fly_with, thruster_commands,
 };
 
 #[test]
@@ -124,4 +124,51 @@ fn scenario_6_depth_sensor_silent_aborts_at_the_surface() {
     assert_eq!(f.took("areas_done"), 0);
     let last = f.trace.last().expect("a trace");
     assert!(last.depth < 0.5, "at the surface: {last:?}");
+}
+
+/// The planner's process crashes (SIGKILL) during the first transit: the player's liveness
+/// check raises `program_lost("PLN")`, DECISION gives the mission up and ACTION brings the
+/// vehicle up where it is; it ends stopped at the surface, short of the survey.
+#[test]
+fn scenario_7_planner_crash_mid_transit_surfaces_where_the_vehicle_is() {
+    let f = fly_killing("nominal", "PLN", 2.0);
+    assert!(
+        f.steps
+            .iter()
+            .any(|(e, p, _)| e == "program_lost" && p == &["\"PLN\""]),
+        "{:?}",
+        f.steps
+    );
+    assert_flown_and_stopped(&f);
+    assert!(f.called("call GUI.stop") && f.called("call IDC.surface"));
+    assert_eq!(f.took("areas_done"), 0, "the survey was given up");
+    let last = f.trace.last().expect("a trace");
+    assert!(last.depth < 0.5, "at the surface: {last:?}");
+}
+
+/// The navigation process (GDD, GUI, IDC: the pilot) crashes (SIGKILL) during the first
+/// transit: with IDC lost, EMERGENCY takes every other net down and stops the thrusters itself
+/// through the CAN data server (`CAN.ThrusterCmd(0, 0, false)`): the last thruster command on
+/// the bus disables them (the buoyant vehicle rises).
+#[test]
+fn scenario_8_pilot_crash_stops_the_thrusters_through_the_data_server() {
+    let f = fly_killing("nominal", "NAV", 2.0);
+    assert!(f.marked("EMERGENCY", "unpiloted"), "{}", f.marking);
+    for net in ["MISSION", "DECISION", "ACTION"] {
+        assert!(
+            f.marking.get(net).is_none(),
+            "{net} still active: {}",
+            f.marking
+        );
+    }
+    assert!(f.called("call CAN.ThrusterCmd(0.0, 0.0, false)"));
+    // IDC's own commands enable the thrusters, and a killed IDC sends nothing more: the last
+    // command on the bus is the supervisor's. (The run ends at that final marking, so the
+    // simulator's trace stops before the vehicle has risen far.)
+    let frames = thruster_commands(&f.logs.join("bus.log"));
+    assert!(
+        frames.iter().any(|c| c.2),
+        "IDC flew the vehicle: {frames:?}"
+    );
+    assert_eq!(frames.last(), Some(&(0, 0, false)), "{frames:?}");
 }

@@ -7,7 +7,7 @@
 //! over its strongly connected components ([`Scc`]), numbered so that every edge goes to a
 //! component numbered no higher, with no reversed copy of the edges.
 
-use super::explore::{Graph, NO_EVENT};
+use super::explore::{Edge, Edges, Graph, NO_EVENT};
 use super::{
     DeadFinding, InvariantFinding, LoopFinding, ProgressFinding, StarvationFinding, StuckFinding,
 };
@@ -111,48 +111,170 @@ pub(super) struct Scc {
 
 impl Scc {
     /// The components of `g`'s edges whose step kind `keep` keeps (every edge with `None`).
-    pub fn new(g: &Graph, keep: Option<&[bool]>) -> Scc {
+    ///
+    /// Each state's edges are fetched (recomputed, when the graph does not keep them) when the
+    /// search enters it, and its targets not visited yet are kept for the search to come back
+    /// to, in one vector for the whole depth-first path, while they fit in a budget of half an
+    /// edge (4 bytes) per state; beyond it, a state's edges are fetched again each time the search comes
+    /// back to it after a child.
+    pub fn new(g: &Graph, edges: &Edges, keep: Option<&[bool]>) -> Scc {
+        Scc::search(g, edges, keep, None, Scc::budget(g))
+    }
+
+    /// Unvisited targets the search keeps at most: half an edge per state.
+    fn budget(g: &Graph) -> usize {
+        (g.states.len() / 2).max(1 << 16)
+    }
+
+    /// The components of the whole graph, and what [`Walk`] answers, in the same search: each
+    /// edge is looked at when its source is entered or left, when its target is either done
+    /// (in a component numbered lower) or live (in the source's component), so the walk needs
+    /// no pass of its own over the edges.
+    pub fn with_walk(g: &Graph, edges: &Edges, mut want: Folded) -> (Scc, Walk) {
+        let scc = Scc::search(g, edges, None, Some(&mut want), Scc::budget(g));
+        (scc, want.finish())
+    }
+
+    /// [`Scc::with_walk`] keeping at most `budget` unvisited targets (the tests try 0).
+    #[cfg(test)]
+    fn with_walk_within(g: &Graph, edges: &Edges, mut want: Folded, budget: usize) -> (Scc, Walk) {
+        let scc = Scc::search(g, edges, None, Some(&mut want), budget);
+        (scc, want.finish())
+    }
+
+    fn search(
+        g: &Graph,
+        edges: &Edges,
+        keep: Option<&[bool]>,
+        mut walk: Option<&mut Folded>,
+        budget: usize,
+    ) -> Scc {
         let n = g.states.len();
+        let top = (n as u32).wrapping_sub(1);
         // Unvisited (0), then the depth-first index while the state is live, then its
         // component counted down from n - 1 (above every live index: Pearce's invariant).
         let mut rindex = vec![0u32; n];
         let mut stack: Vec<u32> = Vec::new();
-        // The depth-first path: each state and how many of its edges were looked at, with
+        // The depth-first path: each state and how many of its targets were looked at, with
         // ROOT while no edge led lower.
         const ROOT: u32 = 1 << 31;
         let mut call: Vec<(u32, u32)> = Vec::new();
+        // Per state on the path, where its unvisited targets start in `pending` (the top
+        // state's run to the end), or NOT_KEPT.
+        const NOT_KEPT: u32 = u32::MAX;
+        let mut starts: Vec<u32> = Vec::new();
+        let mut pending: Vec<Edge> = Vec::new();
         let mut order: Vec<u32> = Vec::with_capacity(n);
         let mut start: Vec<u32> = vec![0];
         let mut index = 1u32;
         let mut c = (n as u32).wrapping_sub(1);
+        let mut buf: Vec<Edge> = Vec::new();
+        let mut buf_of = u32::MAX;
+        let kept = |e: &Edge| keep.is_none_or(|kp| kp[e.kind as usize]);
         for r in 0..n as u32 {
             if rindex[r as usize] != 0 {
                 continue;
             }
-            rindex[r as usize] = index;
-            index += 1;
-            call.push((r, ROOT));
-            while let Some(&mut (v, ref mut off)) = call.last_mut() {
-                let range = g.edge_range(v);
-                let k = range.start + (*off & !ROOT) as usize;
-                if k < range.end {
-                    *off += 1;
-                    if keep.is_some_and(|kp| !kp[g.edge_kind(k)]) {
-                        continue;
+            let mut entering = Some(r);
+            loop {
+                if let Some(w) = entering.take() {
+                    rindex[w as usize] = index;
+                    index += 1;
+                    edges.of(w, &mut buf);
+                    buf_of = w;
+                    let mut flags = ROOT;
+                    // The targets already visited are looked at now (an edge's order does not
+                    // matter to the algorithm), the others kept within the budget.
+                    let from = pending.len();
+                    for e in buf.iter().filter(|e| kept(e)) {
+                        let x = rindex[e.to as usize];
+                        if x == 0 {
+                            pending.push(*e);
+                        } else if x < rindex[w as usize] {
+                            rindex[w as usize] = x;
+                            flags = 0;
+                        }
                     }
-                    let w = g.edge_target(k);
+                    if let Some(f) = walk.as_deref_mut() {
+                        // A state that may be a component's root gathers for it; the others
+                        // for the nearest one below them on the path, in their component.
+                        if flags == ROOT {
+                            f.open();
+                        }
+                        f.state(w);
+                        for e in &buf {
+                            let x = rindex[e.to as usize];
+                            f.edge(w, e, (x != 0).then(|| f.done(e.to).then(|| top - x)));
+                        }
+                    }
+                    if pending.len() <= budget {
+                        starts.push(from as u32);
+                    } else {
+                        pending.truncate(from);
+                        starts.push(NOT_KEPT);
+                    }
+                    call.push((w, flags));
+                }
+                let Some(&mut (v, ref mut off)) = call.last_mut() else {
+                    break;
+                };
+                let from = starts[starts.len() - 1];
+                let next = if from != NOT_KEPT {
+                    let k = from as usize + (*off & !ROOT) as usize;
+                    (k < pending.len()).then(|| {
+                        *off += 1;
+                        pending[k].to
+                    })
+                } else {
+                    if buf_of != v {
+                        edges.of(v, &mut buf);
+                        buf_of = v;
+                    }
+                    let mut found = None;
+                    while let Some(e) = buf.get((*off & !ROOT) as usize) {
+                        *off += 1;
+                        if kept(e) {
+                            found = Some(e.to);
+                            break;
+                        }
+                    }
+                    found
+                };
+                if let Some(w) = next {
                     if rindex[w as usize] == 0 {
-                        rindex[w as usize] = index;
-                        index += 1;
-                        call.push((w, ROOT));
+                        entering = Some(w);
                     } else if rindex[w as usize] < rindex[v as usize] {
                         rindex[v as usize] = rindex[w as usize];
-                        *off &= !ROOT;
+                        if *off & ROOT != 0 {
+                            *off &= !ROOT;
+                            if let Some(f) = walk.as_deref_mut() {
+                                f.merge();
+                            }
+                        }
                     }
                     continue;
                 }
                 let root = *off & ROOT != 0;
+                if let Some(f) = walk.as_deref_mut() {
+                    // Every target is visited now: the edges not looked at when `v` was
+                    // entered (those to targets then unvisited; all of them again when they
+                    // were not kept, which changes nothing).
+                    let rest = if from != NOT_KEPT {
+                        &pending[from as usize..]
+                    } else {
+                        debug_assert_eq!(buf_of, v);
+                        &buf[..]
+                    };
+                    for e in rest {
+                        let x = rindex[e.to as usize];
+                        f.edge(v, e, Some(f.done(e.to).then(|| top - x)));
+                    }
+                }
                 call.pop();
+                if from != NOT_KEPT {
+                    pending.truncate(from as usize);
+                }
+                starts.pop();
                 if root {
                     index -= 1;
                     while let Some(&w) = stack.last() {
@@ -166,6 +288,9 @@ impl Scc {
                     }
                     rindex[v as usize] = c;
                     order.push(v);
+                    if let Some(f) = walk.as_deref_mut() {
+                        f.close(top - c, &order[start[start.len() - 1] as usize..]);
+                    }
                     c = c.wrapping_sub(1);
                     start.push(order.len() as u32);
                 } else {
@@ -174,13 +299,17 @@ impl Scc {
                 if let Some(&mut (u, ref mut uoff)) = call.last_mut() {
                     if rindex[v as usize] < rindex[u as usize] {
                         rindex[u as usize] = rindex[v as usize];
-                        *uoff &= !ROOT;
+                        if *uoff & ROOT != 0 {
+                            *uoff &= !ROOT;
+                            if let Some(f) = walk.as_deref_mut() {
+                                f.merge();
+                            }
+                        }
                     }
                 }
             }
         }
         // Number the components from 0 in the order they completed.
-        let top = (n as u32).wrapping_sub(1);
         for x in &mut rindex {
             *x = top - *x;
         }
@@ -204,17 +333,25 @@ impl Scc {
     /// Per component: whether a state where `target` holds is reachable from it along the
     /// edges `keep` keeps (all with `None`; the components must be those of the same edges).
     /// The components are met in increasing number, so every one an edge leads to is done.
-    fn reach(&self, g: &Graph, keep: Option<&[bool]>, target: &dyn Fn(u32) -> bool) -> Vec<bool> {
+    fn reach(
+        &self,
+        edges: &Edges,
+        keep: Option<&[bool]>,
+        target: &dyn Fn(u32) -> bool,
+    ) -> Vec<bool> {
         let mut out: Vec<bool> = Vec::with_capacity(self.count());
+        let mut buf = Vec::new();
         for c in 0..self.count() as u32 {
             let r = self.members(c).iter().any(|&v| {
-                target(v)
-                    || g.edge_range(v).any(|k| {
-                        keep.is_none_or(|kp| kp[g.edge_kind(k)]) && {
-                            let d = self.comp[g.edge_target(k) as usize];
+                target(v) || {
+                    edges.of(v, &mut buf);
+                    buf.iter().any(|e| {
+                        keep.is_none_or(|kp| kp[e.kind as usize]) && {
+                            let d = self.comp[e.to as usize];
                             d != c && out[d as usize]
                         }
                     })
+                }
             });
             out.push(r);
         }
@@ -222,17 +359,304 @@ impl Scc {
     }
 }
 
+/// What the search for the components of the whole graph answers besides them
+/// ([`Scc::with_walk`], each part when asked): per component, whether an end is reachable from
+/// it (progress, when every edge counts) and which nets can still fire from it; and the loops.
+/// No pass over the edges of its own, where there were three: each is a replay of every state
+/// when the graph does not keep its edges.
+#[cfg_attr(test, derive(Debug, PartialEq))]
+pub(super) struct Walk {
+    /// Per component: an end is reachable.
+    pub reach: Option<Vec<bool>>,
+    pub can: Option<CanFire>,
+    pub loops: Option<Vec<Loop>>,
+}
+
+/// The nets each step kind of `g` fires (`words` words of bits per kind), the words, and the
+/// nets with no transition (a store of places: never stuck), for [`CanFire`].
+pub(super) fn nets_fired(
+    p: &CompiledProject,
+    l: &Layout,
+    g: &Graph,
+) -> (Vec<u64>, usize, Vec<bool>) {
+    let words = p.nets.len().div_ceil(64).max(1);
+    let mut fires = vec![0u64; g.steps().len() * words];
+    for (k, &(_, f)) in g.steps().iter().enumerate() {
+        for &r in &g.fired_sets[f as usize] {
+            let net = l.rules[r as usize].net as usize;
+            fires[k * words + net / 64] |= 1 << (net % 64);
+        }
+    }
+    (
+        fires,
+        words,
+        p.nets.iter().map(|n| n.transitions.is_empty()).collect(),
+    )
+}
+
+/// What [`Scc::with_walk`] gathers, for each component while it is being found: one set of
+/// values per state of the depth-first path that may still be a component's root (a state
+/// that turns out not to be one hands its values to the next such state below it, which is
+/// in its component), closed into the component's when its root is left.
+pub(super) struct Folded<'x> {
+    ends: Option<&'x [bool]>,
+    /// The nets each step kind fires, `words` words each (when the nets that can fire are
+    /// asked; `words` is 0 otherwise), and the nets with no transition.
+    fires: Vec<u64>,
+    words: usize,
+    no_transitions: Vec<bool>,
+    /// Words of a set of step kinds (0 when the loops are not asked).
+    kw: usize,
+    /// Per open set: an end is reachable (0 or 1), the first state with an edge inside the
+    /// component to another state (`u64::MAX`: none yet), the nets that can fire (`words`),
+    /// the step kinds of those inner edges (`kw`).
+    open: Vec<u64>,
+    reach: Vec<bool>,
+    bits: Vec<u64>,
+    found: Vec<Loop>,
+    /// A bit per state whose component is complete.
+    done: Vec<u64>,
+}
+
+impl<'x> Folded<'x> {
+    /// What to gather over `g`: what reaches `ends` (when given), the nets that can still fire
+    /// (`nets`, from [`nets_fired`], when given), the loops (when `loops`).
+    pub fn new(
+        g: &Graph,
+        ends: Option<&'x [bool]>,
+        nets: Option<(Vec<u64>, usize, Vec<bool>)>,
+        loops: bool,
+    ) -> Folded<'x> {
+        let (fires, words, no_transitions) = nets.unwrap_or_default();
+        Folded {
+            ends,
+            fires,
+            words,
+            no_transitions,
+            kw: if loops {
+                g.steps().len().div_ceil(64).max(1)
+            } else {
+                0
+            },
+            open: Vec::new(),
+            reach: Vec::new(),
+            bits: Vec::new(),
+            found: Vec::new(),
+            done: vec![0; g.states.len().div_ceil(64)],
+        }
+    }
+
+    fn stride(&self) -> usize {
+        2 + self.words + self.kw
+    }
+
+    /// A state that may be a component's root is entered.
+    fn open(&mut self) {
+        let st = self.stride();
+        self.open.resize(self.open.len() + st, 0);
+        let k = self.open.len() - st;
+        self.open[k + 1] = u64::MAX;
+    }
+
+    /// State `v` is in the component of the top set.
+    fn state(&mut self, v: u32) {
+        if self.ends.is_some_and(|e| e[v as usize]) {
+            let k = self.open.len() - self.stride();
+            self.open[k] = 1;
+        }
+    }
+
+    /// Edge `e` out of `v`, in the component of the top set, to a target not visited yet
+    /// (`None`), in component `d` (`Some(Some(d))`, done), or live (`Some(None)`: in the
+    /// component of `v`).
+    fn edge(&mut self, v: u32, e: &Edge, target: Option<Option<u32>>) {
+        debug_assert!(!self.open.is_empty());
+        let (words, st) = (self.words, self.stride());
+        let k = self.open.len() - st;
+        let kind = e.kind as usize;
+        for w in 0..words {
+            self.open[k + 2 + w] |= self.fires[kind * words + w];
+        }
+        match target {
+            None => {}
+            Some(Some(d)) => {
+                if self.ends.is_some() && self.reach[d as usize] {
+                    self.open[k] = 1;
+                }
+                for w in 0..words {
+                    self.open[k + 2 + w] |= self.bits[d as usize * words + w];
+                }
+            }
+            Some(None) if self.kw > 0 && e.to != v => {
+                self.open[k + 1] = self.open[k + 1].min(u64::from(v));
+                self.open[k + 2 + words + kind / 64] |= 1 << (kind % 64);
+            }
+            Some(None) => {}
+        }
+    }
+
+    /// The top set's state is not a component's root: its values go to the set below.
+    fn merge(&mut self) {
+        let st = self.stride();
+        let k = self.open.len() - st;
+        debug_assert!(k >= st);
+        let below = k - st;
+        self.open[below] |= self.open[k];
+        self.open[below + 1] = self.open[below + 1].min(self.open[k + 1]);
+        for w in 2..st {
+            self.open[below + w] |= self.open[k + w];
+        }
+        self.open.truncate(k);
+    }
+
+    /// Whether state `v`'s component is complete (its number is then final; a live state's
+    /// depth-first index may equal a complete component's number).
+    fn done(&self, v: u32) -> bool {
+        self.done
+            .get(v as usize / 64)
+            .is_some_and(|w| w & (1 << (v % 64)) != 0)
+    }
+
+    /// The top set's state is the root of component `comp`, now complete with `members`.
+    fn close(&mut self, comp: u32, members: &[u32]) {
+        for &v in members {
+            let w = v as usize / 64;
+            if self.done.len() <= w {
+                self.done.resize(w + 1, 0);
+            }
+            self.done[w] |= 1 << (v % 64);
+        }
+        let (words, st) = (self.words, self.stride());
+        let k = self.open.len() - st;
+        debug_assert_eq!(self.reach.len(), comp as usize);
+        self.reach.push(self.open[k] != 0);
+        self.bits
+            .extend_from_slice(&self.open[k + 2..k + 2 + words]);
+        if self.open[k + 1] != u64::MAX {
+            let mut kinds = Vec::new();
+            for (w, &bits) in self.open[k + 2 + words..k + st].iter().enumerate() {
+                let mut b = bits;
+                while b != 0 {
+                    kinds.push((w * 64) as u32 + b.trailing_zeros());
+                    b &= b - 1;
+                }
+            }
+            self.found.push(Loop {
+                comp,
+                first: self.open[k + 1] as u32,
+                kinds,
+            });
+        }
+        self.open.truncate(k);
+    }
+
+    fn finish(mut self) -> Walk {
+        self.found.sort_unstable_by_key(|x| x.first);
+        Walk {
+            reach: self.ends.is_some().then_some(self.reach),
+            can: (self.words > 0).then_some(CanFire {
+                words: self.words,
+                bits: self.bits,
+                no_transitions: self.no_transitions,
+            }),
+            loops: (self.kw > 0).then_some(self.found),
+        }
+    }
+}
+
+#[cfg(test)]
+impl Walk {
+    /// The same answers as [`Scc::with_walk`], by a pass of their own over the edges,
+    /// component by component (what the search does at once; the tests compare them).
+    fn separate(
+        edges: &Edges,
+        all: &Scc,
+        ends: Option<&[bool]>,
+        nets: Option<(Vec<u64>, usize, Vec<bool>)>,
+        loops: bool,
+    ) -> Walk {
+        let can = nets.is_some();
+        let (fires, words, no_transitions) = nets.unwrap_or_default();
+        let mut bits = vec![0u64; all.count() * words];
+        let mut reach: Vec<bool> = Vec::new();
+        let mut found: Vec<Loop> = Vec::new();
+        let mut buf = Vec::new();
+        for c in 0..all.count() as u32 {
+            let mut r = false;
+            let mut first = u32::MAX;
+            let mut kinds: Vec<u32> = Vec::new();
+            let (here, done) = bits.split_at_mut(c as usize * words);
+            for &v in all.members(c) {
+                r |= ends.is_some_and(|e| e[v as usize]);
+                edges.of(v, &mut buf);
+                for e in &buf {
+                    let d = all.comp[e.to as usize];
+                    if d != c {
+                        r |= ends.is_some() && reach[d as usize];
+                    } else if loops && e.to != v {
+                        first = first.min(v);
+                        if !kinds.contains(&e.kind) {
+                            kinds.push(e.kind);
+                        }
+                    }
+                    for w in 0..words {
+                        done[w] |= fires[e.kind as usize * words + w];
+                        if d != c {
+                            done[w] |= here[d as usize * words + w];
+                        }
+                    }
+                }
+            }
+            reach.push(r);
+            kinds.sort_unstable();
+            if first != u32::MAX {
+                found.push(Loop {
+                    comp: c,
+                    first,
+                    kinds,
+                });
+            }
+        }
+        found.sort_unstable_by_key(|x| x.first);
+        Walk {
+            reach: ends.is_some().then_some(reach),
+            can: can.then_some(CanFire {
+                words,
+                bits,
+                no_transitions,
+            }),
+            loops: loops.then_some(found),
+        }
+    }
+}
+
+/// Whether progress counts on every step kind of `g` (no edge's event is of a category it
+/// excludes): then the whole graph's components and [`Walk`] answer it.
+pub(super) fn progress_allowed(p: &CompiledProject, g: &Graph) -> Vec<bool> {
+    g.steps()
+        .iter()
+        .map(|&(label, _)| {
+            let e = g.labels[label as usize].event;
+            e == NO_EVENT || !p.progress_excludes.contains(&p.events[e as usize].category)
+        })
+        .collect()
+}
+
 /// Progress: from every reachable state, an end stays reachable without the events of the
 /// excluded categories (AG EF end, over the stable states). The first state (in breadth-first
 /// order) that fails, how many do, and the first state the mission stays in for good once it
 /// failed (a failing state in a bottom loop of the graph without the excluded events), with
-/// their indices.
+/// their indices. `all_reach`: per component of `all`, whether an end is reachable from it
+/// ([`Walk`]), when every edge counts ([`progress_allowed`]).
+#[allow(clippy::too_many_arguments)]
 pub(super) fn progress(
     p: &CompiledProject,
     l: &Layout,
     g: &Graph,
+    edges: &Edges,
     all: &Scc,
     ends: &[bool],
+    all_reach: Option<&[bool]>,
     describe: &dyn Fn(&[u64]) -> Vec<String>,
 ) -> Option<(ProgressFinding, u32, u32, Vec<bool>)> {
     let n = g.states.len();
@@ -241,34 +665,31 @@ pub(super) fn progress(
         return None;
     }
     // The step kinds progress counts on.
-    let allowed: Vec<bool> = g
-        .steps()
-        .iter()
-        .map(|&(label, _)| {
-            let e = g.labels[label as usize].event;
-            e == NO_EVENT || !p.progress_excludes.contains(&p.events[e as usize].category)
-        })
-        .collect();
+    let allowed = progress_allowed(p, g);
     // Over the allowed edges: their own components, unless every edge is allowed.
     let own;
-    let (scc, keep) = if allowed.iter().all(|&a| a) {
-        (all, None)
-    } else {
-        own = Scc::new(g, Some(&allowed));
-        (&own, Some(allowed.as_slice()))
+    let owned;
+    let (scc, keep, creach) = match all_reach {
+        Some(r) if allowed.iter().all(|&a| a) => (all, None, r),
+        _ => {
+            let keep = (!allowed.iter().all(|&a| a)).then_some(allowed.as_slice());
+            own = Scc::new(g, edges, keep);
+            owned = own.reach(edges, keep, &|v| ends[v as usize]);
+            (&own, keep, owned.as_slice())
+        }
     };
-    let creach = scc.reach(g, keep, &|v| ends[v as usize]);
     let reach: Vec<bool> = (0..n).map(|i| creach[scc.comp[i] as usize]).collect();
     let first = (0..n).find(|&i| !reach[i])?;
     let failing = reach.iter().filter(|&&r| !r).count();
     // Where the mission stays: a failing state whose loop (allowed edges only) has no way out.
     // Every allowed successor of a failing state fails too (it is in a component numbered no
     // higher, whose states all fail or all reach), so such a loop exists below each.
-    let has_exit = |c: u32| {
+    let mut buf = Vec::new();
+    let mut has_exit = |c: u32| {
         scc.members(c).iter().any(|&v| {
-            g.edge_range(v).any(|k| {
-                keep.is_none_or(|kp| kp[g.edge_kind(k)]) && scc.comp[g.edge_target(k) as usize] != c
-            })
+            edges.of(v, &mut buf);
+            buf.iter()
+                .any(|e| keep.is_none_or(|kp| kp[e.kind as usize]) && scc.comp[e.to as usize] != c)
         })
     };
     let mut exit_known: HashMap<u32, bool> = HashMap::new();
@@ -350,11 +771,11 @@ pub(super) fn stuck_nets(
     l: &Layout,
     g: &Graph,
     all: &Scc,
+    can: CanFire,
     describe: &dyn Fn(&[u64]) -> Vec<String>,
 ) -> (Vec<Stuck>, CanFire) {
     let n = g.states.len();
     let mut out = Vec::new();
-    let can = CanFire::new(p, l, g, all);
     for net in 0..p.nets.len() {
         let found = (0..n).find(|&i| {
             let s = &g.states[i];
@@ -391,6 +812,7 @@ pub(super) fn stuck_nets(
 
 /// Per component of the whole graph: the nets that can still fire from its states (a set of
 /// nets, one bit each).
+#[cfg_attr(test, derive(Debug, PartialEq))]
 pub(super) struct CanFire {
     words: usize,
     bits: Vec<u64>,
@@ -399,40 +821,6 @@ pub(super) struct CanFire {
 }
 
 impl CanFire {
-    fn new(p: &CompiledProject, l: &Layout, g: &Graph, all: &Scc) -> CanFire {
-        let words = p.nets.len().div_ceil(64).max(1);
-        // The nets each step kind fires.
-        let mut fires = vec![0u64; g.steps().len() * words];
-        for (k, &(_, f)) in g.steps().iter().enumerate() {
-            for &r in &g.fired_sets[f as usize] {
-                let net = l.rules[r as usize].net as usize;
-                fires[k * words + net / 64] |= 1 << (net % 64);
-            }
-        }
-        let mut bits = vec![0u64; all.count() * words];
-        for c in 0..all.count() as u32 {
-            let (here, done) = bits.split_at_mut(c as usize * words);
-            let row = &mut done[..words];
-            for &v in all.members(c) {
-                for k in g.edge_range(v) {
-                    let kind = g.edge_kind(k);
-                    let d = all.comp[g.edge_target(k) as usize];
-                    for w in 0..words {
-                        row[w] |= fires[kind * words + w];
-                        if d != c {
-                            row[w] |= here[d as usize * words + w];
-                        }
-                    }
-                }
-            }
-        }
-        CanFire {
-            words,
-            bits,
-            no_transitions: p.nets.iter().map(|n| n.transitions.is_empty()).collect(),
-        }
-    }
-
     /// Whether net `net` can still fire from state `i` (`all`: the components it was built on).
     pub fn can(&self, all: &Scc, net: NetId, i: u32) -> bool {
         let net = net as usize;
@@ -556,12 +944,8 @@ fn resource_cycle(
     None
 }
 
-/// Loops of stable states: the strongly connected components of the whole graph.
-pub(super) fn components(g: &Graph) -> Scc {
-    Scc::new(g, None)
-}
-
 /// A loop of stable states: a component with edges inside it between two different states.
+#[cfg_attr(test, derive(Debug, PartialEq))]
 pub(super) struct Loop {
     comp: u32,
     /// Its first state (in breadth-first order) with such an edge.
@@ -582,40 +966,6 @@ impl Loop {
         events.dedup();
         events
     }
-}
-
-/// The loops of the graph, in the order of their first states. One pass over the edges,
-/// component by component, the kinds marked in an array (a set of events or rules per edge
-/// cost more than the exploration on large graphs).
-pub(super) fn loops(g: &Graph, c: &Scc) -> Vec<Loop> {
-    let mut seen = vec![false; g.steps().len()];
-    let mut out = Vec::new();
-    for comp in 0..c.count() as u32 {
-        let mut first = u32::MAX;
-        let mut kinds: Vec<u32> = Vec::new();
-        for &v in c.members(comp) {
-            for k in g.edge_range(v) {
-                let to = g.edge_target(k);
-                if to == v || c.comp[to as usize] != comp {
-                    continue;
-                }
-                first = first.min(v);
-                let kind = g.edge_kind(k);
-                if !seen[kind] {
-                    seen[kind] = true;
-                    kinds.push(kind as u32);
-                }
-            }
-        }
-        for &k in &kinds {
-            seen[k as usize] = false;
-        }
-        if first != u32::MAX {
-            out.push(Loop { comp, first, kinds });
-        }
-    }
-    out.sort_unstable_by_key(|x| x.first);
-    out
 }
 
 /// Starvation: a loop of stable states the environment can keep the mission in forever, in
@@ -719,14 +1069,17 @@ pub(super) fn starvation(
 pub(super) fn event_loops(
     p: &CompiledProject,
     g: &Graph,
+    edges: &Edges,
     c: &Scc,
     loops: &[Loop],
 ) -> Vec<LoopFinding> {
     // The edges that move, with their events.
     let moves = |a: u32| {
-        g.edges(a)
+        let mut buf = Vec::new();
+        edges.of(a, &mut buf);
+        buf.into_iter()
             .filter(move |e| e.to != a)
-            .map(|e| (e.to, g.labels[e.label as usize].event))
+            .map(|e| (e.to, g.labels[g.label_of(e.kind) as usize].event))
     };
     let name = |e: EventId| {
         if e == NO_EVENT {
@@ -832,7 +1185,8 @@ mod tests {
                 .map(|_| (0..rnd(4)).map(|_| rnd(n as u64) as u32).collect())
                 .collect();
             let g = tests_graph(&adj);
-            let scc = super::Scc::new(&g, None);
+            let edges = super::Edges::new(&g, None);
+            let scc = super::Scc::new(&g, &edges, None);
             let reach = naive(n, &adj);
             for a in 0..n {
                 for b in 0..n {
@@ -853,10 +1207,31 @@ mod tests {
             assert_eq!(seen, n);
             // Reachability through the components, against the brute force.
             let target = |v: u32| v.is_multiple_of(5);
-            let creach = scc.reach(&g, None, &target);
+            let creach = scc.reach(&edges, None, &target);
             for a in 0..n {
                 let expect = (0..n).any(|b| reach[a][b] && target(b as u32));
                 assert_eq!(creach[scc.comp[a] as usize], expect, "{adj:?} {a}");
+            }
+            // The walk folded into the search, against a pass of its own: the same
+            // components, reach, nets that can fire (each step kind firing one of 70 nets:
+            // two words) and loops.
+            let ends: Vec<bool> = (0..n as u32).map(target).collect();
+            let kinds = g.steps().len();
+            let words = 2;
+            let mut fires = vec![0u64; kinds * words];
+            for k in 0..kinds {
+                let net = (k * 37) % 70;
+                fires[k * words + net / 64] |= 1 << (net % 64);
+            }
+            let nets = || Some((fires.clone(), words, vec![false; 70]));
+            let separate = super::Walk::separate(&edges, &scc, Some(&ends), nets(), true);
+            // Every unvisited target kept, none, or some (the search comes back to a state
+            // whose targets it did not keep by fetching its edges again).
+            for budget in [usize::MAX, 0, 3] {
+                let want = super::Folded::new(&g, Some(&ends), nets(), true);
+                let (folded_scc, folded) = super::Scc::with_walk_within(&g, &edges, want, budget);
+                assert_eq!(folded_scc.comp, scc.comp, "{adj:?} {budget}");
+                assert_eq!(folded, separate, "{adj:?} {budget}");
             }
         }
     }

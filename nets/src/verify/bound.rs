@@ -23,7 +23,7 @@
 //! are not counted: they do not happen.
 
 use super::env::Env;
-use super::explore::{run_step, Graph, Recorder};
+use super::explore::{run_step, Edges, Graph, Recorder};
 use super::timed::{TimerOps, Timing, INF};
 use super::{BoundFinding, BoundStatus, Trace};
 use crate::compiled::{Bound, CompiledProject, Occurrence};
@@ -66,6 +66,7 @@ pub(super) fn bounds(
     sem: &Semantics,
     env: &Env,
     g: &Graph,
+    graph_edges: &Edges,
     plain: &Timing,
     describe: &dyn Fn(&[u64]) -> Vec<String>,
 ) -> Vec<BoundFinding> {
@@ -74,13 +75,15 @@ pub(super) fn bounds(
     // projects that declare bounds pay for this copy).
     let mut edges: Vec<BoundEdge> = Vec::with_capacity(g.edge_count());
     let mut out_edges: Vec<Vec<u32>> = vec![Vec::new(); g.states.len()];
+    let mut buf = Vec::new();
     for i in 0..g.states.len() as u32 {
-        for k in g.edge_range(i) {
-            let (label, fired) = g.steps()[g.edge_kind(k)];
+        graph_edges.of(i, &mut buf);
+        for e in &buf {
+            let (label, fired) = g.steps()[e.kind as usize];
             out_edges[i as usize].push(edges.len() as u32);
             edges.push(BoundEdge {
                 from: i,
-                to: g.edge_target(k),
+                to: e.to,
                 label,
                 fired,
             });
@@ -347,6 +350,7 @@ impl Search<'_> {
             from: b.from_text.clone(),
             to: b.to_text.clone(),
             within_seconds: b.within_us.map(|us| us as f64 / 1e6),
+            within: b.within_text.clone(),
             status: BoundStatus::Bounded,
             reason: None,
             min_seconds: f.min.map(seconds),

@@ -51,11 +51,12 @@ pub(super) struct FreePlace {
 /// The event of a label that is no event: the environment changed a global place (`--net`).
 pub(super) const NO_EVENT: EventId = EventId::MAX;
 
-/// An edge of the graph from a given state: a step to another stable state (or the same).
-#[derive(Clone, Copy, Debug)]
+/// An edge of the graph from a given state: a step to another stable state (or the same),
+/// and its step kind (an index in [`Graph::steps`]: its label and fired set).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) struct Edge {
     pub to: u32,
-    pub label: u32,
+    pub kind: u32,
 }
 
 /// Everything the exploration found.
@@ -72,10 +73,16 @@ pub(super) struct Graph {
     parent: Packed,
     /// The label of that step.
     parent_label: Packed,
-    /// Where the edges of each state start in `edge_to` and `edge_step` (one more at the end).
+    /// Where the edges of each state start in `edge_to` and `edge_step` (one more at the end),
+    /// while they are kept ([`Graph::edges_kept`]).
     edge_start: Packed,
     edge_to: Packed,
     edge_step: Packed,
+    /// Whether the edges are in memory; when not, an analysis that walks them recomputes each
+    /// state's with [`Replay`].
+    edges_kept: bool,
+    /// How many edges (kept or not).
+    edges: u64,
     /// The step kinds: (label, fired set) pairs the edges name.
     steps: Vec<(u32, u32)>,
     pub labels: Vec<Label>,
@@ -107,6 +114,8 @@ impl Graph {
             edge_start: Packed::new(),
             edge_to: Packed::new(),
             edge_step: Packed::new(),
+            edges_kept: true,
+            edges: 0,
             steps: Vec::new(),
             labels: Vec::new(),
             fired_sets: Vec::new(),
@@ -132,45 +141,44 @@ impl Graph {
 
     /// How many edges.
     pub fn edge_count(&self) -> usize {
-        self.edge_to.len()
+        self.edges as usize
     }
 
-    /// The numbers of the edges of state `i` (for [`Graph::edge`]).
-    #[inline]
-    pub fn edge_range(&self, i: u32) -> Range<usize> {
-        self.edge_start.get(i as usize) as usize..self.edge_start.get(i as usize + 1) as usize
+    /// Whether the edges are kept in memory (else [`Edges`] replays them).
+    pub fn edges_kept(&self) -> bool {
+        self.edges_kept
     }
 
-    /// Edge number `k`.
-    #[inline]
-    pub fn edge(&self, k: usize) -> Edge {
-        Edge {
+    /// The kept edges of state `i` (target, step kind), in the order the exploration found
+    /// them, appended to `out`.
+    pub fn kept_edges(&self, i: u32, out: &mut Vec<Edge>) {
+        debug_assert!(self.edges_kept);
+        let range =
+            self.edge_start.get(i as usize) as usize..self.edge_start.get(i as usize + 1) as usize;
+        out.extend(range.map(|k| Edge {
             to: self.edge_to.get(k) as u32,
-            label: self.steps[self.edge_step.get(k) as usize].0,
-        }
+            kind: self.edge_step.get(k) as u32,
+        }));
     }
 
-    /// The edges of state `i`, in the order the exploration found them.
-    pub fn edges(&self, i: u32) -> impl Iterator<Item = Edge> + '_ {
-        self.edge_range(i).map(|k| self.edge(k))
+    /// Forgets the edges kept so far and keeps none from now on: the analyses will replay
+    /// them.
+    fn drop_edges(&mut self) {
+        self.edges_kept = false;
+        self.edge_start = Packed::new();
+        self.edge_to = Packed::new();
+        self.edge_step = Packed::new();
     }
 
-    /// The step kinds, (label, fired set), that edges name; [`Graph::edge_kind`] gives an
-    /// edge's.
+    /// The step kinds, (label, fired set), that edges name ([`Edge::kind`]).
     pub fn steps(&self) -> &[(u32, u32)] {
         &self.steps
     }
 
-    /// The step kind of edge `k` (an index in [`Graph::steps`]).
+    /// The label of step kind `kind`.
     #[inline]
-    pub fn edge_kind(&self, k: usize) -> usize {
-        self.edge_step.get(k) as usize
-    }
-
-    /// The target of edge `k`.
-    #[inline]
-    pub fn edge_target(&self, k: usize) -> u32 {
-        self.edge_to.get(k) as u32
+    pub fn label_of(&self, kind: u32) -> u32 {
+        self.steps[kind as usize].0
     }
 
     /// The bytes the states, parent pointers and edges hold (docs/benchmarks.md).
@@ -335,48 +343,134 @@ pub(super) fn run_step(
     choices: &[bool],
     counter: Option<u32>,
 ) -> State {
-    rec.reset();
-    rec.oracle.prefix = choices.to_vec();
-    let mut t = match d {
-        None => {
-            rec.params.clear();
-            let mut s = sem.initial(rec, scratch);
-            s.resize(env.words, 0);
-            s
-        }
-        Some(d) => {
-            let mut t = state.to_vec();
-            // A timer's event arriving is that timer expiring: it no longer runs.
-            for (k, timer) in sem.project.timers.iter().enumerate() {
-                if timer.event == d.event {
-                    sem.timer_expired(&mut t, k as u32);
-                }
-            }
-            if let Some(c) = counter {
-                env.down(&mut t, c);
-            }
-            rec.params.clone_from(&d.params);
-            sem.process_event(&mut t, d.event, d.target, rec, scratch);
-            t
-        }
-    };
-    env.apply(&mut t, &rec.requests);
+    let mut t = State::new();
+    run_step_into(sem, env, rec, scratch, state, d, choices, counter, &mut t);
     t
 }
 
-/// A state reached from the one being expanded, with the edge's label and fired set.
-type Successor = (State, u32, u32);
+/// [`run_step`] into `t` (whatever it held), which keeps its allocation: the exploration runs
+/// one step per edge.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn run_step_into(
+    sem: &Semantics,
+    env: &Env,
+    rec: &mut Recorder,
+    scratch: &mut Scratch,
+    state: &[u64],
+    d: Option<&Delivery>,
+    choices: &[bool],
+    counter: Option<u32>,
+    t: &mut State,
+) {
+    rec.reset();
+    rec.oracle.prefix.clear();
+    rec.oracle.prefix.extend_from_slice(choices);
+    match d {
+        None => {
+            rec.params.clear();
+            *t = sem.initial(rec, scratch);
+            t.resize(env.words, 0);
+        }
+        Some(d) => {
+            t.clear();
+            t.extend_from_slice(state);
+            // A timer's event arriving is that timer expiring: it no longer runs.
+            for (k, timer) in sem.project.timers.iter().enumerate() {
+                if timer.event == d.event {
+                    sem.timer_expired(t, k as u32);
+                }
+            }
+            if let Some(c) = counter {
+                env.down(t, c);
+            }
+            rec.params.clone_from(&d.params);
+            sem.process_event(t, d.event, d.target, rec, scratch);
+        }
+    }
+    env.apply(t, &rec.requests);
+}
+
+/// The states reached from the one being expanded, one after the other in one vector, each
+/// with its edge's label and fired set: no vector per successor (an allocation per edge cost a
+/// tenth of the exploration, docs/benchmarks.md).
+pub(super) struct Successors {
+    words: usize,
+    data: Vec<u64>,
+    /// Label and fired set of each.
+    meta: Vec<(u32, u32)>,
+}
+
+impl Successors {
+    fn new(words: usize) -> Successors {
+        Successors {
+            words: words.max(1),
+            data: Vec::new(),
+            meta: Vec::new(),
+        }
+    }
+
+    fn clear(&mut self) {
+        self.data.clear();
+        self.meta.clear();
+    }
+
+    fn push(&mut self, t: &[u64], label: u32, fired: u32) {
+        debug_assert_eq!(t.len(), self.words);
+        self.data.extend_from_slice(t);
+        self.meta.push((label, fired));
+    }
+
+    fn states(&self) -> std::slice::ChunksExact<'_, u64> {
+        self.data.chunks_exact(self.words)
+    }
+
+    fn append(&mut self, other: &mut Successors) {
+        self.data.append(&mut other.data);
+        self.meta.append(&mut other.meta);
+    }
+}
 
 /// A delivery the environment can make in a state: which one, the counters it may consume
-/// (`None`: a free event), and whether no transition takes it (a pending event, dropped).
+/// (`None`: a free event; a range of [`Moves::counters`]), and whether no transition takes it
+/// (a pending event, dropped).
 struct Move {
     delivery: usize,
-    counters: Vec<Option<u32>>,
+    counters: Range<usize>,
     dropped: bool,
 }
 
+/// The moves of a state, their counters in one vector.
+#[derive(Default)]
+struct Moves {
+    list: Vec<Move>,
+    counters: Vec<Option<u32>>,
+}
+
+/// The graph a state's expansion works on: the exploration's, which it adds labels, fired sets
+/// and findings to, or a finished one whose edges are replayed (all of those known already).
+enum At<'g> {
+    Explore(&'g mut Graph),
+    Replay(&'g Graph),
+}
+
+impl At<'_> {
+    fn graph(&self) -> &Graph {
+        match self {
+            At::Explore(g) => g,
+            At::Replay(g) => g,
+        }
+    }
+
+    fn exploring(&mut self) -> Option<&mut Graph> {
+        match self {
+            At::Explore(g) => Some(g),
+            At::Replay(_) => None,
+        }
+    }
+}
+
 /// What the exploration keeps besides the graph: the firing code, the environment, and what
-/// was already reported or labelled.
+/// was already reported or labelled. After the exploration, what replays a state's edges.
 struct Ctx<'a> {
     p: &'a CompiledProject,
     sem: &'a Semantics<'a>,
@@ -397,8 +491,15 @@ struct Ctx<'a> {
     /// The fired sets of one rule (by rule) and of none, likewise.
     single_fired: Vec<u32>,
     no_fired: Option<u32>,
+    /// The step kinds of a label with the fired set of no rule or of one rule, likewise
+    /// (`u32::MAX` where none yet): by label, then by rule + 1.
+    plain_steps: Vec<Vec<u32>>,
     /// The last step's fired set, sorted (reused).
     fired_buf: Vec<u32>,
+    /// The state after the step being run, and the prefixes of undecided guards still to run
+    /// (reused).
+    next: State,
+    prefixes: Vec<Vec<bool>>,
     unsafe_seen: HashSet<(u32, u32)>,
     conflict_seen: HashSet<(u32, u32)>,
     livelock_seen: HashSet<Vec<u32>>,
@@ -407,6 +508,10 @@ struct Ctx<'a> {
     timing: Option<Timing>,
     timer_of: Vec<Option<usize>>,
 }
+
+/// The label, fired set or step kind a replay did not find: the exploration made them all, so
+/// this is a replay that does not follow the exploration (a bug the cross-check test catches).
+const NOT_REPLAYED: &str = "a replayed step is one the exploration made";
 
 impl Ctx<'_> {
     fn name_of(&self, r: u32) -> String {
@@ -464,13 +569,14 @@ impl Ctx<'_> {
     /// cloned: once per edge).
     fn label(
         &mut self,
-        g: &mut Graph,
+        at: &mut At,
         key: (u32, Vec<bool>, Option<u32>, bool),
         make: impl FnOnce() -> Label,
     ) -> u32 {
         if let Some(l) = self.known_label(&key) {
             return l;
         }
+        let g = at.exploring().expect(NOT_REPLAYED);
         g.labels.push(make());
         let l = (g.labels.len() - 1) as u32;
         if key.1.is_empty() && key.2.is_none() && !key.3 {
@@ -486,7 +592,7 @@ impl Ctx<'_> {
     }
 
     /// The set of transitions the last step fired, as an index into `g.fired_sets`.
-    fn fired_set(&mut self, g: &mut Graph) -> u32 {
+    fn fired_set(&mut self, at: &mut At) -> u32 {
         // Most steps fire one rule or none: looked up by index, not by a hashed vector.
         let fast = match self.rec.fired.as_slice() {
             [] => self.no_fired,
@@ -507,6 +613,7 @@ impl Ctx<'_> {
         let f = match self.fired_ids.get(self.fired_buf.as_slice()) {
             Some(&f) => f,
             None => {
+                let g = at.exploring().expect(NOT_REPLAYED);
                 g.fired_sets.push(self.fired_buf.clone());
                 let f = (g.fired_sets.len() - 1) as u32;
                 self.fired_ids.insert(self.fired_buf.clone(), f);
@@ -527,17 +634,51 @@ impl Ctx<'_> {
     }
 
     /// The step kind of an edge labelled `label` that fired set `fired`.
-    fn step(&mut self, g: &mut Graph, label: u32, fired: u32) -> u32 {
-        *self.step_ids.entry((label, fired)).or_insert_with(|| {
-            g.steps.push((label, fired));
-            (g.steps.len() - 1) as u32
-        })
+    fn step(&mut self, at: &mut At, label: u32, fired: u32) -> u32 {
+        // By index when the fired set is none or one rule's (most edges), else hashed.
+        let slot = match at.graph().fired_sets[fired as usize].as_slice() {
+            [] => Some(0),
+            &[r] => Some(r as usize + 1),
+            _ => None,
+        };
+        if let Some(k) = slot {
+            if let Some(&st) = self
+                .plain_steps
+                .get(label as usize)
+                .and_then(|v| v.get(k))
+                .filter(|&&st| st != u32::MAX)
+            {
+                return st;
+            }
+        }
+        let st = match self.step_ids.get(&(label, fired)) {
+            Some(&st) => st,
+            None => {
+                let g = at.exploring().expect(NOT_REPLAYED);
+                g.steps.push((label, fired));
+                let st = (g.steps.len() - 1) as u32;
+                self.step_ids.insert((label, fired), st);
+                st
+            }
+        };
+        if let Some(k) = slot {
+            if self.plain_steps.len() <= label as usize {
+                self.plain_steps.resize(label as usize + 1, Vec::new());
+            }
+            let v = &mut self.plain_steps[label as usize];
+            if v.len() <= k {
+                v.resize(k + 1, u32::MAX);
+            }
+            v[k] = st;
+        }
+        st
     }
 
     /// The deliveries the environment can make in state `i` (`s`), and the conflicts they
-    /// show.
-    fn moves(&mut self, g: &mut Graph, i: u32, s: &[u64], out: &mut Vec<Move>) {
-        out.clear();
+    /// show (while exploring).
+    fn moves(&mut self, at: &mut At, i: u32, s: &[u64], out: &mut Moves) {
+        out.list.clear();
+        out.counters.clear();
         for di in 0..self.deliveries.len() {
             let d = &self.deliveries[di];
             let gate = self.env.gate(s, d.event, d.target);
@@ -555,11 +696,12 @@ impl Ctx<'_> {
                 },
                 _ => None,
             };
-            let counters: Vec<Option<u32>> = match gate {
+            let from = out.counters.len();
+            match gate {
                 Gate::Closed => continue,
-                Gate::Free => vec![None],
-                Gate::Counters(list) => list.into_iter().map(Some).collect(),
-            };
+                Gate::Free => out.counters.push(None),
+                Gate::Counters(list) => out.counters.extend(list.into_iter().map(Some)),
+            }
             self.sem.candidates(
                 s,
                 d.event,
@@ -579,60 +721,74 @@ impl Ctx<'_> {
                 // there: that drop changes nothing.
                 // Timed, an expiry nobody takes still stops its timer: time could not pass
                 // its deadline otherwise.
-                let once: Vec<Option<u32>> = counters
-                    .into_iter()
-                    .filter(|c| timer.is_some() || c.is_some_and(|c| self.env.is_once(s, c)))
-                    .collect();
-                if !once.is_empty() {
-                    out.push(Move {
+                let env = self.env;
+                let mut kept = from;
+                for k in from..out.counters.len() {
+                    let c = out.counters[k];
+                    if timer.is_some() || c.is_some_and(|c| env.is_once(s, c)) {
+                        out.counters[kept] = c;
+                        kept += 1;
+                    }
+                }
+                out.counters.truncate(kept);
+                if kept > from {
+                    out.list.push(Move {
                         delivery: di,
-                        counters: once,
+                        counters: from..kept,
                         dropped: true,
                     });
                 }
                 continue;
             }
-            for a in 0..self.candidates.len() {
-                let ra = self.candidates[a];
-                for b in a + 1..self.candidates.len() {
-                    let rb = self.candidates[b];
-                    if self.sem.layout.share_input(ra, rb) && self.conflict_seen.insert((ra, rb)) {
-                        let mut trace = g.trace(i);
-                        trace.push(self.deliveries[di].label.clone());
-                        g.conflicts.push(ConflictFinding {
-                            event: self.p.events[self.deliveries[di].event as usize]
-                                .name
-                                .clone(),
-                            winner: self.name_of(ra),
-                            loser: self.name_of(rb),
-                            trace,
-                        });
+            if let Some(g) = at.exploring() {
+                for a in 0..self.candidates.len() {
+                    let ra = self.candidates[a];
+                    for b in a + 1..self.candidates.len() {
+                        let rb = self.candidates[b];
+                        if self.sem.layout.share_input(ra, rb)
+                            && self.conflict_seen.insert((ra, rb))
+                        {
+                            let mut trace = g.trace(i);
+                            trace.push(self.deliveries[di].label.clone());
+                            g.conflicts.push(ConflictFinding {
+                                event: self.p.events[self.deliveries[di].event as usize]
+                                    .name
+                                    .clone(),
+                                winner: self.name_of(ra),
+                                loser: self.name_of(rb),
+                                trace,
+                            });
+                        }
                     }
                 }
             }
-            out.push(Move {
+            out.list.push(Move {
                 delivery: di,
-                counters,
+                counters: from..out.counters.len(),
                 dropped: false,
             });
         }
     }
 
-    /// Runs move `m` from state `i` (`s`): one step per counter and per outcome of the guards
-    /// it cannot decide.
+    /// Runs move `m` from state `i` (`s`): one step per counter (from `counters`) and per
+    /// outcome of the guards it cannot decide.
+    #[allow(clippy::too_many_arguments)]
     fn run(
         &mut self,
-        g: &mut Graph,
+        at: &mut At,
         i: u32,
         s: &[u64],
         m: &Move,
-        out: &mut Vec<Successor>,
+        counters: &[Option<u32>],
+        out: &mut Successors,
     ) -> Result<(), VerifyError> {
         let di = m.delivery;
-        for &counter in &m.counters {
+        let mut t = std::mem::take(&mut self.next);
+        let mut prefixes = std::mem::take(&mut self.prefixes);
+        for &counter in &counters[m.counters.clone()] {
             if m.dropped {
                 let d = &self.deliveries[di];
-                let mut t = run_step(
+                run_step_into(
                     self.sem,
                     self.env,
                     &mut self.rec,
@@ -641,6 +797,7 @@ impl Ctx<'_> {
                     Some(d),
                     &[],
                     counter,
+                    &mut t,
                 );
                 if let Some(tm) = &self.timing {
                     let k = if counter.is_none() {
@@ -655,7 +812,7 @@ impl Ctx<'_> {
                     Some(l) => l,
                     None => {
                         let (label, event) = (format!("{} (unused)", d.label), d.event);
-                        self.label(g, key, || Label {
+                        self.label(at, key, || Label {
                             text: label,
                             event,
                             delivery: di as u32,
@@ -664,22 +821,24 @@ impl Ctx<'_> {
                         })
                     }
                 };
-                let fid = self.fired_set(g);
-                out.push((t, lid, fid));
+                let fid = self.fired_set(at);
+                out.push(&t, lid, fid);
                 continue;
             }
             // Every outcome of the guards this delivery cannot decide.
-            let mut prefixes: Vec<Vec<bool>> = vec![Vec::new()];
+            prefixes.clear();
+            prefixes.push(Vec::new());
             let mut runs = 0usize;
             while let Some(prefix) = prefixes.pop() {
                 runs += 1;
                 let d = &self.deliveries[di];
                 if runs > MAX_GUARD_RUNS {
+                    self.next = t;
                     return Err(VerifyError::TooManyUndecidedGuards {
                         event: self.p.events[d.event as usize].name.clone(),
                     });
                 }
-                let mut t = run_step(
+                run_step_into(
                     self.sem,
                     self.env,
                     &mut self.rec,
@@ -688,6 +847,7 @@ impl Ctx<'_> {
                     Some(d),
                     &prefix,
                     counter,
+                    &mut t,
                 );
                 if let Some(tm) = &self.timing {
                     let k = if counter.is_none() {
@@ -707,7 +867,7 @@ impl Ctx<'_> {
                     None => {
                         let (base, event) = (d.label.clone(), d.event);
                         let choices = key.1.clone();
-                        self.label(g, key, || {
+                        self.label(at, key, || {
                             let mut text = base;
                             if !choices.is_empty() {
                                 let taken: Vec<&str> = choices
@@ -727,23 +887,110 @@ impl Ctx<'_> {
                         })
                     }
                 };
-                let fid = self.fired_set(g);
-                if self.rec.refused.is_empty() && self.rec.livelock.is_none() {
-                    // Nothing to report: only the rules that fired.
-                    for &r in &self.rec.fired {
-                        g.ever_fired[r as usize] = true;
+                let fid = self.fired_set(at);
+                if let Some(g) = at.exploring() {
+                    if self.rec.refused.is_empty() && self.rec.livelock.is_none() {
+                        // Nothing to report: only the rules that fired.
+                        for &r in &self.rec.fired {
+                            g.ever_fired[r as usize] = true;
+                        }
+                    } else {
+                        self.record(g, &|g| {
+                            let mut t = g.trace(i);
+                            t.push(g.labels[lid as usize].text.clone());
+                            t
+                        });
                     }
-                } else {
-                    self.record(g, &|g| {
-                        let mut t = g.trace(i);
-                        t.push(g.labels[lid as usize].text.clone());
-                        t
-                    });
                 }
-                out.push((t, lid, fid));
+                out.push(&t, lid, fid);
             }
         }
+        self.next = t;
+        self.prefixes = prefixes;
         Ok(())
+    }
+
+    /// The edges of state `i` of the finished graph `g`, recomputed: the same moves, steps and
+    /// order as when the exploration expanded it in full, each target looked up in the store.
+    fn replay(&mut self, g: &Graph, i: u32, w: &mut ReplayBuffers, out: &mut Vec<Edge>) {
+        let at = &mut At::Replay(g);
+        w.s.clear();
+        w.s.extend_from_slice(&g.states[i as usize]);
+        let s = std::mem::take(&mut w.s);
+        w.succ.clear();
+        if !self.sem.layout.is_over(&s) {
+            self.moves(at, i, &s, &mut w.moves);
+            for m in &w.moves.list {
+                self.run(at, i, &s, m, &w.moves.counters, &mut w.succ)
+                    .expect(NOT_REPLAYED);
+            }
+        }
+        w.s = s;
+        g.states
+            .find_all(w.succ.states(), &mut w.slots, &mut w.found);
+        for (&(label, fired), known) in w.succ.meta.iter().zip(&w.found) {
+            let to = known.expect(NOT_REPLAYED);
+            out.push(Edge {
+                to,
+                kind: self.step(at, label, fired),
+            });
+        }
+    }
+}
+
+/// What a replay reuses from one state to the next.
+struct ReplayBuffers {
+    s: State,
+    moves: Moves,
+    succ: Successors,
+    slots: Vec<(usize, u32)>,
+    found: Vec<Option<u32>>,
+}
+
+/// Recomputes the edges of a finished graph whose edges were not kept: the exploration's own
+/// expansion of a state ([`Ctx::moves`], [`Ctx::run`]: the same firing code, the same order),
+/// every label, fired set and step kind looked up, none made.
+pub(super) struct Replay<'a> {
+    ctx: Ctx<'a>,
+    w: ReplayBuffers,
+}
+
+impl Replay<'_> {
+    /// The edges of state `i`, appended to `out`.
+    pub fn edges(&mut self, g: &Graph, i: u32, out: &mut Vec<Edge>) {
+        self.ctx.replay(g, i, &mut self.w, out);
+    }
+}
+
+/// The edges of a finished graph, kept or replayed: what the analyses walk.
+pub(super) struct Edges<'g, 'a> {
+    g: &'g Graph,
+    replay: Option<std::cell::RefCell<Replay<'a>>>,
+}
+
+impl<'g, 'a> Edges<'g, 'a> {
+    /// The edges of `g`; `replay`, what explored it, recomputes them when `g` did not keep
+    /// them (it must be given then).
+    pub fn new(g: &'g Graph, replay: Option<Replay<'a>>) -> Self {
+        debug_assert!(g.edges_kept || replay.is_some());
+        Edges {
+            g,
+            replay: if g.edges_kept {
+                None
+            } else {
+                replay.map(std::cell::RefCell::new)
+            },
+        }
+    }
+
+    /// The edges of state `i` (what `out` held is cleared), in the order the exploration found
+    /// them.
+    pub fn of(&self, i: u32, out: &mut Vec<Edge>) {
+        out.clear();
+        match &self.replay {
+            None => self.g.kept_edges(i, out),
+            Some(r) => r.borrow_mut().edges(self.g, i, out),
+        }
     }
 }
 
@@ -763,15 +1010,15 @@ pub(super) fn rule_guards(p: &CompiledProject, sem: &Semantics) -> Vec<Option<Gu
         .collect()
 }
 
-pub(super) fn explore(
-    p: &CompiledProject,
-    sem: &Semantics,
-    env: &Env,
+pub(super) fn explore<'a>(
+    p: &'a CompiledProject,
+    sem: &'a Semantics<'a>,
+    env: &'a Env,
     free: &[FreePlace],
     opts: &mut VerifyOptions,
     started: Instant,
     start: Option<&[u64]>,
-) -> Result<Graph, VerifyError> {
+) -> Result<(Graph, Replay<'a>), VerifyError> {
     let l = &sem.layout;
     let guards = rule_guards(p, sem);
     let deliveries = deliveries(p, l)?;
@@ -799,7 +1046,10 @@ pub(super) fn explore(
         plain_labels: FxMap::default(),
         single_fired: Vec::new(),
         no_fired: None,
+        plain_steps: Vec::new(),
         fired_buf: Vec::new(),
+        next: State::new(),
+        prefixes: Vec::new(),
         unsafe_seen: HashSet::new(),
         conflict_seen: HashSet::new(),
         livelock_seen: HashSet::new(),
@@ -889,8 +1139,21 @@ pub(super) fn explore(
 
     let mut last_progress = Instant::now();
     let mut next = 0usize;
-    let mut moves: Vec<Move> = Vec::new();
-    let mut tried: Vec<Successor> = Vec::new();
+    let mut moves = Moves::default();
+    let mut tried = Successors::new(words);
+    let mut successors = Successors::new(words);
+    let mut s = State::new();
+    // The edges are kept while they are few (or when asked to), else dropped and replayed by
+    // the analyses. Not when reducing (which states were expanded in full is not kept) nor
+    // with places the environment changes (`--net`: those moves are not replayed): those
+    // graphs keep theirs.
+    let replayable = !reducing && free.is_empty();
+    let keep_limit = match opts.edges {
+        _ if !replayable => u64::MAX,
+        super::EdgeMemory::Auto => KEEP_EDGES,
+        super::EdgeMemory::Keep => u64::MAX,
+        super::EdgeMemory::Replay => 0,
+    };
     let mut order: Vec<u32> = Vec::new();
     let (mut slots, mut found) = (Vec::new(), Vec::new());
     while next < g.states.len() {
@@ -906,20 +1169,26 @@ pub(super) fn explore(
                 );
             }
         }
-        let s = g.states[i as usize].to_vec();
-        g.edge_start.push(g.edge_to.len() as u64);
+        s.clear();
+        s.extend_from_slice(&g.states[i as usize]);
+        if g.edges_kept && g.edges > keep_limit {
+            g.drop_edges();
+        }
+        if g.edges_kept {
+            g.edge_start.push(g.edge_to.len() as u64);
+        }
         for (n, seen) in g.ever_active.iter_mut().enumerate() {
             *seen |= l.is_active(&s, n as NetId);
         }
         g.max_tokens_per_marking = g.max_tokens_per_marking.max(l.tokens(&s) as u64);
-        let mut successors: Vec<Successor> = Vec::new();
+        successors.clear();
         if l.is_over(&s) {
-            moves.clear();
+            moves.list.clear();
         } else {
-            ctx.moves(&mut g, i, &s, &mut moves);
+            ctx.moves(&mut At::Explore(&mut g), i, &s, &mut moves);
         }
         // A drop counts: the player still has that event to process.
-        let mut any_enabled = !moves.is_empty();
+        let mut any_enabled = !moves.list.is_empty();
 
         // One component's deliveries, when they make a persistent set (no catastrophic event
         // enabled: it touches everything) and pass the cycle proviso; else every delivery.
@@ -927,7 +1196,7 @@ pub(super) fn explore(
         if components.is_some() && !must_full[i as usize] {
             order.clear();
             let mut global = false;
-            for m in &moves {
+            for m in &moves.list {
                 match delivery_component[m.delivery] {
                     None => global = true,
                     Some(c) => {
@@ -948,10 +1217,13 @@ pub(super) fn explore(
                 // A component whose deliveries all belong to categories progress does not count
                 // on is no choice while others offer counted ones: the states it leads to would
                 // hide the counted ways to an end.
-                let any_counted = moves.iter().any(|m| counted(m.delivery, &ctx.deliveries));
+                let any_counted = moves
+                    .list
+                    .iter()
+                    .any(|m| counted(m.delivery, &ctx.deliveries));
                 for &c in &order {
                     if any_counted
-                        && !moves.iter().any(|m| {
+                        && !moves.list.iter().any(|m| {
                             delivery_component[m.delivery] == Some(c)
                                 && counted(m.delivery, &ctx.deliveries)
                         })
@@ -960,16 +1232,24 @@ pub(super) fn explore(
                     }
                     tried.clear();
                     for m in moves
+                        .list
                         .iter()
                         .filter(|m| delivery_component[m.delivery] == Some(c))
                     {
-                        ctx.run(&mut g, i, &s, m, &mut tried)?;
+                        ctx.run(
+                            &mut At::Explore(&mut g),
+                            i,
+                            &s,
+                            m,
+                            &moves.counters,
+                            &mut tried,
+                        )?;
                     }
                     // The cycle proviso: every edge that does not go one level deeper ends
                     // in a state expanded in full (or that will be), so every loop of the
                     // reduced graph holds a state expanded in full and no component is
                     // ignored forever.
-                    let ok = tried.iter().all(|(t, _, _)| match g.states.find(t) {
+                    let ok = tried.states().all(|t| match g.states.find(t) {
                         None => true,
                         Some(j) => {
                             depth[j as usize] > depth[i as usize]
@@ -977,7 +1257,7 @@ pub(super) fn explore(
                         }
                     });
                     if ok {
-                        for (t, _, _) in &tried {
+                        for t in tried.states() {
                             if let Some(j) = g.states.find(t) {
                                 if j > i && depth[j as usize] <= depth[i as usize] {
                                     must_full[j as usize] = true;
@@ -992,8 +1272,15 @@ pub(super) fn explore(
             }
         }
         if !reduced {
-            for m in &moves {
-                ctx.run(&mut g, i, &s, m, &mut successors)?;
+            for m in &moves.list {
+                ctx.run(
+                    &mut At::Explore(&mut g),
+                    i,
+                    &s,
+                    m,
+                    &moves.counters,
+                    &mut successors,
+                )?;
             }
         } else {
             g.reduced += 1;
@@ -1034,7 +1321,7 @@ pub(super) fn explore(
             // An edge like the others, labelled with the environment's move (no event).
             let name = f.name.clone();
             let lid = ctx.label(
-                &mut g,
+                &mut At::Explore(&mut g),
                 (u32::MAX - k as u32, vec![set], None, false),
                 || Label {
                     text: format!(
@@ -1047,17 +1334,18 @@ pub(super) fn explore(
                     counter: None,
                 },
             );
-            let fid = ctx.fired_set(&mut g);
-            successors.push((t, lid, fid));
+            let fid = ctx.fired_set(&mut At::Explore(&mut g));
+            successors.push(&t, lid, fid);
         }
-        g.states.find_all(
-            successors.iter().map(|(t, _, _)| &t[..]),
-            &mut slots,
-            &mut found,
-        );
-        for ((t, label, fired), known) in successors.into_iter().zip(found.iter()) {
+        g.states
+            .find_all(successors.states(), &mut slots, &mut found);
+        for ((t, &(label, fired)), known) in successors
+            .states()
+            .zip(successors.meta.iter())
+            .zip(found.iter())
+        {
             // A state not found may have been added by an earlier successor of this one.
-            let j = match known.or_else(|| g.states.find(&t)) {
+            let j = match known.or_else(|| g.states.find(t)) {
                 Some(j) => j,
                 None => {
                     let j = g.states.len() as u32;
@@ -1066,7 +1354,7 @@ pub(super) fn explore(
                             return Err(VerifyError::TooManyStates { limit });
                         }
                     }
-                    g.push_state(&t, Some((i, label)));
+                    g.push_state(t, Some((i, label)));
                     if reducing {
                         depth.push(depth[i as usize] + 1);
                         full.push(false);
@@ -1075,21 +1363,42 @@ pub(super) fn explore(
                     j
                 }
             };
-            let step = ctx.step(&mut g, label, fired);
-            g.edge_to.push(u64::from(j));
-            g.edge_step.push(u64::from(step));
+            let step = ctx.step(&mut At::Explore(&mut g), label, fired);
+            g.edges += 1;
+            if g.edges_kept {
+                g.edge_to.push(u64::from(j));
+                g.edge_step.push(u64::from(step));
+            }
         }
         if !any_enabled {
             g.dead.push(i);
         }
     }
-    g.edge_start.push(g.edge_to.len() as u64);
-    g.deliveries = ctx.deliveries;
-    Ok(g)
+    if g.edges_kept {
+        g.edge_start.push(g.edge_to.len() as u64);
+    }
+    g.deliveries = ctx.deliveries.clone();
+    // What expanded the states replays them: the same labels, fired sets and step kinds.
+    let replay = Replay {
+        ctx,
+        w: ReplayBuffers {
+            s: State::new(),
+            moves: Moves::default(),
+            succ: Successors::new(words),
+            slots: Vec::new(),
+            found: Vec::new(),
+        },
+    };
+    Ok((g, replay))
 }
 
-/// A graph with the edges `adj` (state `i`'s targets), every edge of one step kind, for the
-/// analyses' unit tests.
+/// Edges kept in memory at most, unless asked otherwise ([`super::EdgeMemory`]): about 4 MB;
+/// beyond, the analyses replay them (docs/benchmarks.md, "What the full exploration costs per
+/// state").
+const KEEP_EDGES: u64 = 1 << 20;
+
+/// A graph with the edges `adj` (state `i`'s targets), of 70 step kinds (edge `k` of state `i`
+/// of kind `(7i + k) % 70`, two words of kinds), for the analyses' unit tests.
 #[cfg(test)]
 pub(super) fn tests_graph(adj: &[Vec<u32>]) -> Graph {
     let mut g = Graph::new(1, 0, 0);
@@ -1104,12 +1413,13 @@ pub(super) fn tests_graph(adj: &[Vec<u32>]) -> Graph {
         counter: None,
     });
     g.fired_sets.push(Vec::new());
-    g.steps.push((0, 0));
-    for succ in adj {
+    g.steps.extend((0..70).map(|_| (0, 0)));
+    for (i, succ) in adj.iter().enumerate() {
         g.edge_start.push(g.edge_to.len() as u64);
-        for &j in succ {
+        for (k, &j) in succ.iter().enumerate() {
             g.edge_to.push(u64::from(j));
-            g.edge_step.push(0);
+            g.edge_step.push(((7 * i + k) % 70) as u64);
+            g.edges += 1;
         }
     }
     g.edge_start.push(g.edge_to.len() as u64);

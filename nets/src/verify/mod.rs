@@ -58,6 +58,23 @@ pub struct VerifyOptions {
     /// durations impose (a zone over their clocks beside each state), outside events stay
     /// free. No partial-order reduction then, and traces are kept whole.
     pub timed: bool,
+    /// Whether the explored graph keeps its edges in memory or the analyses recompute them.
+    pub edges: EdgeMemory,
+}
+
+/// Where the analyses find the explored graph's edges (docs/verification.md, "The state
+/// store"): the findings are the same either way.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum EdgeMemory {
+    /// Kept while there are few of them (about a million), recomputed beyond.
+    #[default]
+    Auto,
+    /// Always kept: the analyses are fastest, at a few bytes per edge.
+    Keep,
+    /// Never kept: each state's edges are recomputed with the firing code when an analysis
+    /// walks them, so the graph costs its states and parent pointers alone. Not with the
+    /// partial-order reduction or `--net`, whose graphs keep their edges.
+    Replay,
 }
 
 /// Why a verification could not finish.
@@ -258,6 +275,8 @@ pub struct BoundFinding {
     pub to: String,
     /// The requirement (`within`), in seconds.
     pub within_seconds: Option<f64>,
+    /// The requirement as written in petrel.toml (`10min`).
+    pub within: Option<String>,
     /// Bounded, unbounded, `from` never happens, or not decided.
     pub status: BoundStatus,
     /// Why it is unbounded (what `to` may wait for forever), or not decided.
@@ -384,6 +403,42 @@ impl Report {
     }
 }
 
+/// A cross-check for tests (docs/verification.md, "The state store"): explores `project` in
+/// full (no partial-order reduction, whatever `opts` says), keeping every edge, then recomputes
+/// each state's edges as the analyses do when the graph does not keep them, and compares.
+/// Returns how many edges were compared, or the first state whose recomputed edges differ from
+/// the explored ones.
+pub fn check_replay(project: &CompiledProject, mut opts: VerifyOptions) -> Result<u64, String> {
+    opts.no_reduction = true;
+    opts.edges = EdgeMemory::Keep;
+    if opts.only_net.is_some() {
+        return Err("--net: the environment's moves are not replayed".into());
+    }
+    let sem = Semantics::new(project);
+    let env = env::Env::new(project, sem.layout.words);
+    let (g, mut replay) =
+        explore::explore(project, &sem, &env, &[], &mut opts, Instant::now(), None)
+            .map_err(|e| e.to_string())?;
+    let (mut kept, mut replayed) = (Vec::new(), Vec::new());
+    let mut compared = 0u64;
+    for i in 0..g.states.len() as u32 {
+        kept.clear();
+        g.kept_edges(i, &mut kept);
+        replayed.clear();
+        replay.edges(&g, i, &mut replayed);
+        if kept != replayed {
+            return Err(format!(
+                "state {i}: explored edges {kept:?}, replayed {replayed:?}"
+            ));
+        }
+        compared += kept.len() as u64;
+    }
+    if compared != g.edge_count() as u64 || !g.edges_kept() {
+        return Err(format!("{compared} edges compared of {}", g.edge_count()));
+    }
+    Ok(compared)
+}
+
 /// Verifies a compiled project.
 pub fn verify(project: &CompiledProject, opts: VerifyOptions) -> Result<Report, VerifyError> {
     verify_inner(project, opts, None)
@@ -431,8 +486,11 @@ fn verify_inner(
         None => Vec::new(),
     };
     let env = env::Env::new(p, l.words);
-    let mut g = explore::explore(p, &sem, &env, &free, &mut opts, started, start)?;
+    let (mut g, replay) = explore::explore(p, &sem, &env, &free, &mut opts, started, start)?;
     g.alone = alone.is_some();
+    let g = g;
+    // The edges, kept or recomputed when an analysis walks them.
+    let edges = explore::Edges::new(&g, Some(replay));
     let timing = opts.timed.then(|| timed::Timing::new(p, env.words));
     let describe = |s: &[u64]| {
         let mut out = l.describe_state(p, s);
@@ -535,23 +593,49 @@ fn verify_inner(
     let ends = analysis::ends(p, l, &g);
     // The strongly connected components of the whole graph, for what is reachable from each
     // state (progress, stuck nets) and for the loops.
-    let all = (!opts.skip_liveness || whole).then(|| analysis::components(&g));
-    if let (false, Some(all)) = (opts.skip_liveness, &all) {
-        report.no_progress = analysis::progress(p, l, &g, all, &ends, &describe).map(
-            |(mut f, first, stays, reach)| {
-                // Any state from which no end is reachable will do for the first trace; for the
-                // state the mission stays in, the nets not at an end must be where they are.
-                f.trace = at(first, &|s| index_of(s).is_some_and(|k| !reach[k as usize]));
-                let target = g.states[stays as usize].to_vec();
-                let nets = concerned(&target);
-                f.stays_in_trace = at(stays, &|s| {
-                    index_of(s).is_some_and(|k| !reach[k as usize])
-                        && same_places(s, &target, &nets)
-                });
-                f
-            },
+    // In the same search: what reaches an end (when progress counts every edge), the nets
+    // that can still fire, and the loops.
+    let declares_ends = !p.finals.is_empty() || !p.goals.is_empty();
+    let every_edge = analysis::progress_allowed(p, &g).iter().all(|&a| a);
+    let (all, mut walk) = if !opts.skip_liveness || whole {
+        let want = analysis::Folded::new(
+            &g,
+            (!opts.skip_liveness && declares_ends && every_edge).then_some(ends.as_slice()),
+            (!opts.skip_liveness).then(|| analysis::nets_fired(p, l, &g)),
+            whole,
         );
-        let (stuck, can) = analysis::stuck_nets(p, l, &g, all, &describe);
+        let (all, walk) = analysis::Scc::with_walk(&g, &edges, want);
+        (Some(all), Some(walk))
+    } else {
+        (None, None)
+    };
+    if let (false, Some(all), Some(walk)) = (opts.skip_liveness, &all, &mut walk) {
+        report.no_progress = analysis::progress(
+            p,
+            l,
+            &g,
+            &edges,
+            all,
+            &ends,
+            walk.reach.as_deref(),
+            &describe,
+        )
+        .map(|(mut f, first, stays, reach)| {
+            // Any state from which no end is reachable will do for the first trace; for the
+            // state the mission stays in, the nets not at an end must be where they are.
+            f.trace = at(first, &|s| index_of(s).is_some_and(|k| !reach[k as usize]));
+            let target = g.states[stays as usize].to_vec();
+            let nets = concerned(&target);
+            f.stays_in_trace = at(stays, &|s| {
+                index_of(s).is_some_and(|k| !reach[k as usize]) && same_places(s, &target, &nets)
+            });
+            f
+        });
+        let can = walk
+            .can
+            .take()
+            .expect("asked of the walk without --skip-liveness");
+        let (stuck, can) = analysis::stuck_nets(p, l, &g, all, can, &describe);
         report.stuck_nets = stuck
             .into_iter()
             // A net stuck in a dead marking with nothing to wait for: the dead marking says it all.
@@ -569,16 +653,16 @@ fn verify_inner(
             })
             .collect();
     }
-    if let (true, Some(all)) = (whole, &all) {
-        let loops = analysis::loops(&g, all);
+    if let (true, Some(all), Some(walk)) = (whole, &all, &mut walk) {
+        let loops = walk.loops.take().unwrap_or_default();
         if !opts.skip_liveness {
             report.starvation = analysis::starvation(p, l, &g, all, &loops);
         }
-        report.event_loops = analysis::event_loops(p, &g, all, &loops);
+        report.event_loops = analysis::event_loops(p, &g, &edges, all, &loops);
     }
     report.bounds = match &timing {
         Some(tm) if alone.is_none() && start.is_none() => {
-            bound::bounds(p, &sem, &env, &g, tm, &describe)
+            bound::bounds(p, &sem, &env, &g, &edges, tm, &describe)
         }
         _ => {
             let why = if !opts.timed {
@@ -596,6 +680,7 @@ fn verify_inner(
                     from: b.from_text.clone(),
                     to: b.to_text.clone(),
                     within_seconds: b.within_us.map(|us| us as f64 / 1e6),
+                    within: b.within_text.clone(),
                     status: BoundStatus::NotDecided,
                     reason: Some(why.to_string()),
                     min_seconds: None,

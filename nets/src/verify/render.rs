@@ -361,6 +361,11 @@ fn secs(v: f64) -> String {
     format!("{text}s")
 }
 
+/// A bound's `within` as written in petrel.toml (`10min`), or in seconds when it was not written.
+fn within_text(b: &super::BoundFinding) -> Option<String> {
+    b.within.clone().or_else(|| b.within_seconds.map(secs))
+}
+
 /// A time bound on one line: `bound NAME (FROM .. TO): 0s to 600s, ...`.
 fn bound_text(b: &super::BoundFinding) -> String {
     use super::BoundStatus as S;
@@ -405,18 +410,13 @@ fn bound_text(b: &super::BoundFinding) -> String {
             let _ = write!(line, "not decided: {}", b.reason.as_deref().unwrap_or(""));
         }
     }
-    if let Some(w) = b.within_seconds {
-        match b.met {
-            Some(true) => {
-                let _ = write!(line, "; within {}: met", secs(w));
-            }
-            Some(false) => {
-                let _ = write!(line, "; within {}: VIOLATED", secs(w));
-            }
-            None => {
-                let _ = write!(line, "; within {}: not decided", secs(w));
-            }
-        }
+    if let Some(w) = within_text(b) {
+        let verdict = match b.met {
+            Some(true) => "met",
+            Some(false) => "VIOLATED",
+            None => "not decided",
+        };
+        let _ = write!(line, "; within {w}: {verdict}");
     }
     line
 }
@@ -634,7 +634,7 @@ fn diagnostics_with(
             .iter()
             .find(|x| x.name.text == b.name);
         let span = decl.map(|x| x.within.as_ref().map_or(x.name.span, |w| w.span));
-        let within = b.within_seconds.map(secs).unwrap_or_default();
+        let within = within_text(b).unwrap_or_default();
         let what = match (b.status, b.max_seconds) {
             (super::BoundStatus::Bounded, Some(max)) => {
                 format!("{} after {} can take up to {}", b.to, b.from, secs(max))

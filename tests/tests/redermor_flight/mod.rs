@@ -5,7 +5,8 @@
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
 
 use petrel_tests::{forget_vehicle, journal_json, petrel_bin, repo, unique_vehicle, TempProject};
 use serde_json::Value;
@@ -81,6 +82,24 @@ pub fn fly_with(
     scenario: &str,
     requests: bool,
 ) -> Flight {
+    fly_and(vehicle_file, edits, scenario, requests, None)
+}
+
+/// Flies scenario `scenario` on the in-memory bus and, once the vehicle is `depth` metres down
+/// (the simulator's trace), SIGKILLs the program process of role `role` (`--role ROLE`:
+/// PLN, NAV, EVT): a crash mid-mission. `petrel up` then ends with status 1 (a process failed)
+/// once the mission is over.
+pub fn fly_killing(scenario: &str, role: &str, depth: f64) -> Flight {
+    fly_and("vehicle.toml", &[], scenario, false, Some((role, depth)))
+}
+
+fn fly_and(
+    vehicle_file: &str,
+    edits: &[(&str, &str)],
+    scenario: &str,
+    requests: bool,
+    kill: Option<(&str, f64)>,
+) -> Flight {
     let bench = bench();
     let project = TempProject::copy(&repo().join("missions/redermor"), |name, text| {
         if name != vehicle_file {
@@ -103,7 +122,7 @@ pub fn fly_with(
     });
     let logs = project.path().join("logs");
     let vehicle = unique_vehicle("rdm");
-    let out = Command::new(petrel_bin())
+    let child = Command::new(petrel_bin())
         .arg("up")
         .arg(project.path())
         .arg("--file")
@@ -111,19 +130,34 @@ pub fn fly_with(
         .args(["--vehicle", &vehicle, "--logs"])
         .arg(&logs)
         .args(["--timeout", "400"])
-        .output()
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
         .expect("petrel up runs");
+    let killed = kill.map(|(role, depth)| kill_when_down(&vehicle, &logs, role, depth));
+    let out = child.wait_with_output().expect("petrel up ends");
     forget_vehicle(&vehicle);
     let output = format!(
         "{}{}",
         String::from_utf8_lossy(&out.stdout),
         String::from_utf8_lossy(&out.stderr)
     );
-    assert!(
-        out.status.success(),
-        "petrel up failed:\n{output}\n{}",
-        process_logs(&logs)
-    );
+    match killed {
+        None => assert!(
+            out.status.success(),
+            "petrel up failed:\n{output}\n{}",
+            process_logs(&logs)
+        ),
+        Some(Err(why)) => panic!("{why}:\n{output}\n{}", process_logs(&logs)),
+        // A process died of a signal `petrel up` did not send: the mission goes on, the
+        // run ends with status 1.
+        Some(Ok(())) => assert_eq!(
+            out.status.code(),
+            Some(1),
+            "petrel up after the kill:\n{output}\n{}",
+            process_logs(&logs)
+        ),
+    }
     let marking = output
         .lines()
         .rev()
@@ -162,6 +196,56 @@ pub fn fly_with(
         logs,
         _project: project,
     }
+}
+
+/// Waits (at most 200 s) until the simulator's trace has the vehicle `depth` metres down, then
+/// SIGKILLs the program process of `vehicle` started with `--role ROLE`.
+fn kill_when_down(vehicle: &str, logs: &Path, role: &str, depth: f64) -> Result<(), String> {
+    let patience = Instant::now() + Duration::from_secs(200);
+    loop {
+        let down = std::fs::read_to_string(logs.join("trace.csv"))
+            .map(|t| {
+                t.lines().skip(1).any(|l| {
+                    l.split(',')
+                        .nth(3)
+                        .and_then(|d| d.trim().parse::<f64>().ok())
+                        .is_some_and(|d| d > depth)
+                })
+            })
+            .unwrap_or(false);
+        if down {
+            break;
+        }
+        if Instant::now() > patience {
+            return Err(format!("the vehicle never went {depth} m down"));
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let pid = program_process(vehicle, role).ok_or(format!("no process of role {role}"))?;
+    let status = Command::new("kill")
+        .args(["-KILL", &pid.to_string()])
+        .status()
+        .map_err(|e| format!("kill: {e}"))?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!("kill -KILL {pid} failed"))
+    }
+}
+
+/// The process whose command line has `--vehicle VEHICLE` and `--role ROLE`.
+fn program_process(vehicle: &str, role: &str) -> Option<u32> {
+    std::fs::read_dir("/proc").ok()?.find_map(|e| {
+        let e = e.ok()?;
+        let pid: u32 = e.file_name().to_str()?.parse().ok()?;
+        let cmdline = std::fs::read(e.path().join("cmdline")).ok()?;
+        let args: Vec<&[u8]> = cmdline.split(|b| *b == 0).collect();
+        let has = |flag: &str, value: &str| {
+            args.windows(2)
+                .any(|w| w[0] == flag.as_bytes() && w[1] == value.as_bytes())
+        };
+        (has("--vehicle", vehicle) && has("--role", role)).then_some(pid)
+    })
 }
 
 /// The end of each process's log in `logs` (`NAME.log`), to say why a flight failed.
@@ -252,8 +336,17 @@ pub fn assert_flown_and_stopped(f: &Flight) {
 /// The thruster commands (rpm left, rpm right, enable) sent after the leak detector's first
 /// wet reading, from a candump -L log.
 pub fn thruster_commands_after_leak(log: &Path) -> Vec<(i16, i16, bool)> {
+    thruster_commands_after(log, true)
+}
+
+/// Every thruster command (rpm left, rpm right, enable) on the bus, from a candump -L log.
+pub fn thruster_commands(log: &Path) -> Vec<(i16, i16, bool)> {
+    thruster_commands_after(log, false)
+}
+
+fn thruster_commands_after(log: &Path, leak: bool) -> Vec<(i16, i16, bool)> {
     let text = std::fs::read_to_string(log).expect("the bus was recorded");
-    let mut wet = false;
+    let mut wet = !leak;
     let mut out = Vec::new();
     for line in text.lines() {
         let Some((id, data)) = line
