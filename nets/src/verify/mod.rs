@@ -356,8 +356,8 @@ pub struct Report {
     pub bounds: Vec<BoundFinding>,
     /// Seconds spent.
     pub seconds: f64,
-    /// Bytes the explored graph holds (its states, parent pointers and edges), for the
-    /// benchmarks (docs/benchmarks.md).
+    /// Bytes the explored graph holds (its states, parent pointers, and edges when it keeps
+    /// them), for the benchmarks (docs/benchmarks.md).
     #[serde(skip)]
     pub graph_bytes: u64,
     /// Each net's template (its declaration in the net files), for locating findings.
