@@ -259,7 +259,54 @@ pub fn all(s: &crate::measure::Settings) -> Vec<Res<Footprint>> {
             "program: no `examples/echo` next to this binary".to_owned()
         )),
     }
+    // The same program once a player runs: the player created the events service and
+    // recorded its project's longest event there, so the program's sender is sized from it
+    // (alone, above, the program created the service and keeps the growing default).
+    if let (Some(echo), Some(petrel)) = (&s.echo, &s.petrel) {
+        let v = vehicle_name("fpp");
+        let j = jdir(&v);
+        out.push(start_player(petrel, &uav, &v, &j).and_then(|player| {
+            let m = measure(
+                "program (`echo`) started after a player (UAV): events sized from the project",
+                echo,
+                &[&v, "ECHO"],
+                "petrel play missions/uav, then target/release/examples/echo VEHICLE ECHO"
+                    .to_owned(),
+                ReadySign::Line("ready"),
+            );
+            let _ = player.terminate(Duration::from_secs(5));
+            m
+        }));
+        clear_vehicle(&v);
+    }
     out
+}
+
+/// Starts `petrel play DIR` on `vehicle` and returns it once its first heartbeat is seen.
+fn start_player(petrel: &Path, dir: &Path, vehicle: &str, journal: &str) -> Res<Kid> {
+    let v = Vehicle::new(vehicle).map_err(|e| e.to_string())?;
+    let me = Participant::join(&v, Role::tool("benchwait").map_err(|e| e.to_string())?)
+        .map_err(|e| e.to_string())?;
+    let beats = me.heartbeat_subscriber().map_err(|e| e.to_string())?;
+    let d = dir.display().to_string();
+    let kid = Kid::spawn(
+        petrel,
+        &["play", &d, "--vehicle", vehicle, "--journal", journal],
+        "player",
+    )?;
+    let reactor =
+        Reactor::without_signal_handling(WaitStrategy::Block).map_err(|e| e.to_string())?;
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_secs(30) {
+        reactor
+            .wait(&[&beats], Some(Duration::from_millis(100)))
+            .map_err(|e| e.to_string())?;
+        if beats.try_recv().map_err(|e| e.to_string())?.is_some() {
+            return Ok(kid);
+        }
+    }
+    let _ = kid.terminate(Duration::from_secs(5));
+    Err("the player did not start within 30 s".to_owned())
 }
 
 /// Runs `petrel-bench role ports` and reads its steps.

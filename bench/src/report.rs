@@ -331,7 +331,7 @@ impl Report {
     }
 
     fn footprint_md(&self, o: &mut String) {
-        o.push_str("### 4. Footprint\n\n`scripts/bench.sh --only footprint`. Each process started alone on a fresh vehicle; ready is its first heartbeat on the vehicle (the player: project loaded, checked, journal opened, services up; the data server likewise) or its ready line (a program); memory read from `/proc/PID/status` one second after ready. The goal: under 20 MB resident for the player on Redermor.\n\n| process | command | ready ms | VmRSS MB | VmHWM MB | x baseline RSS | iceoryx2 shared memory resident MB | heap MB | binary MB |\n|---|---|---:|---:|---:|---:|---:|---:|---:|\n");
+        o.push_str("### 4. Footprint\n\n`scripts/bench.sh --only footprint`. Each process started alone on a fresh vehicle (the last program after a player, whose project sizes the events service); ready is its first heartbeat on the vehicle (the player: project loaded, checked, journal opened, services up; the data server likewise) or its ready line (a program); memory read from `/proc/PID/status` one second after ready. The goal: under 20 MB resident for the player on Redermor.\n\n| process | command | ready ms | VmRSS MB | VmHWM MB | x baseline RSS | iceoryx2 shared memory resident MB | heap MB | binary MB |\n|---|---|---:|---:|---:|---:|---:|---:|---:|\n");
         let base = self
             .footprint
             .first()

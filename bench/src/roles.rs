@@ -473,20 +473,25 @@ pub fn ports() -> Res<()> {
     {
         let player = Participant::join(&vehicle, Role::Player).map_err(s)?;
         step("joined the vehicle (iceoryx2 node)");
-        let events = player.event_receiver().map_err(s)?;
-        step("events receiver (the player's)");
+        // The bound a project of fixed-size events records (64 B); senders take 512 B at least.
+        let events = player.event_receiver_sized(64).map_err(s)?;
+        step("events receiver (the player's, recording its project's longest event)");
         let calls = player.call_sender("P0").map_err(s)?;
         step("a call sender, a program taking text or lists (grows to 64 KiB calls)");
         let sized = player.call_sender_sized("P2", Some(64)).map_err(s)?;
         step("a call sender sized from the project (fixed-size parameters: 64 B calls)");
         let marking = player.marking_publisher().map_err(s)?;
-        step("marking publisher");
+        step("marking publisher, default (grows to 1 MiB)");
+        let marking_sized = player.marking_publisher_sized(4 * 1024).map_err(s)?;
+        step("marking publisher sized from the project (4 KiB snapshots)");
         let beat = player.heartbeat_publisher_sized(64 * 1024).map_err(s)?;
         step("heartbeat publisher (64 KiB)");
         let program = Participant::join(&vehicle, Role::program("P1").map_err(|e| e.to_string())?)
             .map_err(s)?;
-        let sender = program.event_sender().map_err(s)?;
-        step("an events sender (a program's)");
+        let sender_default = program.event_sender().map_err(s)?;
+        step("an events sender, default (grows to 64 KiB events)");
+        let sender = program.event_sender_sized().map_err(s)?;
+        step("an events sender sized from the project (a program's: 512 B samples)");
         let receiver = program.call_receiver().map_err(s)?;
         step("a calls receiver (a program's)");
         let beats = program.heartbeat_subscriber().map_err(s)?;
@@ -494,7 +499,19 @@ pub fn ports() -> Res<()> {
         let signals = program.signals_subscriber().map_err(s)?;
         step("a signals subscriber");
         drop((
-            events, calls, sized, marking, beat, sender, receiver, beats, signals, program, player,
+            events,
+            calls,
+            sized,
+            marking,
+            marking_sized,
+            beat,
+            sender_default,
+            sender,
+            receiver,
+            beats,
+            signals,
+            program,
+            player,
         ));
     }
     let _ = petrel_ipc::remove_vehicle_files(&vehicle);

@@ -438,7 +438,7 @@ pub fn run<B: Bus>(
     stop: &AtomicBool,
 ) -> Result<RunReport, RuntimeError> {
     let participant = Participant::join(vehicle, Role::CanBridge)?;
-    let events = participant.event_sender()?;
+    let events = participant.event_sender_sized()?;
     let beats = participant.heartbeat_subscriber()?;
     // The bridge's own heartbeat: its status for `petrel status` and the operators.
     let own_beat = participant.heartbeat_publisher()?;

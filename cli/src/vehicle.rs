@@ -199,7 +199,7 @@ pub fn send(a: SendArgs) -> Outcome {
         Ok(x) => x,
         Err(o) => return o,
     };
-    let sender = match me.event_sender() {
+    let sender = match me.event_sender_sized() {
         Ok(s) => s,
         Err(e) => return Outcome::Usage(e.to_string()),
     };

@@ -9,12 +9,14 @@ use std::time::Duration;
 use iceoryx2::node::NodeCreationFailure;
 use iceoryx2::port::listener::ListenerCreateError;
 use iceoryx2::port::notifier::NotifierCreateError;
+use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::publisher::PublisherCreateError;
 use iceoryx2::port::subscriber::SubscriberCreateError;
 use iceoryx2::prelude::{
-    ipc, AllocationStrategy, BackpressureStrategy, EventId, Node, NodeBuilder, NodeName,
-    ServiceName,
+    ipc, AllocationStrategy, AttributeVerifier, BackpressureStrategy, EventId, Node, NodeBuilder,
+    NodeName, PortFactory, SemanticString, ServiceName,
 };
+use iceoryx2::service::attribute::{AttributeKey, AttributeValue};
 use iceoryx2::service::builder::event::{EventOpenError, EventOpenOrCreateError};
 use iceoryx2::service::builder::publish_subscribe::{
     PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
@@ -247,14 +249,64 @@ impl Participant {
         &self.node
     }
 
-    /// A sender of events to the player.
+    /// A sender of events to the player, with the service's default samples: they grow by
+    /// powers of two from 512 bytes up to [`EVENTS`]`.max_body_len`, which costs this process
+    /// about 2 KiB per sample, 4 MB in all (see [`EVENTS`]). A program wants
+    /// [`event_sender_sized`](Self::event_sender_sized).
     pub fn event_sender(&self) -> Result<EventSender, SetupError> {
         self.sender(self.vehicle.events_service(), EVENTS)
     }
 
+    /// A sender of events to the player sized from the project the player runs. When the
+    /// player created the events service, it recorded there the longest event its project
+    /// foresees ([`max_event_len`](Self::max_event_len)); the sender's samples are one fixed
+    /// segment of that length, [`MIN_FIXED_LEN`] at least: a few bytes of this process's
+    /// memory per sample instead of about 2 KiB (4 MB less). A longer event (a text or a list
+    /// beyond the project's allowance, a project reloaded with longer events) still goes, in
+    /// pieces of that length that the player joins ([`wire::FRAGMENT`](crate::wire::FRAGMENT)):
+    /// the bound saves memory, it never refuses an event.
+    ///
+    /// When the service has no bound (this process created it, before the player started),
+    /// the sender is the default one of [`event_sender`](Self::event_sender).
+    pub fn event_sender_sized(&self) -> Result<EventSender, SetupError> {
+        let service = self.vehicle.events_service();
+        let factory = self.open_pubsub(&service, &EVENTS, None)?;
+        match bound_of(&factory) {
+            Some(bound) => {
+                let spec = ServiceSpec {
+                    initial_slice_len: bound.clamp(MIN_FIXED_LEN, EVENTS.max_body_len),
+                    ..EVENTS
+                };
+                self.sender_with(service, spec, AllocationStrategy::Static)
+            }
+            None => self.sender(service, EVENTS),
+        }
+    }
+
+    /// The longest event the events service was created for ([`event_receiver_sized`]
+    /// (Self::event_receiver_sized)), if the process that created it recorded one.
+    pub fn max_event_len(&self) -> Result<Option<usize>, SetupError> {
+        let factory = self.open_pubsub(&self.vehicle.events_service(), &EVENTS, None)?;
+        Ok(bound_of(&factory))
+    }
+
     /// The player's receiver of events. The events service accepts one receiver.
     pub fn event_receiver(&self) -> Result<EventReceiver, SetupError> {
-        self.receiver(self.vehicle.events_service(), EVENTS)
+        self.receiver(self.vehicle.events_service(), EVENTS, None)
+    }
+
+    /// The player's receiver of events, recording in the events service, when it creates it,
+    /// `max_event_len`: the longest event (encoded [`EventMsg`](crate::EventMsg)) its project
+    /// lets a process send, from which every [`event_sender_sized`](Self::event_sender_sized)
+    /// sizes its samples. A service that already exists (a program created it first, or a
+    /// previous player) keeps what it was created with: iceoryx2 fixes a service's attributes
+    /// at its creation.
+    pub fn event_receiver_sized(&self, max_event_len: usize) -> Result<EventReceiver, SetupError> {
+        self.receiver(
+            self.vehicle.events_service(),
+            EVENTS,
+            Some(max_event_len.clamp(1, EVENTS.max_body_len)),
+        )
     }
 
     /// A sender of calls to `program`.
@@ -297,7 +349,7 @@ impl Participant {
     /// The receiver of this program's calls. Only a [`Role::Program`] has one.
     pub fn call_receiver(&self) -> Result<CallReceiver, SetupError> {
         match &self.role {
-            Role::Program(name) => self.receiver(self.vehicle.calls_service(name)?, CALLS),
+            Role::Program(name) => self.receiver(self.vehicle.calls_service(name)?, CALLS, None),
             role => Err(SetupError::NotAProgram { role: role.clone() }),
         }
     }
@@ -309,7 +361,7 @@ impl Participant {
 
     /// A subscriber to the latest CAN signal values.
     pub fn signals_subscriber(&self) -> Result<SignalsSubscriber, SetupError> {
-        self.receiver(self.vehicle.signals_service(), SIGNALS)
+        self.receiver(self.vehicle.signals_service(), SIGNALS, None)
     }
 
     /// A publisher of marking deltas.
@@ -317,9 +369,30 @@ impl Participant {
         self.sender(self.vehicle.marking_service(), MARKING)
     }
 
+    /// A publisher of marking deltas whose samples are one fixed segment of `fixed_len` bytes
+    /// ([`MIN_FIXED_LEN`] at least; the player's: what its project's snapshots take), a few
+    /// bytes of this process's memory per sample instead of about 2 KiB. A longer message (a
+    /// step with long actions or parameters) still goes, in pieces the monitors join
+    /// ([`wire::FRAGMENT`](crate::wire::FRAGMENT)).
+    pub fn marking_publisher_sized(
+        &self,
+        fixed_len: usize,
+    ) -> Result<MarkingPublisher, SetupError> {
+        let fixed_len = fixed_len.clamp(MIN_FIXED_LEN, MARKING.max_body_len);
+        let spec = ServiceSpec {
+            initial_slice_len: fixed_len,
+            ..MARKING
+        };
+        self.sender_with(
+            self.vehicle.marking_service(),
+            spec,
+            AllocationStrategy::Static,
+        )
+    }
+
     /// A subscriber to marking deltas.
     pub fn marking_subscriber(&self) -> Result<MarkingSubscriber, SetupError> {
-        self.receiver(self.vehicle.marking_service(), MARKING)
+        self.receiver(self.vehicle.marking_service(), MARKING, None)
     }
 
     /// A sender of reload requests to the player (`petrel reload`).
@@ -329,7 +402,7 @@ impl Participant {
 
     /// The player's receiver of reload requests (one player receives).
     pub fn reload_receiver(&self) -> Result<ReloadReceiver, SetupError> {
-        self.receiver(self.vehicle.reload_service(), RELOAD)
+        self.receiver(self.vehicle.reload_service(), RELOAD, None)
     }
 
     /// The player's publisher of reload answers.
@@ -339,33 +412,51 @@ impl Participant {
 
     /// A subscriber to the player's reload answers.
     pub fn reload_answer_subscriber(&self) -> Result<ReloadAnswerSubscriber, SetupError> {
-        self.receiver(self.vehicle.reload_answer_service(), RELOAD_ANSWER)
+        self.receiver(self.vehicle.reload_answer_service(), RELOAD_ANSWER, None)
     }
 
-    /// A publisher of heartbeats.
+    /// A publisher of heartbeats. Its samples are one fixed segment of
+    /// [`HEARTBEAT`]`.max_body_len` bytes: it never sends more, and a growing segment would cost
+    /// about 2 KiB of this process's memory per sample for nothing.
     pub fn heartbeat_publisher(&self) -> Result<HeartbeatPublisher, SetupError> {
-        self.sender(self.vehicle.heartbeat_service(), HEARTBEAT)
+        let spec = ServiceSpec {
+            initial_slice_len: HEARTBEAT.max_body_len,
+            ..HEARTBEAT
+        };
+        self.sender_with(
+            self.vehicle.heartbeat_service(),
+            spec,
+            AllocationStrategy::Static,
+        )
     }
 
     /// Opens a heartbeat publisher that may send bodies of up to `max_body_len` bytes (at most
     /// [`MAX_BODY_LEN`](crate::wire::MAX_BODY_LEN)) rather than the service's default of 1,024:
     /// for the player, whose heartbeat carries its status and acknowledgements, sized from its
-    /// project. The limit is the publisher's own (its shared memory grows by powers of two as
-    /// needed); receivers read any body up to [`MAX_BODY_LEN`](crate::wire::MAX_BODY_LEN).
+    /// project. The limit is the publisher's own: its samples are one fixed segment of that
+    /// many bytes (the shared memory is only touched as far as each heartbeat goes, and the
+    /// process keeps a few bytes per sample, not the 2 KiB a growing segment costs);
+    /// receivers read any body up to [`MAX_BODY_LEN`](crate::wire::MAX_BODY_LEN).
     pub fn heartbeat_publisher_sized(
         &self,
         max_body_len: usize,
     ) -> Result<HeartbeatPublisher, SetupError> {
+        let max_body_len = max_body_len.clamp(HEARTBEAT.max_body_len, crate::wire::MAX_BODY_LEN);
         let spec = ServiceSpec {
-            max_body_len: max_body_len.clamp(HEARTBEAT.max_body_len, crate::wire::MAX_BODY_LEN),
+            max_body_len,
+            initial_slice_len: max_body_len,
             ..HEARTBEAT
         };
-        self.sender(self.vehicle.heartbeat_service(), spec)
+        self.sender_with(
+            self.vehicle.heartbeat_service(),
+            spec,
+            AllocationStrategy::Static,
+        )
     }
 
     /// A subscriber to heartbeats (from the next heartbeat each sender sends).
     pub fn heartbeat_subscriber(&self) -> Result<HeartbeatSubscriber, SetupError> {
-        self.receiver(self.vehicle.heartbeat_service(), HEARTBEAT)
+        self.receiver(self.vehicle.heartbeat_service(), HEARTBEAT, None)
     }
 
     fn service_name(&self, service: &str) -> Result<ServiceName, SetupError> {
@@ -377,16 +468,18 @@ impl Participant {
         })
     }
 
+    /// Opens the service, or creates it; a creator records `bound` (the longest body its
+    /// project lets the senders send, [`BOUND_ATTRIBUTE`]) in the service's attributes. A
+    /// service that exists is opened whatever it recorded.
     fn open_pubsub(
         &self,
         service: &str,
         spec: &ServiceSpec,
+        bound: Option<usize>,
     ) -> Result<publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>, SetupError> {
         let name = self.service_name(service)?;
-        let mut attempt = 0;
-        loop {
-            let result = self
-                .node
+        let builder = || {
+            self.node
                 .service_builder(&name)
                 .publish_subscribe::<[u8]>()
                 .user_header::<MsgHeader>()
@@ -397,7 +490,21 @@ impl Participant {
                 .max_publishers(spec.max_publishers)
                 .max_subscribers(spec.max_subscribers)
                 .max_nodes(spec.max_nodes)
-                .open_or_create();
+        };
+        let recorded = bound.and_then(bound_verifier);
+        let mut attempt = 0;
+        loop {
+            let result = match &recorded {
+                // Created with the bound, or opened if it already has this one.
+                Some(verifier) => match builder().open_or_create_with_attributes(verifier) {
+                    // It exists with another bound, or none: open it as it is.
+                    Err(PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+                        PublishSubscribeOpenError::IncompatibleAttributes,
+                    )) => builder().open_or_create(),
+                    other => other,
+                },
+                None => builder().open_or_create(),
+            };
             match result {
                 Ok(factory) => return Ok(factory),
                 Err(e) if is_transient_pubsub(&e) && attempt + 1 < OPEN_ATTEMPTS => {
@@ -458,8 +565,9 @@ impl Participant {
         self.sender_with(service, spec, AllocationStrategy::PowerOfTwo)
     }
 
-    /// A sender whose samples start at `spec.initial_slice_len` bytes and, with
-    /// `AllocationStrategy::Static`, never grow.
+    /// A sender whose samples start at `spec.initial_slice_len` bytes. With
+    /// `AllocationStrategy::Static` they are one fixed segment of that length, and a longer
+    /// body (up to `spec.max_body_len`) goes in pieces.
     fn sender_with<M: Message>(
         &self,
         service: String,
@@ -470,16 +578,12 @@ impl Participant {
             service: service.clone(),
             failure,
         };
-        let factory = self.open_pubsub(&service, &spec)?;
+        let factory = self.open_pubsub(&service, &spec, None)?;
         let events = self.open_event(&service, &spec)?;
-        let publisher = factory
-            .publisher_builder()
-            .initial_max_slice_len(spec.initial_slice_len)
-            .allocation_strategy(allocation)
-            .backpressure_strategy(BackpressureStrategy::DiscardData)
-            .max_loaned_samples(2)
-            .create()
+        let publisher = create_publisher(&factory, spec.initial_slice_len, allocation)
             .map_err(|e| failed(ServiceFailure::Publisher(e)))?;
+        let fixed_len =
+            matches!(allocation, AllocationStrategy::Static).then_some(spec.initial_slice_len);
         // With a group: the publisher's memory and connections are the group's before the
         // notifier (created next) tells the receivers to connect.
         self.session.share_now();
@@ -493,6 +597,7 @@ impl Participant {
             spec,
             self.origin,
             publisher,
+            fixed_len,
             notifier,
             factory,
             self.session.clone(),
@@ -503,12 +608,13 @@ impl Participant {
         &self,
         service: String,
         spec: ServiceSpec,
+        bound: Option<usize>,
     ) -> Result<Receiver<M>, SetupError> {
         let failed = |failure| SetupError::Service {
             service: service.clone(),
             failure,
         };
-        let factory = self.open_pubsub(&service, &spec)?;
+        let factory = self.open_pubsub(&service, &spec, bound)?;
         let events = self.open_event(&service, &spec)?;
         // The listener first: a sender that delivers between the two still wakes us.
         let listener = events
@@ -530,4 +636,52 @@ impl Participant {
             self.session.clone(),
         ))
     }
+}
+
+/// The shortest fixed sample a sized sender takes: a body of 64 KiB goes in 128 pieces at most
+/// (a sixteenth of the player's buffer for one sender), and a fixed segment of 512-byte samples
+/// costs the process no more memory than a shorter one until they are written.
+pub const MIN_FIXED_LEN: usize = 512;
+
+/// The key of the attribute in which the process that creates a service records the longest
+/// body its project lets the senders send (the events service: the player's
+/// [`Participant::event_receiver_sized`]), in decimal bytes.
+pub const BOUND_ATTRIBUTE: &str = "petrel.max_body_len";
+
+fn bound_key() -> Option<AttributeKey> {
+    AttributeKey::new(BOUND_ATTRIBUTE.as_bytes()).ok()
+}
+
+fn bound_verifier(bound: usize) -> Option<AttributeVerifier> {
+    let value = AttributeValue::new(bound.to_string().as_bytes()).ok()?;
+    AttributeVerifier::new().require(&bound_key()?, &value).ok()
+}
+
+/// The bound a service's creator recorded, if any (a value that does not read as a length is
+/// no bound: the senders keep the defaults).
+fn bound_of(
+    factory: &publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>,
+) -> Option<usize> {
+    let value = factory.attributes().key_value(&bound_key()?, 0)?;
+    std::str::from_utf8(value.as_bytes())
+        .ok()?
+        .parse()
+        .ok()
+        .filter(|&b| b > 0)
+}
+
+/// A publisher on `factory` whose samples start at `slice_len` bytes and grow as `allocation`
+/// says; full receivers' buffers refuse (never overwrite) unless the service overflows safely.
+pub(crate) fn create_publisher(
+    factory: &publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>,
+    slice_len: usize,
+    allocation: AllocationStrategy,
+) -> Result<Publisher<ipc::Service, [u8], MsgHeader>, PublisherCreateError> {
+    factory
+        .publisher_builder()
+        .initial_max_slice_len(slice_len)
+        .allocation_strategy(allocation)
+        .backpressure_strategy(BackpressureStrategy::DiscardData)
+        .max_loaned_samples(2)
+        .create()
 }

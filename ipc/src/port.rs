@@ -90,7 +90,10 @@ pub struct ServiceSpec {
 /// samples, and iceoryx2 0.10 keeps, in the sender's own memory, a reference counter per
 /// sample for each of the 255 segments a power-of-two publisher may grow to: about 2 KiB of
 /// resident memory per sample, whatever the body's size. 16,384 events cost every program
-/// 33 MB; 2,048 cost it 4 MB (docs/benchmarks.md, "Footprint").
+/// 33 MB; 2,048 cost it 4 MB (docs/benchmarks.md, "Footprint"). A sender of one fixed
+/// segment keeps 8 bytes per sample: what
+/// [`Participant::event_sender_sized`](crate::Participant::event_sender_sized) gives a program
+/// once the player recorded its project's longest event.
 pub const EVENTS: ServiceSpec = ServiceSpec {
     kind: MsgKind::Event,
     subscriber_buffer: 2_048,
@@ -124,8 +127,10 @@ pub const CALLS: ServiceSpec = ServiceSpec {
 
 /// Marking deltas to monitors. A monitor that falls 128 steps behind is refused further
 /// deltas (counted by the player, seen as a gap by the monitor) until it catches up, and must
-/// wait for a snapshot. Eight monitors of 128 deltas cost the player about 2 MB (see
-/// [`EVENTS`]).
+/// wait for a snapshot. Eight monitors of 128 deltas cost a growing publisher about 2 MB (see
+/// [`EVENTS`]); the player's is one fixed segment sized from its project
+/// ([`Participant::marking_publisher_sized`](crate::Participant::marking_publisher_sized)), a
+/// few KB.
 pub const MARKING: ServiceSpec = ServiceSpec {
     kind: MsgKind::Marking,
     subscriber_buffer: 128,
@@ -360,6 +365,9 @@ pub struct Sender<M: Message> {
     // Dropped by hand, publisher then notifier, before the receivers' doorbells ring the news
     // (see `Drop`).
     publisher: ManuallyDrop<Publisher<ipc::Service, [u8], MsgHeader>>,
+    /// `Some`: the port's samples are one fixed segment of this many bytes, and a longer body
+    /// (up to `spec.max_body_len`) goes in pieces of this size ([`wire::FRAGMENT`]).
+    fixed_len: Option<usize>,
     notifier: ManuallyDrop<Notifier<ipc::Service>>,
     factory: publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>,
     /// The doorbells of the service's receivers.
@@ -392,6 +400,7 @@ impl<M: Message> fmt::Debug for Sender<M> {
             .field("service", &self.service)
             .field("origin", &self.origin)
             .field("sender_id", &self.sender_id)
+            .field("fixed_len", &self.fixed_len)
             .field("stats", &self.stats.get())
             .finish()
     }
@@ -419,11 +428,13 @@ fn fold_id(id: u128) -> u64 {
 }
 
 impl<M: Message> Sender<M> {
+    #[allow(clippy::too_many_arguments)] // one per part of a port, all owned by it
     pub(crate) fn new(
         service: String,
         spec: ServiceSpec,
         origin: Origin,
         publisher: Publisher<ipc::Service, [u8], MsgHeader>,
+        fixed_len: Option<usize>,
         notifier: Notifier<ipc::Service>,
         factory: publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>,
         session: Arc<Session>,
@@ -435,6 +446,7 @@ impl<M: Message> Sender<M> {
             origin,
             sender_id,
             publisher: ManuallyDrop::new(publisher),
+            fixed_len,
             notifier: ManuallyDrop::new(notifier),
             factory,
             bells: RefCell::new(Bells::default()),
@@ -478,6 +490,12 @@ impl<M: Message> Sender<M> {
         self.sender_id
     }
 
+    /// The length of this sender's fixed samples (`None`: its samples grow by powers of two up
+    /// to the spec's `max_body_len`). A longer body goes in pieces of this length.
+    pub fn fixed_len(&self) -> Option<usize> {
+        self.fixed_len
+    }
+
     /// This sender's origin (its participant's node name).
     pub fn origin(&self) -> Origin {
         self.origin
@@ -513,6 +531,19 @@ impl<M: Message> Sender<M> {
                 max: self.spec.max_body_len,
             }));
         }
+        if let Some(fixed) = self.fixed_len.filter(|&f| len > f) {
+            // Longer than the fixed samples: encoded apart, then sent in pieces (rare: the
+            // fixed length is the longest body the project foresees).
+            let mut body = vec![0u8; len];
+            return match wire::encode_into(msg, &mut body) {
+                Ok(written) if written == len => self.send_pieces(&body, fixed),
+                Ok(written) => Err(self.not_sent_wire(WireError::LengthMismatch {
+                    measured: len,
+                    written,
+                })),
+                Err(error) => Err(self.not_sent_wire(error)),
+            };
+        }
         let sample = match self.publisher.loan_slice_uninit(len) {
             Ok(sample) => sample,
             Err(error) => return Err(self.not_sent_loan(error)),
@@ -545,6 +576,9 @@ impl<M: Message> Sender<M> {
                 max: self.spec.max_body_len,
             }));
         }
+        if let Some(fixed) = self.fixed_len.filter(|&f| body.len() > f) {
+            return self.send_pieces(body, fixed);
+        }
         let sample = match self.publisher.loan_slice_uninit(body.len()) {
             Ok(sample) => sample,
             Err(error) => return Err(self.not_sent_loan(error)),
@@ -556,13 +590,50 @@ impl<M: Message> Sender<M> {
         self.account(seq, result)
     }
 
+    /// Sends `body` in pieces of `piece` bytes, each a sample numbered like a message
+    /// ([`wire::FRAGMENT`]): the receiver joins them. A piece that is not delivered ends the
+    /// body there (the receiver drops what it had of it: a gap in the sequence) and is
+    /// returned as the body's error; the caller may send the body again.
+    fn send_pieces(&self, body: &[u8], piece: usize) -> Result<Sent, SendError> {
+        let pieces = body.len().div_ceil(piece);
+        let mut sent = None;
+        for (i, chunk) in body.chunks(piece).enumerate() {
+            let mut flags = wire::FRAGMENT;
+            if i == 0 {
+                flags |= wire::FRAGMENT_FIRST;
+            }
+            if i + 1 == pieces {
+                flags |= wire::FRAGMENT_LAST;
+            }
+            let sample = match self.publisher.loan_slice_uninit(chunk.len()) {
+                Ok(sample) => sample,
+                Err(error) => return Err(self.not_sent_loan(error)),
+            };
+            let mut sample = sample.write_from_slice(chunk);
+            let seq = self.take_seq();
+            *sample.user_header_mut() = MsgHeader {
+                fragment: flags,
+                ..self.header(seq)
+            };
+            let result = sample.send();
+            sent = Some(self.account(seq, result)?);
+        }
+        // A body is never empty (its encoding has a length or a tag at least).
+        sent.ok_or_else(|| {
+            self.not_sent_wire(WireError::LengthMismatch {
+                measured: body.len(),
+                written: 0,
+            })
+        })
+    }
+
     fn header(&self, seq: u64) -> MsgHeader {
         MsgHeader {
             sender: self.sender_id,
             seq,
             version: WIRE_VERSION,
             kind: M::KIND as u16,
-            reserved: 0,
+            fragment: 0,
             origin: self.origin.bytes(),
         }
     }
@@ -852,6 +923,9 @@ pub struct Receiver<M: Message> {
     factory: publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>,
     stats: Cell<ReceiverStats>,
     senders: RefCell<HashMap<u64, SenderAccount>>,
+    /// The pieces taken so far of each sender's body in pieces ([`wire::FRAGMENT`]): the
+    /// number of messages missed before its first piece, and its bytes.
+    pieces: RefCell<HashMap<u64, (u64, Vec<u8>)>>,
     pending_wakeups: Cell<Wakeups>,
     /// Set: [`take_wakeups`](Self::take_wakeups) consumes notifications at most once per this
     /// period (see [`consume_wakeups_every`](Self::consume_wakeups_every)).
@@ -916,6 +990,7 @@ impl<M: Message> Receiver<M> {
             factory,
             stats: Cell::new(ReceiverStats::default()),
             senders: RefCell::new(HashMap::new()),
+            pieces: RefCell::new(HashMap::new()),
             pending_wakeups: Cell::new(Wakeups::default()),
             wakeup_period: Cell::new(None),
             last_consumed: Cell::new(Instant::now()),
@@ -999,6 +1074,7 @@ impl<M: Message> Receiver<M> {
     /// numbers are accounted from scratch.
     pub fn forget_sender(&self, sender: u64) {
         self.senders.borrow_mut().remove(&sender);
+        self.pieces.borrow_mut().remove(&sender);
     }
 
     /// True when a sample waits in the buffer (a shared-memory read, no system call).
@@ -1081,48 +1157,115 @@ impl<M: Message> Receiver<M> {
     /// `Ok(None)` when the buffer is empty. A sample whose body does not decode is taken, counted
     /// and reported as [`RecvError::Undecodable`]; the next call goes on with the next sample.
     pub fn try_recv(&self) -> Result<Option<Received<M>>, RecvError> {
-        let sample = match self.subscriber.receive() {
-            Ok(Some(sample)) => sample,
-            Ok(None) => return Ok(None),
-            Err(error) => {
-                return Err(RecvError::Transport {
-                    service: self.service.clone(),
-                    error,
-                })
-            }
-        };
-        let header = *sample.user_header();
-        let origin = Origin::from_bytes(header.origin);
-        let missed = self.account(&header, origin);
-        if header.version != WIRE_VERSION || header.kind != M::KIND as u16 {
-            self.count_undecodable(header.sender);
-            return Err(RecvError::Foreign {
-                service: self.service.clone(),
-                origin,
-                seq: header.seq,
-                version: header.version,
-                kind: header.kind,
-            });
-        }
-        match wire::decode::<M>(sample.payload()) {
-            Ok(msg) => Ok(Some(Received {
-                msg,
-                origin,
-                sender: header.sender,
-                seq: header.seq,
-                missed,
-            })),
-            Err(error) => {
+        loop {
+            let sample = match self.subscriber.receive() {
+                Ok(Some(sample)) => sample,
+                Ok(None) => return Ok(None),
+                Err(error) => {
+                    return Err(RecvError::Transport {
+                        service: self.service.clone(),
+                        error,
+                    })
+                }
+            };
+            let header = *sample.user_header();
+            let origin = Origin::from_bytes(header.origin);
+            let missed = self.account(&header, origin);
+            if header.version != WIRE_VERSION || header.kind != M::KIND as u16 {
                 self.count_undecodable(header.sender);
-                Err(RecvError::Undecodable {
+                return Err(RecvError::Foreign {
+                    service: self.service.clone(),
+                    origin,
+                    seq: header.seq,
+                    version: header.version,
+                    kind: header.kind,
+                });
+            }
+            let undecodable = |error| {
+                self.count_undecodable(header.sender);
+                RecvError::Undecodable {
                     service: self.service.clone(),
                     origin,
                     sender: header.sender,
                     seq: header.seq,
                     error,
-                })
+                }
+            };
+            if header.fragment == 0 {
+                self.drop_pieces(header.sender);
+                return match wire::decode::<M>(sample.payload()) {
+                    Ok(msg) => Ok(Some(Received {
+                        msg,
+                        origin,
+                        sender: header.sender,
+                        seq: header.seq,
+                        missed,
+                    })),
+                    Err(error) => Err(undecodable(error)),
+                };
+            }
+            let Some(joined) = self.join_piece(&header, missed, sample.payload()) else {
+                // More pieces to come (or a piece whose body this receiver cannot have).
+                continue;
+            };
+            let (missed, body) = joined.map_err(undecodable)?;
+            return match wire::decode::<M>(&body) {
+                Ok(msg) => Ok(Some(Received {
+                    msg,
+                    origin,
+                    sender: header.sender,
+                    seq: header.seq,
+                    missed,
+                })),
+                Err(error) => Err(undecodable(error)),
+            };
+        }
+    }
+
+    /// Drops what this receiver holds of a body in pieces of `sender`: a whole message came
+    /// after them, so that body was given up.
+    fn drop_pieces(&self, sender: u64) {
+        let mut pieces = self.pieces.borrow_mut();
+        if !pieces.is_empty() {
+            pieces.remove(&sender);
+        }
+    }
+
+    /// Takes one piece of a body ([`wire::FRAGMENT`]). Returns the whole body, with the
+    /// messages missed before its first piece, once its last piece is there; `None` while
+    /// pieces are missing, or for a piece whose first piece this receiver did not get or after
+    /// a gap (the body is dropped: its lost pieces are counted missing, and its sender was
+    /// told that the piece was refused).
+    fn join_piece(
+        &self,
+        header: &MsgHeader,
+        missed: u64,
+        payload: &[u8],
+    ) -> Option<Result<(u64, Vec<u8>), WireError>> {
+        let mut pieces = self.pieces.borrow_mut();
+        if header.fragment & wire::FRAGMENT_FIRST != 0 {
+            pieces.insert(header.sender, (missed, payload.to_vec()));
+        } else {
+            match pieces.get_mut(&header.sender) {
+                Some((_, bytes)) if missed == 0 => bytes.extend_from_slice(payload),
+                _ => {
+                    pieces.remove(&header.sender);
+                    return None;
+                }
             }
         }
+        let len = pieces.get(&header.sender).map_or(0, |(_, b)| b.len());
+        if len > wire::MAX_BODY_LEN {
+            pieces.remove(&header.sender);
+            return Some(Err(WireError::TooLarge {
+                len,
+                max: wire::MAX_BODY_LEN,
+            }));
+        }
+        if header.fragment & wire::FRAGMENT_LAST == 0 {
+            return None;
+        }
+        pieces.remove(&header.sender).map(Ok)
     }
 
     /// Consumes the wake-ups, then hands every waiting sample to `f`, in order, until the

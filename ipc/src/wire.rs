@@ -48,8 +48,17 @@ use iceoryx2::prelude::ZeroCopySend;
 /// iceoryx2 type name, so a process built with another wire version cannot even open the
 /// services. Version 2: the heartbeat carries typed acknowledgements and the recorder's state.
 /// Version 3: a marking delta carries its step's mission time, the event's parameters and the
-/// step's actions as text, so that a monitor shows the whole step.
-pub const WIRE_VERSION: u16 = 3;
+/// step's actions as text, so that a monitor shows the whole step. Version 4: a body longer
+/// than its sender's fixed samples travels in fragments ([`MsgHeader::fragment`]).
+pub const WIRE_VERSION: u16 = 4;
+
+/// [`MsgHeader::fragment`]: this sample carries a piece of a body longer than its sender's
+/// samples; the receiver joins the pieces of one sender, in sequence, into the body.
+pub const FRAGMENT: u32 = 1;
+/// [`MsgHeader::fragment`]: the first piece of a body (with [`FRAGMENT`]).
+pub const FRAGMENT_FIRST: u32 = 2;
+/// [`MsgHeader::fragment`]: the last piece of a body (with [`FRAGMENT`]): the body is whole.
+pub const FRAGMENT_LAST: u32 = 4;
 
 /// Most senders one heartbeat acknowledges (the most recently active first). The events
 /// service takes 32 senders at once; the rest is room for senders that just left.
@@ -507,7 +516,7 @@ impl Message for ReloadAnswer {
 /// depend on the module path and changes with [`WIRE_VERSION`].
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("petrel::MsgHeader/v3")]
+#[type_name("petrel::MsgHeader/v4")]
 pub struct MsgHeader {
     /// The sending port's id, unique among the vehicle's live ports.
     pub sender: u64,
@@ -518,8 +527,10 @@ pub struct MsgHeader {
     pub version: u16,
     /// [`MsgKind`] of the body, as a number.
     pub kind: u16,
-    /// Reserved, zero.
-    pub reserved: u32,
+    /// Zero for a whole body; for a piece of a longer one, [`FRAGMENT`] with [`FRAGMENT_FIRST`]
+    /// or [`FRAGMENT_LAST`] as the case may be (a piece numbered like any message: a body in
+    /// `n` pieces takes `n` sequence numbers, the last one its own).
+    pub fragment: u32,
     /// The sender's role (its node name, such as `program/PLN`), NUL-padded UTF-8.
     pub origin: [u8; ORIGIN_LEN],
 }

@@ -559,3 +559,62 @@ fn a_lazily_consuming_receiver_neither_misses_a_wakeup_nor_wakes_for_old_ones() 
         done.send(()).unwrap();
     });
 }
+
+#[test]
+fn a_sender_made_before_the_player_keeps_the_defaults_and_still_delivers() {
+    let vehicle = TestVehicle::new("early");
+    // The program comes first: it creates the events service, with no bound.
+    let gui = Participant::join(&vehicle, Role::program("GUI").unwrap()).unwrap();
+    let tx = gui.event_sender_sized().unwrap();
+    assert_eq!(tx.fixed_len(), None);
+    // The player opens it as it is (its bound cannot be recorded any more).
+    let player = Participant::join(&vehicle, Role::Player).unwrap();
+    let events = player.event_receiver_sized(40).unwrap();
+    assert_eq!(player.max_event_len().unwrap(), None);
+    let text = EventMsg::new("log", vec![Value::Text("é".repeat(10_000))]);
+    tx.send(&text).unwrap();
+    assert_eq!(events.try_recv().unwrap().unwrap().msg, text);
+    // A later sender of the same process reads no bound either.
+    assert_eq!(gui.event_sender_sized().unwrap().fixed_len(), None);
+}
+
+#[test]
+fn a_sized_marking_publisher_sends_a_long_step_in_pieces_every_monitor_joins() {
+    let vehicle = TestVehicle::new("pieces");
+    let player = Participant::join(&vehicle, Role::Player).unwrap();
+    let publisher = player.marking_publisher_sized(600).unwrap();
+    assert_eq!(publisher.fixed_len(), Some(600));
+    let monitors: Vec<_> = (0..2)
+        .map(|i| {
+            let me = Participant::join(&vehicle, Role::tool(&format!("mon{i}")).unwrap()).unwrap();
+            let sub = me.marking_subscriber().unwrap();
+            (me, sub)
+        })
+        .collect();
+    let short = MarkingMsg {
+        step: 1,
+        fired: vec!["MISSION.t1".into()],
+        ..MarkingMsg::default()
+    };
+    // A step whose actions take 5,000 bytes: 9 pieces of 600.
+    let long = MarkingMsg {
+        step: 2,
+        actions: vec!["call GUI.say(\"".to_owned() + &"z".repeat(5_000) + "\")"],
+        ..MarkingMsg::default()
+    };
+    let first = publisher.send(&short).unwrap().seq;
+    let last = publisher.send(&long).unwrap().seq;
+    publisher.send(&short).unwrap();
+    assert_eq!(
+        last - first,
+        9,
+        "nine pieces, the last one numbering the step"
+    );
+    for (_, sub) in &monitors {
+        let got: Vec<_> = std::iter::from_fn(|| sub.try_recv().unwrap())
+            .map(|r| r.msg)
+            .collect();
+        assert_eq!(got, vec![short.clone(), long.clone(), short.clone()]);
+        assert_eq!(sub.stats().missing, 0);
+    }
+}

@@ -22,7 +22,7 @@ use crate::journal::{
 };
 use crate::record::{marked_places, outcome_name, place_changes, StepRecord};
 use petrel_ipc::{
-    CallMsg, CallSender, EventReceiver, Heartbeat, HeartbeatPublisher, MarkingMsg,
+    CallMsg, CallSender, EventMsg, EventReceiver, Heartbeat, HeartbeatPublisher, MarkingMsg,
     MarkingPublisher, Participant, ProgramWatch, Reactor, RecvError, ReloadAnswer,
     ReloadAnswerPublisher, ReloadReceiver, ReloadRequest, Role, SendError, Vehicle, WaitStrategy,
 };
@@ -530,14 +530,18 @@ impl<'p> PlayerLoop<'p> {
             );
         }
         let ports = Ports {
-            events: me.event_receiver().map_err(setup)?,
+            events: me
+                .event_receiver_sized(event_bound(project))
+                .map_err(setup)?,
             calls: project
                 .programs
                 .iter()
                 .map(|p| me.call_sender_sized(&p.name, call_bound(p)))
                 .collect::<Result<_, _>>()
                 .map_err(setup)?,
-            marking: me.marking_publisher().map_err(setup)?,
+            marking: me
+                .marking_publisher_sized(marking_bound(project))
+                .map_err(setup)?,
             heartbeat: me.heartbeat_publisher_sized(heartbeat_max).map_err(setup)?,
             reload: me.reload_receiver().map_err(setup)?,
             reload_answers: me.reload_answer_publisher().map_err(setup)?,
@@ -1598,9 +1602,6 @@ fn status_json(s: &StatusSnapshot) -> String {
     serde_json::Value::Object(doc).to_string()
 }
 
-/// The length of the largest status JSON `project` can give: every net active with every place
-/// marked, the ledger full of senders whose origins need the most escaping, every counter at
-/// its largest. The heartbeat's publisher is sized from it, so that no status is ever refused.
 /// The longest call the project can make to `program`, encoded, when its functions take only
 /// fixed-size parameters (`None`: text or lists, whose length the project does not bound): the
 /// size of the player's call sender to it (docs/benchmarks.md, "Footprint").
@@ -1624,6 +1625,78 @@ fn call_bound(program: &Program) -> Option<usize> {
     Some(bound)
 }
 
+/// What a text or list parameter of an event counts for in [`event_bound`]: 256 bytes (a
+/// 256-byte text, 32 floats). Longer ones still go, in pieces (`petrel_ipc::wire::FRAGMENT`).
+const TEXT_ALLOWANCE: usize = 256;
+
+/// The longest event a process may send `project`, encoded: the events service records it
+/// when the player creates it, and each program's sender sizes its fixed samples from it
+/// (docs/benchmarks.md, "Footprint"). Exact for `int`, `float` and `bool` parameters (the
+/// longest encoding of each), [`TEXT_ALLOWANCE`] for each text or list; at least 64 bytes.
+/// Internal and built-in events are left out: no process sends them (the data server's
+/// `call_failed`, short names, fits the senders' 512 bytes at least).
+fn event_bound(project: &CompiledProject) -> usize {
+    let allowance_floats = TEXT_ALLOWANCE / 8;
+    let builtin = |name: &str| {
+        petrel_nets::model::builtin_events()
+            .iter()
+            .any(|b| b.name.text == name)
+    };
+    project
+        .events
+        .iter()
+        .filter(|e| !e.internal && !builtin(&e.name))
+        .filter_map(|e| {
+            let params = e
+                .params
+                .iter()
+                .map(|(_, ty)| match ty {
+                    Type::Int => Value::Int(i64::MIN),
+                    Type::Float => Value::Float(f64::MAX),
+                    Type::Bool => Value::Bool(true),
+                    Type::Text => Value::Text("x".repeat(TEXT_ALLOWANCE)),
+                    Type::FloatList => Value::FloatList(vec![f64::MAX; allowance_floats]),
+                })
+                .collect();
+            petrel_ipc::wire::encoded_len(&EventMsg::new(e.name.clone(), params)).ok()
+        })
+        .fold(64, usize::max)
+}
+
+/// The length of the marking publisher's fixed samples: twice the largest snapshot `project`
+/// can give (every place marked, every net active, the longest event's name), at least 1 KiB.
+/// Deltas name only what changed and fit with room to spare; a step whose actions or
+/// parameters are longer still goes, in pieces (`petrel_ipc::wire::FRAGMENT`).
+fn marking_bound(project: &CompiledProject) -> usize {
+    let worst = MarkingMsg {
+        step: u64::MAX,
+        event: project
+            .events
+            .iter()
+            .map(|e| e.name.clone())
+            .max_by_key(|n| n.len()),
+        fired: Vec::new(),
+        marked: project
+            .nets
+            .iter()
+            .flat_map(|n| n.places.iter().map(|p| format!("{}.{}", n.name, p.name)))
+            .chain(project.globals.iter().map(|g| format!("global.{}", g.name)))
+            .collect(),
+        unmarked: Vec::new(),
+        activated: project.nets.iter().map(|n| n.name.clone()).collect(),
+        deactivated: Vec::new(),
+        snapshot: true,
+        time_us: u64::MAX,
+        params: Vec::new(),
+        actions: Vec::new(),
+    };
+    let snapshot = petrel_ipc::wire::encoded_len(&worst).unwrap_or(0);
+    (2 * snapshot).max(1024)
+}
+
+/// The length of the largest status JSON `project` can give: every net active with every place
+/// marked, the ledger full of senders whose origins need the most escaping, every counter at
+/// its largest. The heartbeat's publisher is sized from it, so that no status is ever refused.
 fn status_bound(project: &CompiledProject) -> usize {
     let mut marking: Vec<(String, Vec<String>)> = project
         .nets
@@ -1772,5 +1845,55 @@ mod tests {
         assert_eq!(longest, bound);
         assert_eq!(call_bound(program("PLN")), None, "a list has no bound");
         assert_eq!(call_bound(program("LOG")), None, "a text has no bound");
+    }
+
+    #[test]
+    fn the_event_bound_covers_the_longest_event_a_process_sends_and_leaves_out_built_ins() {
+        let manifest = "[project]\nname = \"p\"\nfiles = [\"a.pn\"]\nstart = [\"A\"]\n\n[events]\narrived = { category = \"nominal\", params = [\"x: int\", \"speed: float\", \"fast: bool\"] }\nnote = { category = \"nominal\", params = [\"what: text\", \"xs: [float]\"] }\n";
+        let net = "net A {\n    place a = 1\n    transition t on arrived(x, s, f): a -> a\n    transition n on note(w, xs): a -> a\n}\n";
+        let (_, c, d, _) = petrel_nets::project::from_sources(manifest, &[("a.pn", net)]);
+        assert!(!d.has_errors(), "{d:?}");
+        let p = c.unwrap();
+        let bound = event_bound(&p);
+        let len = |e: EventMsg| petrel_ipc::wire::encoded_len(&e).unwrap();
+        let arrived = len(EventMsg::new(
+            "arrived",
+            vec![
+                Value::Int(i64::MIN),
+                Value::Float(f64::MAX),
+                Value::Bool(true),
+            ],
+        ));
+        let note = len(EventMsg::new(
+            "note",
+            vec![
+                Value::Text("é".repeat(TEXT_ALLOWANCE / 2)),
+                Value::FloatList(vec![0.5; TEXT_ALLOWANCE / 8]),
+            ],
+        ));
+        assert!(arrived < bound);
+        assert_eq!(note, bound, "a text and a list at their allowance");
+        // Built-in events (program_lost, call_failed... with their texts) do not count.
+        let only_ints = programs();
+        assert_eq!(
+            event_bound(&only_ints),
+            64,
+            "a project of parameterless events"
+        );
+        // The marking's fixed samples hold a snapshot of every place and net, twice over.
+        let snapshot = MarkingMsg {
+            step: 1,
+            event: Some("note".into()),
+            fired: Vec::new(),
+            marked: vec!["A.a".into()],
+            unmarked: Vec::new(),
+            activated: vec!["A".into()],
+            deactivated: Vec::new(),
+            snapshot: true,
+            time_us: 5,
+            params: Vec::new(),
+            actions: Vec::new(),
+        };
+        assert!(2 * petrel_ipc::wire::encoded_len(&snapshot).unwrap() <= marking_bound(&p));
     }
 }

@@ -20,6 +20,12 @@
 //!   outlives the player: the calls of a restarted player arrive like the first one's.
 //! - SIGINT and SIGTERM end [`Program::recv`] with [`ProgramError::Terminated`], so that a
 //!   program leaves the vehicle in good order.
+//! - Memory: a program's events sender is sized from the project the player runs (the player
+//!   records its longest event in the events service when it creates it): one fixed segment of
+//!   samples, about 4 MB less than the growing default; a longer event still goes, in pieces.
+//!   A program started before the player creates the service itself, with no bound, and keeps
+//!   the default sender (until it loses the player and connects again); under `petrel up` the
+//!   player starts first.
 //!
 //! The examples hold a minimal program (`echo`) and the simulated UAV of the ProCoSA mission
 //! (`uav_gui` playing GUI and PLD, `uav_dec` playing DEC).

@@ -235,7 +235,7 @@ impl Program {
                 // now and then, not at every call.
                 calls.consume_wakeups_every(Some(petrel_ipc::SPIN_WAKEUP_PERIOD));
             }
-            let events = participant.event_sender().map_err(setup)?;
+            let events = participant.event_sender_sized().map_err(setup)?;
             hosts.push(Hosted {
                 calls,
                 events: Some(events),
@@ -717,7 +717,7 @@ impl Program {
             if host.events.is_none() {
                 let sender =
                     host.participant
-                        .event_sender()
+                        .event_sender_sized()
                         .map_err(|error| ProgramError::Setup {
                             program: host.name.clone(),
                             error: Box::new(error),

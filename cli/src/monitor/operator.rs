@@ -48,7 +48,7 @@ pub fn serve(vehicle: Vehicle, requests: mpsc::Receiver<Request>) {
         .map_err(|e| e.to_string())
         .and_then(|role| Participant::join(&vehicle, role).map_err(|e| e.to_string()))
         .and_then(|me| {
-            let sender = me.event_sender().map_err(|e| e.to_string())?;
+            let sender = me.event_sender_sized().map_err(|e| e.to_string())?;
             let beats = me.heartbeat_subscriber().map_err(|e| e.to_string())?;
             Ok((me, sender, beats))
         });
