@@ -319,6 +319,62 @@ fn generated(seed: u64) -> (String, String) {
     (m, text)
 }
 
+/// A net of one component stuck while another component is still short of the declared end:
+/// the reduction may move the ends' component to its end first (here `work` refuses to leave
+/// `busy` alone: its `poke` loops back, which the cycle proviso refuses), so that the reduced
+/// graph meets `work` stuck only beside the end. It is stuck all the same, and the report
+/// says so with a state where the end does not hold (found by a generated project once).
+#[test]
+fn a_net_stuck_beside_another_components_end_is_found_reduced() {
+    let manifest = r#"[project]
+name = "beside"
+files = ["a.pn"]
+start = ["main", "work"]
+
+[events]
+finish = { category = "nominal" }
+begin = { category = "nominal" }
+poke = { category = "nominal" }
+jam = { category = "nominal" }
+
+[verify]
+final = [["main.done"]]
+"#;
+    let nets = r#"net main {
+    place running = 1
+    place done
+    transition end on finish: running -> done
+}
+net work {
+    place idle = 1
+    place busy
+    place jammed
+    transition start on begin: idle -> busy
+    transition again on poke: busy -> busy
+    transition stop on jam: busy -> jammed
+}
+"#;
+    let (_, c, d, _) = from_sources(manifest, &[("a.pn", nets)]);
+    let c = c.unwrap_or_else(|| panic!("{d:?}"));
+    let (red, full) = (run(&c, true), run(&c, false));
+    assert!(red.reduced_states > 0, "the reduction must apply here");
+    assert_eq!(findings(&red), findings(&full));
+    let stuck = red
+        .stuck_nets
+        .iter()
+        .find(|f| f.net == "work")
+        .expect("work is stuck in `jammed`");
+    assert!(
+        stuck.marking.contains(&"main{running}".to_string()),
+        "{stuck:?}"
+    );
+    assert!(
+        stuck.marking.contains(&"work{jammed}".to_string()),
+        "{stuck:?}"
+    );
+    assert_eq!(stuck.trace, ["begin", "jam"]);
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 160, ..ProptestConfig::default() })]
 

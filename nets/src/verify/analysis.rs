@@ -10,6 +10,7 @@
 use super::explore::{Edge, Edges, Graph, NO_EVENT};
 use super::{
     DeadFinding, InvariantFinding, LoopFinding, ProgressFinding, StarvationFinding, StuckFinding,
+    Trace,
 };
 use crate::compiled::{CompiledProject, EventId, NetId, PlaceRef};
 use crate::semantics::Layout;
@@ -789,25 +790,45 @@ pub(super) fn stuck_nets(
             .filter(|&m| l.is_active(s, m) && !can.can(all, m, i as u32))
             .collect();
         out.push((
-            StuckFinding {
-                net: p.nets[net].name.clone(),
-                marking: describe(s),
-                trace: g.trace(i as u32),
-                waits_for: waits_for(p, l, s, net as NetId),
-                resource_cycle: resource_cycle(p, l, s, net as NetId, &stuck_here),
-                places: marked_places(p, l, s)
-                    .into_iter()
-                    .filter(|q| {
-                        q.split_once('.')
-                            .is_some_and(|(owner, _)| owner == p.nets[net].name)
-                    })
-                    .collect(),
-            },
+            stuck_finding(
+                p,
+                l,
+                s,
+                net as NetId,
+                &stuck_here,
+                describe,
+                g.trace(i as u32),
+            ),
             i as u32,
             net as NetId,
         ));
     }
     (out, can)
+}
+
+/// The finding of net `net` stuck in `s`, reached by `trace`, with `stuck_here` the nets stuck
+/// there with it.
+pub(super) fn stuck_finding(
+    p: &CompiledProject,
+    l: &Layout,
+    s: &[u64],
+    net: NetId,
+    stuck_here: &[NetId],
+    describe: &dyn Fn(&[u64]) -> Vec<String>,
+    trace: Trace,
+) -> StuckFinding {
+    let name = &p.nets[net as usize].name;
+    StuckFinding {
+        net: name.clone(),
+        marking: describe(s),
+        trace,
+        waits_for: waits_for(p, l, s, net),
+        resource_cycle: resource_cycle(p, l, s, net, stuck_here),
+        places: marked_places(p, l, s)
+            .into_iter()
+            .filter(|q| q.split_once('.').is_some_and(|(owner, _)| owner == name))
+            .collect(),
+    }
 }
 
 /// Per component of the whole graph: the nets that can still fire from its states (a set of

@@ -40,7 +40,7 @@ impl<'a> Minimizer<'a> {
     /// The state reached by replaying `steps` (labels) from `root`; `None` if the environment
     /// could not make one of the steps (an answer with no call outstanding, an internal event
     /// nobody emitted).
-    fn replay(&self, root: &State, steps: &[u32]) -> Option<State> {
+    pub(super) fn replay(&self, root: &State, steps: &[u32]) -> Option<State> {
         let mut rec = self.rec.borrow_mut();
         let mut scratch = self.scratch.borrow_mut();
         let mut s = root.clone();

@@ -636,7 +636,29 @@ fn verify_inner(
             .take()
             .expect("asked of the walk without --skip-liveness");
         let (stuck, can) = analysis::stuck_nets(p, l, &g, all, can, &describe);
-        report.stuck_nets = stuck
+        // Reduced, a net of another component than the ends' may be met stuck only beside an
+        // end (docs/verification.md, "Partial-order reduction"): a witness is put together.
+        let beside = if report.partial && declares_ends {
+            let reported: Vec<NetId> = stuck.iter().map(|&(_, _, net)| net).collect();
+            reduction::stuck_beside_ends(
+                p,
+                l,
+                &g,
+                &reduction::Components::new(p, l),
+                &ends,
+                &reported,
+                &|net, i| can.can(all, net, i),
+                &m,
+            )
+        } else {
+            Ok(Vec::new())
+        };
+        let Ok(beside) = beside else {
+            // No witness that way: the whole graph decides.
+            opts.no_reduction = true;
+            return verify_inner(project, opts, start);
+        };
+        let mut found: Vec<(NetId, StuckFinding)> = stuck
             .into_iter()
             // A net stuck in a dead marking with nothing to wait for: the dead marking says it all.
             .filter(|(f, i, _)| {
@@ -649,9 +671,23 @@ fn verify_inner(
                         && index_of(s).is_some_and(|k| !can.can(all, net, k))
                         && !analysis::end_for_net(p, l, s, net)
                 });
-                f
+                (net, f)
             })
             .collect();
+        for b in beside {
+            let trace = b
+                .steps
+                .iter()
+                .map(|&label| g.labels[label as usize].text.clone())
+                .collect();
+            let f = analysis::stuck_finding(p, l, &b.state, b.net, &b.stuck_here, &describe, trace);
+            let dead_here = index_of(&b.state).is_some_and(|k| dead[k as usize]);
+            if !dead_here || !f.waits_for.is_empty() || f.resource_cycle.is_some() {
+                found.push((b.net, f));
+            }
+        }
+        found.sort_by_key(|&(net, _)| net);
+        report.stuck_nets = found.into_iter().map(|(_, f)| f).collect();
     }
     if let (true, Some(all), Some(walk)) = (whole, &all, &mut walk) {
         let loops = walk.loops.take().unwrap_or_default();

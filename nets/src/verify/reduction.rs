@@ -15,9 +15,12 @@
 //! of [`super::explore`], and every state in full where it cannot.
 
 use super::env::Delivery;
-use crate::compiled::{Action, CompiledProject, PlaceRef, StateFormula};
+use super::explore::Graph;
+use super::minimize::Minimizer;
+use crate::compiled::{Action, CompiledProject, NetId, PlaceRef, StateFormula};
 use crate::model::Category;
-use crate::semantics::Layout;
+use crate::semantics::{Layout, State};
+use std::collections::HashMap;
 
 /// The component of each net, and of each delivery.
 pub(super) struct Components {
@@ -25,6 +28,9 @@ pub(super) struct Components {
     pub of_net: Vec<u32>,
     /// How many components.
     pub count: u32,
+    /// The component of the nets named in the `final` and `goal` markings (one, by
+    /// construction); `None` when there are none, or they name global places no net touches.
+    pub ends: Option<u32>,
 }
 
 struct UnionFind(Vec<u32>);
@@ -151,6 +157,7 @@ impl Components {
         for w in ends.windows(2) {
             uf.union(w[0], w[1]);
         }
+        let ends_root = ends.first().map(|&x| uf.find(x) as usize);
         // Number the components of the nets in net order.
         let mut number: Vec<u32> = vec![u32::MAX; total as usize];
         let mut of_net = Vec::with_capacity(nets as usize);
@@ -163,7 +170,12 @@ impl Components {
             }
             of_net.push(number[root]);
         }
-        Components { of_net, count }
+        let ends = ends_root.map(|r| number[r]).filter(|&c| c != u32::MAX);
+        Components {
+            of_net,
+            count,
+            ends,
+        }
     }
 
     /// The component a delivery touches; `None` for a catastrophic event (every component:
@@ -178,4 +190,127 @@ impl Components {
         };
         Some(self.of_net[net as usize])
     }
+}
+
+/// A net met stuck in the reduced graph only beside an end of the ends' component, and a state
+/// of the whole graph where it is stuck with no end holding ([`stuck_beside_ends`]).
+pub(super) struct StuckBesideEnds {
+    /// The net.
+    pub net: NetId,
+    /// Where it is stuck, no end holding.
+    pub state: State,
+    /// The steps (labels) from the initial state to `state`.
+    pub steps: Vec<u32>,
+    /// The nets stuck there with it.
+    pub stuck_here: Vec<NetId>,
+}
+
+/// The nets of another component than the ends' that the reduced graph `g` meets stuck (active,
+/// never to fire again, the mission not over) only in states where a `final` or `goal` marking
+/// holds (`ends`). Whether a net can fire again is its component's question, but whether an
+/// end holds is the ends' component's: the reduction may have moved the ends' component to its
+/// end before the net's component got the net stuck, and never the other way round. In the
+/// whole graph every state of one component meets every state of the others (they are
+/// independent), so the net is stuck there beside a state where no end holds. The witness is
+/// put together from the ends' component's steps to such a state (the first one breadth
+/// first), then the other components' steps to where the net is stuck (the environment's
+/// drops of events no net waits for left out), replayed with the firing code (`m`), and
+/// checked. `can(net, i)`: whether `net` can still fire from state `i` of `g`. `Err(())` when
+/// no witness can be put together this way (the two states were first reached from different
+/// initial states, or the replay does not give what it should): the caller then explores in
+/// full.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn stuck_beside_ends(
+    p: &CompiledProject,
+    l: &Layout,
+    g: &Graph,
+    comps: &Components,
+    ends: &[bool],
+    reported: &[NetId],
+    can: &dyn Fn(NetId, u32) -> bool,
+    m: &Minimizer,
+) -> Result<Vec<StuckBesideEnds>, ()> {
+    let Some(e) = comps.ends else {
+        return Ok(Vec::new());
+    };
+    let n = g.states.len() as u32;
+    let candidates: Vec<(NetId, u32)> = (0..p.nets.len() as NetId)
+        .filter(|&net| {
+            comps.of_net[net as usize] != e
+                && !reported.contains(&net)
+                && !p.nets[net as usize].transitions.is_empty()
+        })
+        .filter_map(|net| {
+            (0..n)
+                .find(|&i| {
+                    let s = &g.states[i as usize];
+                    l.is_active(s, net) && !can(net, i) && !l.is_over(s)
+                })
+                .map(|i| (net, i))
+        })
+        .collect();
+    if candidates.is_empty() {
+        return Ok(Vec::new());
+    }
+    // Breadth first, a state's parent was found before it: one pass gives every state's
+    // initial state.
+    let mut root: Vec<u32> = Vec::with_capacity(n as usize);
+    for i in 0..n {
+        let r = g.parent(i).map_or(i, |(up, _)| root[up as usize]);
+        root.push(r);
+    }
+    // The first state where no end holds, per initial state.
+    let mut open: HashMap<u32, u32> = HashMap::new();
+    for i in 0..n {
+        if !ends[i as usize] {
+            open.entry(root[i as usize]).or_insert(i);
+        }
+    }
+    if open.is_empty() {
+        // An end holds everywhere: no net is stuck, reduced or not.
+        return Ok(Vec::new());
+    }
+    let component_of = |label: u32| {
+        let d = &g.deliveries[g.labels[label as usize].delivery as usize];
+        comps.of_delivery(p, l, d)
+    };
+    let mut out = Vec::new();
+    for (net, i) in candidates {
+        let r = root[i as usize];
+        let &t = open.get(&r).ok_or(())?;
+        let mut steps = Vec::new();
+        for step in g.trace_steps(t) {
+            let label = step.ok_or(())?;
+            if component_of(label) == Some(e) {
+                steps.push(label);
+            }
+        }
+        for step in g.trace_steps(i) {
+            let label = step.ok_or(())?;
+            if component_of(label).is_some_and(|c| c != e) {
+                steps.push(label);
+            }
+        }
+        let state = m.replay(&g.states[r as usize].to_vec(), &steps).ok_or(())?;
+        if !l.is_active(&state, net) || super::analysis::end_for_net(p, l, &state, net) {
+            return Err(());
+        }
+        if g.states.find(&state).is_some_and(|k| can(net, k)) {
+            return Err(());
+        }
+        // The ends' component is where it is in `t`, the others where they are in `i`.
+        let stuck_here = (0..p.nets.len() as NetId)
+            .filter(|&k| {
+                let from = if comps.of_net[k as usize] == e { t } else { i };
+                l.is_active(&state, k) && !can(k, from)
+            })
+            .collect();
+        out.push(StuckBesideEnds {
+            net,
+            state,
+            steps,
+            stuck_here,
+        });
+    }
+    Ok(out)
 }
