@@ -1191,34 +1191,29 @@ impl<M: Message> Receiver<M> {
                     error,
                 }
             };
+            let received = |body: &[u8], missed| {
+                wire::decode::<M>(body)
+                    .map(|msg| {
+                        Some(Received {
+                            msg,
+                            origin,
+                            sender: header.sender,
+                            seq: header.seq,
+                            missed,
+                        })
+                    })
+                    .map_err(undecodable)
+            };
             if header.fragment == 0 {
                 self.drop_pieces(header.sender);
-                return match wire::decode::<M>(sample.payload()) {
-                    Ok(msg) => Ok(Some(Received {
-                        msg,
-                        origin,
-                        sender: header.sender,
-                        seq: header.seq,
-                        missed,
-                    })),
-                    Err(error) => Err(undecodable(error)),
-                };
+                return received(sample.payload(), missed);
             }
             let Some(joined) = self.join_piece(&header, missed, sample.payload()) else {
                 // More pieces to come (or a piece whose body this receiver cannot have).
                 continue;
             };
-            let (missed, body) = joined.map_err(undecodable)?;
-            return match wire::decode::<M>(&body) {
-                Ok(msg) => Ok(Some(Received {
-                    msg,
-                    origin,
-                    sender: header.sender,
-                    seq: header.seq,
-                    missed,
-                })),
-                Err(error) => Err(undecodable(error)),
-            };
+            let (missed, body) = joined.map_err(&undecodable)?;
+            return received(&body, missed);
         }
     }
 

@@ -12,15 +12,6 @@ use common::TestVehicle;
 use petrel_ipc::wire::encoded_len;
 use petrel_ipc::{EventMsg, Participant, Role, Value};
 
-fn resident_kib() -> u64 {
-    let status = std::fs::read_to_string("/proc/self/status").unwrap();
-    let line = status
-        .lines()
-        .find(|l| l.starts_with("VmRSS:"))
-        .expect("VmRSS in /proc/self/status");
-    line.split_whitespace().nth(1).unwrap().parse().unwrap()
-}
-
 #[test]
 fn sized_event_senders_carry_their_bound_send_longer_events_in_pieces_and_save_memory() {
     let vehicle = TestVehicle::new("auv");
@@ -96,13 +87,13 @@ fn sized_event_senders_carry_their_bound_send_longer_events_in_pieces_and_save_m
 
     // Memory: 8 sized senders, then 8 default ones, on the same service.
     const SENDERS: usize = 8;
-    let before = resident_kib();
+    let before = common::resident_kib();
     let sized: Vec<_> = (0..SENDERS)
         .map(|_| pln.event_sender_sized().unwrap())
         .collect();
-    let after_sized = resident_kib();
+    let after_sized = common::resident_kib();
     let default: Vec<_> = (0..SENDERS).map(|_| pln.event_sender().unwrap()).collect();
-    let after_default = resident_kib();
+    let after_default = common::resident_kib();
     assert!(sized.iter().all(|s| s.fixed_len() == Some(bound)));
     assert!(default.iter().all(|s| s.fixed_len().is_none()));
     let (sized_kib, default_kib) = (after_sized - before, after_default - after_sized);

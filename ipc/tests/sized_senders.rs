@@ -11,15 +11,6 @@ use petrel_ipc::port::CALLS;
 use petrel_ipc::wire::encoded_len;
 use petrel_ipc::{CallMsg, Participant, Role, SendError, Value, WireError};
 
-fn resident_kib() -> u64 {
-    let status = std::fs::read_to_string("/proc/self/status").unwrap();
-    let line = status
-        .lines()
-        .find(|l| l.starts_with("VmRSS:"))
-        .expect("VmRSS in /proc/self/status");
-    line.split_whitespace().nth(1).unwrap().parse().unwrap()
-}
-
 #[test]
 fn sized_call_senders_carry_their_bound_large_calls_grow_and_the_bound_saves_memory() {
     let vehicle = TestVehicle::new("auv");
@@ -70,7 +61,7 @@ fn sized_call_senders_carry_their_bound_large_calls_grow_and_the_bound_saves_mem
     // Memory: 16 programs with bounded senders, then 16 with unbounded ones, each into a
     // service of its own. An unbounded sender keeps about 2 KiB per sample (130 samples).
     const PROGRAMS: usize = 16;
-    let before = resident_kib();
+    let before = common::resident_kib();
     let bounded: Vec<_> = (0..PROGRAMS)
         .map(|i| {
             player
@@ -78,11 +69,11 @@ fn sized_call_senders_carry_their_bound_large_calls_grow_and_the_bound_saves_mem
                 .unwrap()
         })
         .collect();
-    let after_bounded = resident_kib();
+    let after_bounded = common::resident_kib();
     let unbounded: Vec<_> = (0..PROGRAMS)
         .map(|i| player.call_sender_sized(&format!("U{i}"), None).unwrap())
         .collect();
-    let after_unbounded = resident_kib();
+    let after_unbounded = common::resident_kib();
     let bounded_kib = after_bounded - before;
     let unbounded_kib = after_unbounded - after_bounded;
     eprintln!(

@@ -143,3 +143,14 @@ impl Drop for ChildProcess {
         }
     }
 }
+
+/// This process's resident memory, in KiB (`VmRSS` of /proc/self/status).
+#[allow(dead_code)] // Not every test binary that shares this module measures memory.
+pub fn resident_kib() -> u64 {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap();
+    let line = status
+        .lines()
+        .find(|l| l.starts_with("VmRSS:"))
+        .expect("VmRSS in /proc/self/status");
+    line.split_whitespace().nth(1).unwrap().parse().unwrap()
+}
