@@ -242,13 +242,20 @@ pub(super) struct Recorder {
     pub refused: Vec<(u32, u32)>,
     pub requests: Requests,
     /// States seen during the current fixpoint (with the number of immediate firings before
-    /// each), to find cycles of immediate transitions.
+    /// each), to find cycles of immediate transitions: the first few one after the other in
+    /// `fixpoint_seen` (a fixpoint fires a few immediate transitions, and a `Vec` per state
+    /// was an allocation per immediate firing), the others in `fixpoint_states`.
+    fixpoint_seen: Vec<u64>,
+    fixpoint_at: Vec<usize>,
     fixpoint_states: FxMap<State, usize>,
     fixpoint_rules: Vec<u32>,
     pub livelock: Option<Vec<u32>>,
     /// The timers the step started (with their duration) or cancelled, in order.
     pub timer_ops: TimerOps,
 }
+
+/// States of a fixpoint compared one by one before they go to a hash map.
+const FIXPOINT_LISTED: usize = 16;
 
 impl Effects for Recorder {
     fn fired(&mut self, rule: u32) {
@@ -271,7 +278,18 @@ impl Effects for Recorder {
         self.timer_ops.push((timer, None));
     }
     fn immediate_step(&mut self, state: &[u64]) -> bool {
-        if let Some(&at) = self.fixpoint_states.get(state) {
+        let w = state.len().max(1);
+        let seen = self
+            .fixpoint_seen
+            .chunks_exact(w)
+            .position(|x| x == state)
+            .map(|k| self.fixpoint_at[k])
+            .or_else(|| {
+                (!self.fixpoint_states.is_empty())
+                    .then(|| self.fixpoint_states.get(state).copied())
+                    .flatten()
+            });
+        if let Some(at) = seen {
             // The immediate firings since that state form the cycle.
             let mut cycle = self.fixpoint_rules[at..].to_vec();
             // Start the cycle at its first transition in dispatch order, so it reads the same
@@ -287,8 +305,13 @@ impl Effects for Recorder {
             self.livelock = Some(cycle);
             return false;
         }
-        self.fixpoint_states
-            .insert(state.to_vec(), self.fixpoint_rules.len());
+        if self.fixpoint_at.len() < FIXPOINT_LISTED {
+            self.fixpoint_seen.extend_from_slice(state);
+            self.fixpoint_at.push(self.fixpoint_rules.len());
+        } else {
+            self.fixpoint_states
+                .insert(state.to_vec(), self.fixpoint_rules.len());
+        }
         true
     }
     fn livelock(&mut self) {
@@ -322,7 +345,12 @@ impl Recorder {
         self.fired.clear();
         self.refused.clear();
         self.requests.clear();
-        self.fixpoint_states.clear();
+        self.fixpoint_seen.clear();
+        self.fixpoint_at.clear();
+        // Clearing a map that held states once writes its whole table again: only when needed.
+        if !self.fixpoint_states.is_empty() {
+            self.fixpoint_states.clear();
+        }
         self.fixpoint_rules.clear();
         self.livelock = None;
         self.timer_ops.clear();
@@ -344,12 +372,15 @@ pub(super) fn run_step(
     counter: Option<u32>,
 ) -> State {
     let mut t = State::new();
-    run_step_into(sem, env, rec, scratch, state, d, choices, counter, &mut t);
+    run_step_into(
+        sem, env, rec, scratch, state, d, choices, counter, None, &mut t,
+    );
     t
 }
 
 /// [`run_step`] into `t` (whatever it held), which keeps its allocation: the exploration runs
-/// one step per edge.
+/// one step per edge. `known`: the delivery's candidates in `state`, when the caller computed
+/// them and no guard could make them differ (none of them is guarded).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn run_step_into(
     sem: &Semantics,
@@ -360,6 +391,7 @@ pub(super) fn run_step_into(
     d: Option<&Delivery>,
     choices: &[bool],
     counter: Option<u32>,
+    known: Option<&[u32]>,
     t: &mut State,
 ) {
     rec.reset();
@@ -384,7 +416,12 @@ pub(super) fn run_step_into(
                 env.down(t, c);
             }
             rec.params.clone_from(&d.params);
-            sem.process_event(t, d.event, d.target, rec, scratch);
+            // The timer's and the counter's bits are not places: the candidates are the same
+            // in `t` as in `state`.
+            match known {
+                Some(candidates) => sem.process_candidates(t, d.event, candidates, rec, scratch),
+                None => sem.process_event(t, d.event, d.target, rec, scratch),
+            };
         }
     }
     env.apply(t, &rec.requests);
@@ -431,19 +468,22 @@ impl Successors {
 }
 
 /// A delivery the environment can make in a state: which one, the counters it may consume
-/// (`None`: a free event; a range of [`Moves::counters`]), and whether no transition takes it
-/// (a pending event, dropped).
+/// (`None`: a free event; a range of [`Moves::counters`]), whether no transition takes it
+/// (a pending event, dropped), and its candidates (a range of [`Moves::candidates`]) when no
+/// guard can change them, for the steps not to compute them again.
 struct Move {
     delivery: usize,
     counters: Range<usize>,
     dropped: bool,
+    candidates: Option<Range<usize>>,
 }
 
-/// The moves of a state, their counters in one vector.
+/// The moves of a state, their counters and candidates in one vector each.
 #[derive(Default)]
 struct Moves {
     list: Vec<Move>,
     counters: Vec<Option<u32>>,
+    candidates: Vec<u32>,
 }
 
 /// The graph a state's expansion works on: the exploration's, which it adds labels, fired sets
@@ -679,6 +719,7 @@ impl Ctx<'_> {
     fn moves(&mut self, at: &mut At, i: u32, s: &[u64], out: &mut Moves) {
         out.list.clear();
         out.counters.clear();
+        out.candidates.clear();
         for di in 0..self.deliveries.len() {
             let d = &self.deliveries[di];
             let gate = self.env.gate(s, d.event, d.target);
@@ -736,6 +777,7 @@ impl Ctx<'_> {
                         delivery: di,
                         counters: from..kept,
                         dropped: true,
+                        candidates: Some(0..0),
                     });
                 }
                 continue;
@@ -762,16 +804,25 @@ impl Ctx<'_> {
                     }
                 }
             }
+            let rules = &self.sem.layout.rules;
+            let candidates = if self.candidates.iter().all(|&r| !rules[r as usize].guarded) {
+                let at = out.candidates.len();
+                out.candidates.extend_from_slice(&self.candidates);
+                Some(at..out.candidates.len())
+            } else {
+                None
+            };
             out.list.push(Move {
                 delivery: di,
                 counters: from..out.counters.len(),
                 dropped: false,
+                candidates,
             });
         }
     }
 
-    /// Runs move `m` from state `i` (`s`): one step per counter (from `counters`) and per
-    /// outcome of the guards it cannot decide.
+    /// Runs move `m` of `moves` from state `i` (`s`): one step per counter and per outcome of
+    /// the guards it cannot decide.
     #[allow(clippy::too_many_arguments)]
     fn run(
         &mut self,
@@ -779,13 +830,14 @@ impl Ctx<'_> {
         i: u32,
         s: &[u64],
         m: &Move,
-        counters: &[Option<u32>],
+        moves: &Moves,
         out: &mut Successors,
     ) -> Result<(), VerifyError> {
         let di = m.delivery;
+        let known = m.candidates.clone().map(|r| &moves.candidates[r]);
         let mut t = std::mem::take(&mut self.next);
         let mut prefixes = std::mem::take(&mut self.prefixes);
-        for &counter in &counters[m.counters.clone()] {
+        for &counter in &moves.counters[m.counters.clone()] {
             if m.dropped {
                 let d = &self.deliveries[di];
                 run_step_into(
@@ -797,6 +849,7 @@ impl Ctx<'_> {
                     Some(d),
                     &[],
                     counter,
+                    known,
                     &mut t,
                 );
                 if let Some(tm) = &self.timing {
@@ -847,6 +900,7 @@ impl Ctx<'_> {
                     Some(d),
                     &prefix,
                     counter,
+                    known,
                     &mut t,
                 );
                 if let Some(tm) = &self.timing {
@@ -921,7 +975,7 @@ impl Ctx<'_> {
         if !self.sem.layout.is_over(&s) {
             self.moves(at, i, &s, &mut w.moves);
             for m in &w.moves.list {
-                self.run(at, i, &s, m, &w.moves.counters, &mut w.succ)
+                self.run(at, i, &s, m, &w.moves, &mut w.succ)
                     .expect(NOT_REPLAYED);
             }
         }
@@ -1236,14 +1290,7 @@ pub(super) fn explore<'a>(
                         .iter()
                         .filter(|m| delivery_component[m.delivery] == Some(c))
                     {
-                        ctx.run(
-                            &mut At::Explore(&mut g),
-                            i,
-                            &s,
-                            m,
-                            &moves.counters,
-                            &mut tried,
-                        )?;
+                        ctx.run(&mut At::Explore(&mut g), i, &s, m, &moves, &mut tried)?;
                     }
                     // The cycle proviso: every edge that does not go one level deeper ends
                     // in a state expanded in full (or that will be), so every loop of the
@@ -1273,14 +1320,7 @@ pub(super) fn explore<'a>(
         }
         if !reduced {
             for m in &moves.list {
-                ctx.run(
-                    &mut At::Explore(&mut g),
-                    i,
-                    &s,
-                    m,
-                    &moves.counters,
-                    &mut successors,
-                )?;
+                ctx.run(&mut At::Explore(&mut g), i, &s, m, &moves, &mut successors)?;
             }
         } else {
             g.reduced += 1;
