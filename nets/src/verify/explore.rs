@@ -192,13 +192,22 @@ impl Graph {
     }
 
     /// The shortest trace to state `s`.
-    pub fn trace(&self, mut s: u32) -> Trace {
-        let mut out = Vec::new();
-        while let Some((prev, l)) = self.parent(s) {
-            out.push(self.labels[l as usize].text.clone());
-            s = prev;
+    pub fn trace(&self, s: u32) -> Trace {
+        // Its length first, so that the trace is allocated once: Redermor reports thousands
+        // of dead markings, each with its trace (docs/benchmarks.md).
+        let mut len = 0;
+        let mut x = s;
+        while let Some((prev, _)) = self.parent(x) {
+            len += 1;
+            x = prev;
         }
-        out.reverse();
+        let mut out = vec![String::new(); len];
+        let mut x = s;
+        while let Some((prev, l)) = self.parent(x) {
+            len -= 1;
+            out[len].clone_from(&self.labels[l as usize].text);
+            x = prev;
+        }
         out
     }
 
