@@ -639,36 +639,18 @@ impl<'p> Semantics<'p> {
         fx: &mut impl Effects,
         scratch: &mut Scratch,
     ) -> StepOutcome {
-        if self.layout.is_over(s) {
-            return StepOutcome::RefusedAfterCatastrophic;
-        }
-        let mut candidates = std::mem::take(&mut scratch.candidates);
-        self.candidates(s, event, target, fx, &mut candidates);
-        let outcome = self.process_candidates(s, event, &candidates, fx, scratch);
-        scratch.candidates = candidates;
-        outcome
-    }
-
-    /// [`Semantics::process_event`] from its candidates in `s`, computed by
-    /// [`Semantics::candidates`] with the guard outcomes the step would have: the verifier
-    /// computes them to list a state's moves, and steps with them rather than compute them
-    /// again (the same firing code, from the same list).
-    pub fn process_candidates(
-        &self,
-        s: &mut [u64],
-        event: EventId,
-        candidates: &[u32],
-        fx: &mut impl Effects,
-        scratch: &mut Scratch,
-    ) -> StepOutcome {
         let l = &self.layout;
         if l.is_over(s) {
             return StepOutcome::RefusedAfterCatastrophic;
         }
-        let outcome = if candidates.is_empty() {
+        let mut candidates = std::mem::take(&mut scratch.candidates);
+        self.candidates(s, event, target, fx, &mut candidates);
+        scratch.candidates = candidates;
+        let outcome = if scratch.candidates.is_empty() {
             StepOutcome::Unused
         } else {
-            for &r in candidates {
+            for i in 0..scratch.candidates.len() {
+                let r = scratch.candidates[i];
                 if !l.enabled(s, r) {
                     fx.conflict(r);
                     continue;

@@ -381,15 +381,12 @@ pub(super) fn run_step(
     counter: Option<u32>,
 ) -> State {
     let mut t = State::new();
-    run_step_into(
-        sem, env, rec, scratch, state, d, choices, counter, None, &mut t,
-    );
+    run_step_into(sem, env, rec, scratch, state, d, choices, counter, &mut t);
     t
 }
 
 /// [`run_step`] into `t` (whatever it held), which keeps its allocation: the exploration runs
-/// one step per edge. `known`: the delivery's candidates in `state`, when the caller computed
-/// them and no guard could make them differ (none of them is guarded).
+/// one step per edge.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn run_step_into(
     sem: &Semantics,
@@ -400,7 +397,6 @@ pub(super) fn run_step_into(
     d: Option<&Delivery>,
     choices: &[bool],
     counter: Option<u32>,
-    known: Option<&[u32]>,
     t: &mut State,
 ) {
     rec.reset();
@@ -425,12 +421,7 @@ pub(super) fn run_step_into(
                 env.down(t, c);
             }
             rec.params.clone_from(&d.params);
-            // The timer's and the counter's bits are not places: the candidates are the same
-            // in `t` as in `state`.
-            match known {
-                Some(candidates) => sem.process_candidates(t, d.event, candidates, rec, scratch),
-                None => sem.process_event(t, d.event, d.target, rec, scratch),
-            };
+            sem.process_event(t, d.event, d.target, rec, scratch);
         }
     }
     env.apply(t, &rec.requests);
@@ -477,22 +468,21 @@ impl Successors {
 }
 
 /// A delivery the environment can make in a state: which one, the counters it may consume
-/// (`None`: a free event; a range of [`Moves::counters`]), whether no transition takes it
-/// (a pending event, dropped), and its candidates (a range of [`Moves::candidates`]) when no
-/// guard can change them, for the steps not to compute them again.
+/// (`None`: a free event; a range of [`Moves::counters`]), and whether no transition takes it
+/// (a pending event, dropped).
 struct Move {
     delivery: usize,
     counters: Range<usize>,
     dropped: bool,
-    candidates: Option<Range<usize>>,
 }
 
-/// The moves of a state, their counters and candidates in one vector each.
+/// The moves of a state, their counters in one vector. (The candidates of each delivery,
+/// computed here to list the moves, are computed again by its step: keeping them for the step
+/// made the exploration slower, docs/benchmarks.md.)
 #[derive(Default)]
 struct Moves {
     list: Vec<Move>,
     counters: Vec<Option<u32>>,
-    candidates: Vec<u32>,
 }
 
 /// The graph a state's expansion works on: the exploration's, which it adds labels, fired sets
@@ -728,7 +718,6 @@ impl Ctx<'_> {
     fn moves(&mut self, at: &mut At, i: u32, s: &[u64], out: &mut Moves) {
         out.list.clear();
         out.counters.clear();
-        out.candidates.clear();
         for di in 0..self.deliveries.len() {
             let d = &self.deliveries[di];
             let gate = self.env.gate(s, d.event, d.target);
@@ -786,7 +775,6 @@ impl Ctx<'_> {
                         delivery: di,
                         counters: from..kept,
                         dropped: true,
-                        candidates: Some(0..0),
                     });
                 }
                 continue;
@@ -813,25 +801,16 @@ impl Ctx<'_> {
                     }
                 }
             }
-            let rules = &self.sem.layout.rules;
-            let candidates = if self.candidates.iter().all(|&r| !rules[r as usize].guarded) {
-                let at = out.candidates.len();
-                out.candidates.extend_from_slice(&self.candidates);
-                Some(at..out.candidates.len())
-            } else {
-                None
-            };
             out.list.push(Move {
                 delivery: di,
                 counters: from..out.counters.len(),
                 dropped: false,
-                candidates,
             });
         }
     }
 
-    /// Runs move `m` of `moves` from state `i` (`s`): one step per counter and per outcome of
-    /// the guards it cannot decide.
+    /// Runs move `m` from state `i` (`s`): one step per counter (from `counters`) and per
+    /// outcome of the guards it cannot decide.
     #[allow(clippy::too_many_arguments)]
     fn run(
         &mut self,
@@ -839,14 +818,13 @@ impl Ctx<'_> {
         i: u32,
         s: &[u64],
         m: &Move,
-        moves: &Moves,
+        counters: &[Option<u32>],
         out: &mut Successors,
     ) -> Result<(), VerifyError> {
         let di = m.delivery;
-        let known = m.candidates.clone().map(|r| &moves.candidates[r]);
         let mut t = std::mem::take(&mut self.next);
         let mut prefixes = std::mem::take(&mut self.prefixes);
-        for &counter in &moves.counters[m.counters.clone()] {
+        for &counter in &counters[m.counters.clone()] {
             if m.dropped {
                 let d = &self.deliveries[di];
                 run_step_into(
@@ -858,7 +836,6 @@ impl Ctx<'_> {
                     Some(d),
                     &[],
                     counter,
-                    known,
                     &mut t,
                 );
                 if let Some(tm) = &self.timing {
@@ -909,7 +886,6 @@ impl Ctx<'_> {
                     Some(d),
                     &prefix,
                     counter,
-                    known,
                     &mut t,
                 );
                 if let Some(tm) = &self.timing {
@@ -984,7 +960,7 @@ impl Ctx<'_> {
         if !self.sem.layout.is_over(&s) {
             self.moves(at, i, &s, &mut w.moves);
             for m in &w.moves.list {
-                self.run(at, i, &s, m, &w.moves, &mut w.succ)
+                self.run(at, i, &s, m, &w.moves.counters, &mut w.succ)
                     .expect(NOT_REPLAYED);
             }
         }
@@ -1299,7 +1275,14 @@ pub(super) fn explore<'a>(
                         .iter()
                         .filter(|m| delivery_component[m.delivery] == Some(c))
                     {
-                        ctx.run(&mut At::Explore(&mut g), i, &s, m, &moves, &mut tried)?;
+                        ctx.run(
+                            &mut At::Explore(&mut g),
+                            i,
+                            &s,
+                            m,
+                            &moves.counters,
+                            &mut tried,
+                        )?;
                     }
                     // The cycle proviso: every edge that does not go one level deeper ends
                     // in a state expanded in full (or that will be), so every loop of the
@@ -1329,7 +1312,14 @@ pub(super) fn explore<'a>(
         }
         if !reduced {
             for m in &moves.list {
-                ctx.run(&mut At::Explore(&mut g), i, &s, m, &moves, &mut successors)?;
+                ctx.run(
+                    &mut At::Explore(&mut g),
+                    i,
+                    &s,
+                    m,
+                    &moves.counters,
+                    &mut successors,
+                )?;
             }
         } else {
             g.reduced += 1;
