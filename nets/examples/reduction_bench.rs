@@ -13,9 +13,10 @@
 //!   the same full explorations in the same run, before and after side by side.
 //! - `reduction_bench --one (DIR | toggles:N) (reduced | full) [auto | keep | replay]`: one
 //!   verification (the edges kept or recomputed as the last word says, `auto` by default:
-//!   `VerifyOptions::edges`); prints `states edges seconds peak_kb errors warnings graph_bytes`
-//!   on one line (`graph_bytes`: what the explored graph's states, parent pointers and edges
-//!   hold).
+//!   `VerifyOptions::edges`); prints `states edges seconds peak_kb errors warnings graph_bytes
+//!   explore_seconds` on one line (`graph_bytes`: what the explored graph's states, parent
+//!   pointers and edges hold; `explore_seconds`: the part of `seconds` until the exploration
+//!   ended, before the analyses and the findings' traces).
 
 use petrel_nets::project::{from_sources, load_and_check};
 use petrel_nets::verify::{verify, EdgeMemory, VerifyOptions};
@@ -76,19 +77,20 @@ fn one(what: &str, reduced: bool, edges: EdgeMemory) -> Result<String, String> {
     .map_err(|e| e.to_string())?;
     let secs = started.elapsed().as_secs_f64();
     Ok(format!(
-        "{} {} {secs:.4} {} {} {} {}",
+        "{} {} {secs:.4} {} {} {} {} {:.4}",
         r.states,
         r.edges,
         peak_kb(),
         r.errors(),
         r.warnings(),
-        r.graph_bytes
+        r.graph_bytes,
+        r.explore_seconds
     ))
 }
 
 /// One verification in a child process (`exe`): states, edges, seconds, peak kB, errors,
-/// warnings, graph bytes (0 from a build that does not count them).
-fn child(exe: &Path, what: &str, reduced: bool) -> Result<[f64; 7], String> {
+/// warnings, graph bytes, seconds of exploration (0 from a build that does not count them).
+fn child(exe: &Path, what: &str, reduced: bool) -> Result<[f64; 8], String> {
     let o = Command::new(exe)
         .args(["--one", what, if reduced { "reduced" } else { "full" }])
         .output()
@@ -97,8 +99,8 @@ fn child(exe: &Path, what: &str, reduced: bool) -> Result<[f64; 7], String> {
         return Err(String::from_utf8_lossy(&o.stderr).into_owned());
     }
     let text = String::from_utf8_lossy(&o.stdout);
-    let mut out = [0.0; 7];
-    for (k, f) in text.split_whitespace().take(7).enumerate() {
+    let mut out = [0.0; 8];
+    for (k, f) in text.split_whitespace().take(8).enumerate() {
         out[k] = f.parse().unwrap_or(0.0);
     }
     Ok(out)
@@ -156,7 +158,7 @@ fn main() -> ExitCode {
         }
     };
     // The full explorations, for the per-state costs: (label, what, result).
-    let mut fulls: Vec<(String, String, [f64; 7])> = Vec::new();
+    let mut fulls: Vec<(String, String, [f64; 8])> = Vec::new();
     println!("| project | states full | states reduced | s full | s reduced | time ratio | MB full | MB reduced | memory ratio | same errors, warnings |");
     println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---|");
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../missions");
@@ -229,9 +231,9 @@ fn main() -> ExitCode {
 /// What the full exploration costs per state: microseconds, bytes of peak memory above the
 /// smallest project's (the process's own), and the graph's counted bytes; with a baseline
 /// build, its figures for the same projects, run now.
-fn per_state(fulls: &[(String, String, [f64; 7])], baseline: Option<&Path>) -> ExitCode {
-    let floor = |runs: &[[f64; 7]]| runs.iter().map(|r| r[3]).fold(f64::INFINITY, f64::min);
-    let mut before: Vec<[f64; 7]> = Vec::new();
+fn per_state(fulls: &[(String, String, [f64; 8])], baseline: Option<&Path>) -> ExitCode {
+    let floor = |runs: &[[f64; 8]]| runs.iter().map(|r| r[3]).fold(f64::INFINITY, f64::min);
+    let mut before: Vec<[f64; 8]> = Vec::new();
     if let Some(exe) = baseline {
         for (_, what, _) in fulls {
             match child(exe, what, false) {
@@ -243,39 +245,42 @@ fn per_state(fulls: &[(String, String, [f64; 7])], baseline: Option<&Path>) -> E
             }
         }
     }
-    let after: Vec<[f64; 7]> = fulls.iter().map(|f| f.2).collect();
+    let after: Vec<[f64; 8]> = fulls.iter().map(|f| f.2).collect();
     let (floor_after, floor_before) = (floor(&after), floor(&before));
-    let us = |r: &[f64; 7]| r[2] * 1e6 / r[0].max(1.0);
-    let bytes = |r: &[f64; 7], floor: f64| (r[3] - floor).max(0.0) * 1024.0 / r[0].max(1.0);
+    let us = |r: &[f64; 8]| r[2] * 1e6 / r[0].max(1.0);
+    let explore_us = |r: &[f64; 8]| r[7] * 1e6 / r[0].max(1.0);
+    let bytes = |r: &[f64; 8], floor: f64| (r[3] - floor).max(0.0) * 1024.0 / r[0].max(1.0);
     println!();
     println!(
         "Full exploration per state (peak memory above {floor_after:.0} kB, the smallest run's)"
     );
     println!();
     if before.is_empty() {
-        println!("| project | states | edges | us/state | bytes/state | graph bytes/state |");
-        println!("|---|---:|---:|---:|---:|---:|");
+        println!("| project | states | edges | us/state | exploration us/state | bytes/state | graph bytes/state |");
+        println!("|---|---:|---:|---:|---:|---:|---:|");
     } else {
-        println!("| project | states | edges | us/state before | us/state after | time ratio | bytes/state before | bytes/state after | memory ratio | graph bytes/state after | same errors, warnings |");
-        println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|");
+        println!("| project | states | edges | us/state before | us/state after | time ratio | exploration us/state after | bytes/state before | bytes/state after | memory ratio | graph bytes/state after | same errors, warnings |");
+        println!("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|");
     }
     for (k, (label, _, a)) in fulls.iter().enumerate() {
         let graph = a[6] / a[0].max(1.0);
         match before.get(k) {
             None => println!(
-                "| {label} | {} | {} | {:.2} | {:.0} | {graph:.0} |",
+                "| {label} | {} | {} | {:.2} | {:.2} | {:.0} | {graph:.0} |",
                 a[0],
                 a[1],
                 us(a),
+                explore_us(a),
                 bytes(a, floor_after)
             ),
             Some(b) => println!(
-                "| {label} | {} | {} | {:.2} | {:.2} | {:.2} | {:.0} | {:.0} | {:.2} | {graph:.0} | {} |",
+                "| {label} | {} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.0} | {:.0} | {:.2} | {graph:.0} | {} |",
                 a[0],
                 a[1],
                 us(b),
                 us(a),
                 us(a) / us(b).max(1e-9),
+                explore_us(a),
                 bytes(b, floor_before),
                 bytes(a, floor_after),
                 bytes(a, floor_after) / bytes(b, floor_before).max(1e-9),

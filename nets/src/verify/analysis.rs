@@ -8,6 +8,7 @@
 //! component numbered no higher, with no reversed copy of the edges.
 
 use super::explore::{Edge, Edges, Graph, NO_EVENT};
+use super::store::{width_of, Packed};
 use super::{
     DeadFinding, InvariantFinding, LoopFinding, ProgressFinding, StarvationFinding, StuckFinding,
     Trace,
@@ -113,24 +114,36 @@ pub(super) struct Scc {
 impl Scc {
     /// The components of `g`'s edges whose step kind `keep` keeps (every edge with `None`).
     ///
-    /// Each state's edges are fetched (recomputed, when the graph does not keep them) when the
-    /// search enters it, and its targets not visited yet are kept for the search to come back
-    /// to, in one vector for the whole depth-first path, while they fit in a budget of half an
-    /// edge (4 bytes) per state; beyond it, a state's edges are fetched again each time the search comes
-    /// back to it after a child.
+    /// Each state's edges are fetched (recomputed, when the graph does not keep them) once,
+    /// when the search enters it: its targets not visited yet are kept for the search to come
+    /// back to, in one stack of packed numbers for the whole depth-first path (a target and a
+    /// step kind in 4 bytes at a million states), while they fit in a budget
+    /// ([`Scc::budget`]); beyond it, a state's edges are fetched again each time the search
+    /// comes back to it after a child.
     pub fn new(g: &Graph, edges: &Edges, keep: Option<&[bool]>) -> Scc {
         Scc::search(g, edges, keep, None, Scc::budget(g))
     }
 
-    /// Unvisited targets the search keeps at most: half an edge per state.
+    /// Unvisited targets the search keeps at most. Edges replayed: half the edges, which a
+    /// graph whose every edge has its reverse never exceeds (of `v -> w` and `w -> v`, only
+    /// the one out of the state entered first can find its target unvisited), so that each
+    /// state is expanded once; a replay costs much more than the 2 to 4 bytes per edge
+    /// (docs/benchmarks.md). Edges kept: one per state, as fetching them again is only
+    /// reading them.
     fn budget(g: &Graph) -> usize {
-        (g.states.len() / 2).max(1 << 16)
+        if g.edges_kept() {
+            g.states.len().max(1 << 16)
+        } else {
+            (g.edge_count() / 2).max(1 << 16)
+        }
     }
 
     /// The components of the whole graph, and what [`Walk`] answers, in the same search: each
-    /// edge is looked at when its source is entered or left, when its target is either done
-    /// (in a component numbered lower) or live (in the source's component), so the walk needs
-    /// no pass of its own over the edges.
+    /// edge is looked at once its target is visited (when its source is entered, when the
+    /// search comes back to its source from that target, or when it takes the edge up again
+    /// after another child), when the target is either done (in a component numbered lower)
+    /// or live (in the source's component) for good, so the walk needs no pass of its own
+    /// over the edges.
     pub fn with_walk(g: &Graph, edges: &Edges, mut want: Folded) -> (Scc, Walk) {
         let scc = Scc::search(g, edges, None, Some(&mut want), Scc::budget(g));
         (scc, want.finish())
@@ -157,14 +170,28 @@ impl Scc {
         let mut rindex = vec![0u32; n];
         let mut stack: Vec<u32> = Vec::new();
         // The depth-first path: each state and how many of its targets were looked at, with
-        // ROOT while no edge led lower.
+        // ROOT while no edge led lower, and CHILD while the last target looked at is a child
+        // the search is in (or comes back from): the walk looks at that edge when it is back.
         const ROOT: u32 = 1 << 31;
+        const CHILD: u32 = 1 << 30;
+        const COUNT: u32 = CHILD - 1;
         let mut call: Vec<(u32, u32)> = Vec::new();
         // Per state on the path, where its unvisited targets start in `pending` (the top
-        // state's run to the end), or NOT_KEPT.
+        // state's run to the end), or NOT_KEPT: its edges are fetched again when the search
+        // comes back to it.
         const NOT_KEPT: u32 = u32::MAX;
         let mut starts: Vec<u32> = Vec::new();
-        let mut pending: Vec<Edge> = Vec::new();
+        // Each kept edge one number, its target in the low `shift` bits and its step kind
+        // above, in as few bytes as they need (4 at a million states and 40 step kinds).
+        let shift = 32 - top.max(1).leading_zeros();
+        let mask = (1u64 << shift) - 1;
+        let kinds = g.steps().len().max(1) as u64 - 1;
+        let mut pending = Packed::with_width(width_of(kinds << shift | mask));
+        let encode = |e: &Edge| u64::from(e.to) | u64::from(e.kind) << shift;
+        let decode = |v: u64| Edge {
+            to: (v & mask) as u32,
+            kind: (v >> shift) as u32,
+        };
         let mut order: Vec<u32> = Vec::with_capacity(n);
         let mut start: Vec<u32> = vec![0];
         let mut index = 1u32;
@@ -187,10 +214,14 @@ impl Scc {
                     // The targets already visited are looked at now (an edge's order does not
                     // matter to the algorithm), the others kept within the budget.
                     let from = pending.len();
+                    let mut fits = true;
                     for e in buf.iter().filter(|e| kept(e)) {
                         let x = rindex[e.to as usize];
                         if x == 0 {
-                            pending.push(*e);
+                            if fits {
+                                pending.push(encode(e));
+                                fits = pending.len() <= budget;
+                            }
                         } else if x < rindex[w as usize] {
                             rindex[w as usize] = x;
                             flags = 0;
@@ -199,16 +230,20 @@ impl Scc {
                     if let Some(f) = walk.as_deref_mut() {
                         // A state that may be a component's root gathers for it; the others
                         // for the nearest one below them on the path, in their component.
+                        // A visited target is done (in a component numbered lower) or live
+                        // (in this state's component) for good.
                         if flags == ROOT {
                             f.open();
                         }
                         f.state(w);
                         for e in &buf {
                             let x = rindex[e.to as usize];
-                            f.edge(w, e, (x != 0).then(|| f.done(e.to).then(|| top - x)));
+                            if x != 0 {
+                                f.edge(w, e, Some(f.done(e.to).then(|| top - x)));
+                            }
                         }
                     }
-                    if pending.len() <= budget {
+                    if fits {
                         starts.push(from as u32);
                     } else {
                         pending.truncate(from);
@@ -220,32 +255,54 @@ impl Scc {
                     break;
                 };
                 let from = starts[starts.len() - 1];
-                let next = if from != NOT_KEPT {
-                    let k = from as usize + (*off & !ROOT) as usize;
-                    (k < pending.len()).then(|| {
-                        *off += 1;
-                        pending[k].to
-                    })
-                } else {
-                    if buf_of != v {
-                        edges.of(v, &mut buf);
-                        buf_of = v;
+                if *off & CHILD != 0 {
+                    // Back from a child: its component is done, or it is live and in this
+                    // state's, for good; the walk looks at the edge to it now.
+                    *off &= !CHILD;
+                    if let Some(f) = walk.as_deref_mut() {
+                        let k = (*off & COUNT) as usize - 1;
+                        let e = if from != NOT_KEPT {
+                            decode(pending.get(from as usize + k))
+                        } else {
+                            if buf_of != v {
+                                edges.of(v, &mut buf);
+                                buf_of = v;
+                            }
+                            buf[k]
+                        };
+                        let x = rindex[e.to as usize];
+                        f.edge(v, &e, Some(f.done(e.to).then(|| top - x)));
                     }
-                    let mut found = None;
-                    while let Some(e) = buf.get((*off & !ROOT) as usize) {
-                        *off += 1;
-                        if kept(e) {
-                            found = Some(e.to);
-                            break;
+                }
+                // The next target not visited yet; the others, visited since `v` was entered
+                // (by its descendants), are looked at on the way.
+                let next = loop {
+                    let e = if from != NOT_KEPT {
+                        let k = from as usize + (*off & COUNT) as usize;
+                        if k >= pending.len() {
+                            break None;
                         }
+                        decode(pending.get(k))
+                    } else {
+                        if buf_of != v {
+                            edges.of(v, &mut buf);
+                            buf_of = v;
+                        }
+                        match buf.get((*off & COUNT) as usize) {
+                            Some(e) => *e,
+                            None => break None,
+                        }
+                    };
+                    *off += 1;
+                    if !kept(&e) {
+                        continue;
                     }
-                    found
-                };
-                if let Some(w) = next {
-                    if rindex[w as usize] == 0 {
-                        entering = Some(w);
-                    } else if rindex[w as usize] < rindex[v as usize] {
-                        rindex[v as usize] = rindex[w as usize];
+                    let x = rindex[e.to as usize];
+                    if x == 0 {
+                        break Some(e.to);
+                    }
+                    if x < rindex[v as usize] {
+                        rindex[v as usize] = x;
                         if *off & ROOT != 0 {
                             *off &= !ROOT;
                             if let Some(f) = walk.as_deref_mut() {
@@ -253,24 +310,16 @@ impl Scc {
                             }
                         }
                     }
+                    if let Some(f) = walk.as_deref_mut() {
+                        f.edge(v, &e, Some(f.done(e.to).then(|| top - x)));
+                    }
+                };
+                if let Some(w) = next {
+                    *off |= CHILD;
+                    entering = Some(w);
                     continue;
                 }
                 let root = *off & ROOT != 0;
-                if let Some(f) = walk.as_deref_mut() {
-                    // Every target is visited now: the edges not looked at when `v` was
-                    // entered (those to targets then unvisited; all of them again when they
-                    // were not kept, which changes nothing).
-                    let rest = if from != NOT_KEPT {
-                        &pending[from as usize..]
-                    } else {
-                        debug_assert_eq!(buf_of, v);
-                        &buf[..]
-                    };
-                    for e in rest {
-                        let x = rindex[e.to as usize];
-                        f.edge(v, e, Some(f.done(e.to).then(|| top - x)));
-                    }
-                }
                 call.pop();
                 if from != NOT_KEPT {
                     pending.truncate(from as usize);

@@ -192,13 +192,22 @@ impl Graph {
     }
 
     /// The shortest trace to state `s`.
-    pub fn trace(&self, mut s: u32) -> Trace {
-        let mut out = Vec::new();
-        while let Some((prev, l)) = self.parent(s) {
-            out.push(self.labels[l as usize].text.clone());
-            s = prev;
+    pub fn trace(&self, s: u32) -> Trace {
+        // Its length first, so that the trace is allocated once: Redermor reports thousands
+        // of dead markings, each with its trace (docs/benchmarks.md).
+        let mut len = 0;
+        let mut x = s;
+        while let Some((prev, _)) = self.parent(x) {
+            len += 1;
+            x = prev;
         }
-        out.reverse();
+        let mut out = vec![String::new(); len];
+        let mut x = s;
+        while let Some((prev, l)) = self.parent(x) {
+            len -= 1;
+            out[len].clone_from(&self.labels[l as usize].text);
+            x = prev;
+        }
         out
     }
 
@@ -242,13 +251,20 @@ pub(super) struct Recorder {
     pub refused: Vec<(u32, u32)>,
     pub requests: Requests,
     /// States seen during the current fixpoint (with the number of immediate firings before
-    /// each), to find cycles of immediate transitions.
+    /// each), to find cycles of immediate transitions: the first few one after the other in
+    /// `fixpoint_seen` (a fixpoint fires a few immediate transitions, and a `Vec` per state
+    /// was an allocation per immediate firing), the others in `fixpoint_states`.
+    fixpoint_seen: Vec<u64>,
+    fixpoint_at: Vec<usize>,
     fixpoint_states: FxMap<State, usize>,
     fixpoint_rules: Vec<u32>,
     pub livelock: Option<Vec<u32>>,
     /// The timers the step started (with their duration) or cancelled, in order.
     pub timer_ops: TimerOps,
 }
+
+/// States of a fixpoint compared one by one before they go to a hash map.
+const FIXPOINT_LISTED: usize = 16;
 
 impl Effects for Recorder {
     fn fired(&mut self, rule: u32) {
@@ -271,7 +287,18 @@ impl Effects for Recorder {
         self.timer_ops.push((timer, None));
     }
     fn immediate_step(&mut self, state: &[u64]) -> bool {
-        if let Some(&at) = self.fixpoint_states.get(state) {
+        let w = state.len().max(1);
+        let seen = self
+            .fixpoint_seen
+            .chunks_exact(w)
+            .position(|x| x == state)
+            .map(|k| self.fixpoint_at[k])
+            .or_else(|| {
+                (!self.fixpoint_states.is_empty())
+                    .then(|| self.fixpoint_states.get(state).copied())
+                    .flatten()
+            });
+        if let Some(at) = seen {
             // The immediate firings since that state form the cycle.
             let mut cycle = self.fixpoint_rules[at..].to_vec();
             // Start the cycle at its first transition in dispatch order, so it reads the same
@@ -287,8 +314,13 @@ impl Effects for Recorder {
             self.livelock = Some(cycle);
             return false;
         }
-        self.fixpoint_states
-            .insert(state.to_vec(), self.fixpoint_rules.len());
+        if self.fixpoint_at.len() < FIXPOINT_LISTED {
+            self.fixpoint_seen.extend_from_slice(state);
+            self.fixpoint_at.push(self.fixpoint_rules.len());
+        } else {
+            self.fixpoint_states
+                .insert(state.to_vec(), self.fixpoint_rules.len());
+        }
         true
     }
     fn livelock(&mut self) {
@@ -322,7 +354,12 @@ impl Recorder {
         self.fired.clear();
         self.refused.clear();
         self.requests.clear();
-        self.fixpoint_states.clear();
+        self.fixpoint_seen.clear();
+        self.fixpoint_at.clear();
+        // Clearing a map that held states once writes its whole table again: only when needed.
+        if !self.fixpoint_states.is_empty() {
+            self.fixpoint_states.clear();
+        }
         self.fixpoint_rules.clear();
         self.livelock = None;
         self.timer_ops.clear();
@@ -439,7 +476,9 @@ struct Move {
     dropped: bool,
 }
 
-/// The moves of a state, their counters in one vector.
+/// The moves of a state, their counters in one vector. (The candidates of each delivery,
+/// computed here to list the moves, are computed again by its step: keeping them for the step
+/// made the exploration slower, docs/benchmarks.md.)
 #[derive(Default)]
 struct Moves {
     list: Vec<Move>,

@@ -356,6 +356,10 @@ pub struct Report {
     pub bounds: Vec<BoundFinding>,
     /// Seconds spent.
     pub seconds: f64,
+    /// Of those, the seconds until the exploration ended (the graph built, before the
+    /// analyses and the findings' traces), for the benchmarks (docs/benchmarks.md).
+    #[serde(skip)]
+    pub explore_seconds: f64,
     /// Bytes the explored graph holds (its states, parent pointers, and edges when it keeps
     /// them), for the benchmarks (docs/benchmarks.md).
     #[serde(skip)]
@@ -487,6 +491,7 @@ fn verify_inner(
     };
     let env = env::Env::new(p, l.words);
     let (mut g, replay) = explore::explore(p, &sem, &env, &free, &mut opts, started, start)?;
+    let explore_seconds = started.elapsed().as_secs_f64();
     g.alone = alone.is_some();
     let g = g;
     // The edges, kept or recomputed when an analysis walks them.
@@ -504,6 +509,7 @@ fn verify_inner(
         states: g.states.len() as u64,
         edges: g.edge_count() as u64,
         graph_bytes: g.heap_bytes() as u64,
+        explore_seconds,
         max_tokens_per_marking: g.max_tokens_per_marking,
         max_tokens_in_place: u64::from(g.max_tokens_per_marking > 0),
         safe: g.unsafe_places.is_empty(),

@@ -158,7 +158,8 @@ pub(super) struct Packed {
 
 const PAD: [u8; 8] = [0; 8];
 
-fn width_of(v: u64) -> usize {
+/// The fewest whole bytes that hold `v`.
+pub(super) fn width_of(v: u64) -> usize {
     (8 - v.leading_zeros() as usize / 8).max(1)
 }
 
@@ -172,9 +173,28 @@ impl Packed {
         }
     }
 
+    /// An empty list of numbers below 2^(8 * `width`) (a wider one widens it): a stack that
+    /// is pushed and truncated often starts at its final width.
+    pub fn with_width(width: usize) -> Packed {
+        Packed {
+            width: width.clamp(1, 8),
+            len: 0,
+            bytes: PAD.to_vec(),
+        }
+    }
+
     /// How many numbers.
     pub fn len(&self) -> usize {
         self.len
+    }
+
+    /// Keeps the first `len` numbers (all of them when there are fewer).
+    pub fn truncate(&mut self, len: usize) {
+        if len < self.len {
+            self.bytes.truncate(len * self.width);
+            self.bytes.extend_from_slice(&PAD);
+            self.len = len;
+        }
     }
 
     /// Adds `v` at the end.
@@ -299,5 +319,17 @@ mod tests {
                 assert_eq!(p.get(j), w);
             }
         }
+        // A stack at a fixed width: truncated, pushed again, read back.
+        let mut q = Packed::with_width(3);
+        for v in 0..100u64 {
+            q.push(v * 1000);
+        }
+        q.truncate(40);
+        assert_eq!(q.len(), 40);
+        q.truncate(50);
+        assert_eq!(q.len(), 40);
+        q.push(7);
+        assert_eq!((q.get(39), q.get(40)), (39_000, 7));
+        assert_eq!(q.heap_bytes(), 41 * 3 + 8);
     }
 }
