@@ -1151,7 +1151,7 @@ pub fn read_journal(path: &Path) -> Result<JournalRead, JournalError> {
             if last_file && all_zero(&bytes[pos..]) {
                 // A power loss after the file grew but before its data reached the disk.
                 read.torn = Some(damage(format!(
-                    "{rest} zero bytes at the end of the segment (space reserved by a player that did not stop in good order, or a power loss before the data reached the disk)"
+                    "{rest} zero bytes at the end of the segment (space a player reserved and had not written: it still runs, or did not stop in good order; or a power loss before the data reached the disk)"
                 )));
                 return Ok(read);
             }
