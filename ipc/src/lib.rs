@@ -28,6 +28,8 @@
 //! - [`doorbell`] lets a sender wake a receiver asleep on a futex word, and skip waking one
 //!   that is awake; iceoryx2's notifications remain for receivers asleep on epoll.
 //! - [`liveness`] tells nodes alive and dead, cleanup of dead ones, program status.
+//! - [`mapped`] maps a window of a file for appending without a system call per record (the
+//!   player's flight recorder).
 //! - [`access`] puts a vehicle's files where only its user (and an optional group) can reach
 //!   them, and removes them when its last process leaves.
 //!
@@ -62,6 +64,7 @@ pub mod access;
 pub mod doorbell;
 mod epoll;
 pub mod liveness;
+pub mod mapped;
 pub mod naming;
 mod participant;
 pub mod port;

@@ -391,6 +391,18 @@ impl<'p> Engine<'p> {
 
     /// Queues an event after checking its parameters against the declaration.
     pub fn submit(&mut self, event: EventId, params: Vec<Value>) -> Result<(), Refusal> {
+        self.submit_with(event, params, |_| {})
+    }
+
+    /// [`submit`](Self::submit), calling `accepted` with the parameters once they are checked
+    /// and before the event is queued (the player journals the event there, from the
+    /// parameters the engine keeps, without a copy). Not called for a refused event.
+    pub fn submit_with(
+        &mut self,
+        event: EventId,
+        params: Vec<Value>,
+        accepted: impl FnOnce(&[Value]),
+    ) -> Result<(), Refusal> {
         let p = self.sem.project;
         let Some(decl) = p.events.get(event as usize) else {
             self.stats.refused += 1;
@@ -424,6 +436,7 @@ impl<'p> Engine<'p> {
                 return Err(r);
             }
         }
+        accepted(&params);
         self.stats.received += 1;
         self.queues[category_index(decl.category)].push_back(Queued {
             event,
@@ -465,8 +478,19 @@ impl<'p> Engine<'p> {
 
     /// Queues an event by name.
     pub fn submit_named(&mut self, name: &str, params: Vec<Value>) -> Result<(), Refusal> {
+        self.submit_named_with(name, params, |_| {})
+    }
+
+    /// [`submit_named`](Self::submit_named) with [`submit_with`](Self::submit_with)'s
+    /// `accepted`.
+    pub fn submit_named_with(
+        &mut self,
+        name: &str,
+        params: Vec<Value>,
+        accepted: impl FnOnce(&[Value]),
+    ) -> Result<(), Refusal> {
         match self.sem.project.event_id(name) {
-            Some(e) => self.submit(e, params),
+            Some(e) => self.submit_with(e, params, accepted),
             None => {
                 self.stats.refused += 1;
                 Err(Refusal::UnknownEvent(name.to_string()))

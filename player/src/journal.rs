@@ -11,10 +11,21 @@
 //! A record cut short by a crash (its length runs past the end of the last segment, or its
 //! checksum fails and nothing but zero bytes follows it) is *torn*: dropped with a warning. So
 //! is a run of zero bytes at the end of the last segment, what a power loss leaves when a file's
-//! length reached the disk before its data. A bad checksum anywhere else is *corruption*: an
+//! length reached the disk before its data, and what a player killed while it wrote leaves of
+//! the window it had reserved (below). A bad checksum anywhere else is *corruption*: an
 //! error that names the segment, the offset and the record. `petrel play --resume` cuts a torn
 //! tail off ([`cut_torn_tail`]) before it writes on, so that it never becomes corruption in the
 //! middle of the journal.
+//!
+//! **Writing without a system call.** Under the `record` and interval policies the writer
+//! reserves the segment's next megabyte (`fallocate`) and maps it shared
+//! ([`petrel_ipc::mapped::MappedWindow`]); a flush copies its records there. The bytes are
+//! then in the page cache, as after a `write`: a crash of the player keeps them (a power loss
+//! may not, as before; `sync` writes and syncs each record through the file). A full disk is
+//! an error of the reservation, and that flush writes through the file as before, keeping what
+//! fits. The writer cuts the reserved zeros off when a segment ends (rotation) and when it is
+//! dropped; a killed player leaves them, a reader takes them as the end of the journal, and
+//! `--resume` cuts them off. The format is unchanged.
 //!
 //! Decoding is bounded: a record's body is decoded with a bincode limit proportional to its own
 //! length ([`decode_entry`]), so a body with a valid checksum that claims a vector of 2^61
@@ -22,6 +33,7 @@
 //! allocation the machine cannot make.
 
 use bincode::{Decode, Encode};
+use petrel_ipc::mapped::MappedWindow;
 use petrel_ipc::RecorderState;
 use petrel_nets::compiled::Value;
 use std::fs::{File, OpenOptions};
@@ -31,6 +43,14 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 const MAGIC: &[u8; 8] = b"PETRELJ1";
+
+/// How much of a segment the writer reserves and maps at a time ([`MappedWindow`]): a system
+/// call (`fallocate`, `mmap`) every few thousand steps instead of a write per round.
+const MAP_WINDOW: usize = 1 << 20;
+
+/// When set (to anything), the journal writes every record through `pwrite`, without a mapped
+/// window: what the benchmarks compare the window with.
+pub const NO_MAP_ENV: &str = "PETREL_JOURNAL_NO_MAP";
 /// Largest record written or read (a guard against a corrupt length field). A step of the
 /// largest project holds a few kilobytes; events on the wire are at most 64 KiB.
 pub const MAX_RECORD: u32 = 16 << 20;
@@ -281,8 +301,19 @@ pub struct JournalWriter {
     written: u64,
     /// The magic and the header: a segment holding only these takes any record.
     floor: u64,
-    /// The file may hold bytes past `written` (a failed write whose cut failed too).
+    /// The file may hold bytes past `written` (a failed write whose cut failed too, or the
+    /// zeros of a reserved window): cut them off before the next write through the file, at a
+    /// rotation and when the writer is dropped.
     tail_dirty: bool,
+    /// Under [`FlushPolicy::EveryRecord`] and [`FlushPolicy::Interval`], records are copied
+    /// into a shared mapping of the segment's tail ([`MappedWindow`]): in the page cache at
+    /// once, as after a write, without a system call per flush. `None` until the first flush,
+    /// after a rotation, or when a window could not be reserved (then this flush writes
+    /// through the file).
+    window: Option<MappedWindow>,
+    /// False under [`FlushPolicy::Sync`] (which syncs each write) or once the file system said
+    /// it cannot reserve (`fallocate` unsupported): every record goes through `pwrite`.
+    mapping: bool,
     /// Encoded records not yet written, and the length of each.
     queued: Vec<u8>,
     lengths: Vec<usize>,
@@ -315,8 +346,29 @@ pub fn segments(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
     Ok(files)
 }
 
+/// [`Entry::Submit`], borrowed: the same bytes (bincode writes an enum's variant index as a
+/// `u32`, then its fields; a `&str` as a `String`, a slice as a `Vec`), so that the player
+/// journals each event it takes without copying its name, parameters and origin. A test
+/// checks that both encode alike.
+#[derive(Encode)]
+struct SubmitRecord<'a> {
+    variant: u32,
+    time: u64,
+    event: &'a str,
+    params: &'a [Value],
+    origin: &'a str,
+    seq: u64,
+}
+
+/// The index of [`Entry::Submit`] among the entry's variants.
+const SUBMIT_VARIANT: u32 = 3;
+
 /// Encodes `entry` as one record (length, CRC-32, body) at the end of `out`.
-fn encode_record(entry: &Entry, body: &mut Vec<u8>, out: &mut Vec<u8>) -> std::io::Result<()> {
+fn encode_record<E: Encode>(
+    entry: &E,
+    body: &mut Vec<u8>,
+    out: &mut Vec<u8>,
+) -> std::io::Result<()> {
     body.clear();
     bincode::encode_into_std_write(entry, body, bincode::config::standard())
         .map_err(std::io::Error::other)?;
@@ -366,6 +418,8 @@ impl JournalWriter {
             written: floor,
             floor,
             tail_dirty: false,
+            window: None,
+            mapping: policy != FlushPolicy::Sync && std::env::var_os(NO_MAP_ENV).is_none(),
             queued: Vec::with_capacity(4096),
             lengths: Vec::new(),
             last_flush: Instant::now(),
@@ -409,6 +463,11 @@ impl JournalWriter {
     /// Queues one entry without writing it (see [`flush`](Self::flush)). Fails only when the
     /// entry cannot be encoded as a record (larger than [`MAX_RECORD`]).
     pub fn push(&mut self, entry: &Entry) -> std::io::Result<()> {
+        self.push_encoded(entry)
+    }
+
+    /// [`push`](Self::push) of an entry's encoding (an [`Entry`] or a borrowed mirror of one).
+    fn push_encoded<E: Encode>(&mut self, entry: &E) -> std::io::Result<()> {
         let started = Instant::now();
         let before = self.queued.len();
         encode_record(entry, &mut self.buf, &mut self.queued)?;
@@ -447,10 +506,58 @@ impl JournalWriter {
         result
     }
 
+    /// Cuts the segment back to its last good record: the window (whose end must not be cut
+    /// under it) is dropped first.
+    fn cut_tail(&mut self) -> std::io::Result<()> {
+        self.window = None;
+        self.file.set_len(self.written)?;
+        self.tail_dirty = false;
+        Ok(())
+    }
+
+    /// Copies `bytes` (whole records) into the mapped window at the segment's end, reserving a
+    /// new window when they do not fit in the one there is. False when they could not be
+    /// mapped: the caller writes them through the file.
+    fn write_mapped(&mut self, bytes: &[u8]) -> bool {
+        if !self.mapping {
+            return false;
+        }
+        let at = self.written;
+        if !self
+            .window
+            .as_ref()
+            .is_some_and(|w| w.covers(at, bytes.len()))
+        {
+            // The old window is dropped before the new one is made: at most one at a time.
+            self.window = None;
+            // Up to the rotation size: the window's zeros are cut off when the segment ends.
+            let room = usize::try_from(self.rotate_bytes.saturating_sub(at)).unwrap_or(MAP_WINDOW);
+            let len = bytes.len().max(MAP_WINDOW.min(room));
+            match MappedWindow::reserve(&self.file, at, len) {
+                Ok(w) => {
+                    self.window = Some(w);
+                    self.tail_dirty = true;
+                }
+                Err(e) => {
+                    if petrel_ipc::mapped::cannot_reserve(&e) {
+                        tracing::debug!(error = %e, "the journal's file system cannot reserve space: records are written through the file");
+                        self.mapping = false;
+                    }
+                    // A full disk, among others: this flush writes through the file, which
+                    // takes what fits and says what did not, as without a window.
+                    return false;
+                }
+            }
+        }
+        match self.window.as_mut() {
+            Some(w) => w.write_at(at, bytes).is_ok(),
+            None => false,
+        }
+    }
+
     fn write_queued(&mut self) -> std::io::Result<()> {
-        if self.tail_dirty {
-            self.file.set_len(self.written)?;
-            self.tail_dirty = false;
+        if self.tail_dirty && self.window.is_none() {
+            self.cut_tail()?;
         }
         let (mut done, mut k) = (0usize, 0usize);
         let result = loop {
@@ -468,7 +575,19 @@ impl JournalWriter {
                 end += len;
                 j += 1;
             }
-            if end > done {
+            if end > done && self.write_mapped_range(done, end) {
+                self.written += (end - done) as u64;
+                self.records += (j - k) as u64;
+                done = end;
+                k = j;
+            } else if end > done {
+                if self.tail_dirty {
+                    // The window's reserved zeros: cut before writing through the file, which
+                    // does not know of them.
+                    if let Err(e) = self.cut_tail() {
+                        break Err(e);
+                    }
+                }
                 let bytes = &self.queued[done..end];
                 if let Err((e, wrote)) = write_at_tracked(&self.file, bytes, self.written) {
                     // Keep the complete records that reached the file (not under `Sync`: they
@@ -508,7 +627,20 @@ impl JournalWriter {
         result
     }
 
+    /// [`write_mapped`](Self::write_mapped) of the queued bytes `[from, to)`.
+    fn write_mapped_range(&mut self, from: usize, to: usize) -> bool {
+        let queued = std::mem::take(&mut self.queued);
+        let done = self.write_mapped(&queued[from..to]);
+        self.queued = queued;
+        done
+    }
+
     fn rotate(&mut self) -> std::io::Result<()> {
+        // The segment that ends must end at its last record: zeros past it would read as
+        // corruption in a segment that is not the last.
+        if self.tail_dirty {
+            self.cut_tail()?;
+        }
         let (file, floor) =
             Self::new_segment(&self.dir, self.segment + 1, &self.header, self.policy)?;
         self.file = file;
@@ -540,6 +672,16 @@ impl JournalWriter {
     /// The directory.
     pub fn dir(&self) -> &Path {
         &self.dir
+    }
+}
+
+impl Drop for JournalWriter {
+    fn drop(&mut self) {
+        // A segment that stops here ends at its last record, not in a window's zeros (a crash
+        // leaves them: a reader takes them as the end, `--resume` cuts them off).
+        if self.tail_dirty {
+            let _ = self.cut_tail();
+        }
     }
 }
 
@@ -749,12 +891,36 @@ impl Journal {
     /// Appends one entry (if there is a journal): written now or later, or dropped (and
     /// counted) while the recorder is dropping.
     pub fn append(&mut self, entry: &Entry) {
+        self.append_encoded(entry);
+    }
+
+    /// Appends an [`Entry::Submit`] of these parts, as [`append`](Self::append) would, without
+    /// making the entry.
+    pub fn append_submit(
+        &mut self,
+        time: u64,
+        event: &str,
+        params: &[Value],
+        origin: &str,
+        seq: u64,
+    ) {
+        self.append_encoded(&SubmitRecord {
+            variant: SUBMIT_VARIANT,
+            time,
+            event,
+            params,
+            origin,
+            seq,
+        });
+    }
+
+    fn append_encoded<E: Encode>(&mut self, entry: &E) {
         let Some(w) = self.writer.as_mut() else {
             return;
         };
         match self.state {
             RecorderState::Dropping => self.lost += 1,
-            RecorderState::Ok => match w.push(entry) {
+            RecorderState::Ok => match w.push_encoded(entry) {
                 Err(e) => self.start_dropping(format!("an entry cannot be recorded: {e}")),
                 Ok(()) => {
                     let due = match w.policy {
@@ -774,7 +940,7 @@ impl Journal {
                 }
             },
             // Retried at the next flush, not at every record.
-            _ => match w.push(entry) {
+            _ => match w.push_encoded(entry) {
                 Err(e) => self.start_dropping(format!("an entry cannot be recorded: {e}")),
                 Ok(()) if w.queued_bytes() > self.backlog => {
                     let why = format!(
@@ -985,7 +1151,7 @@ pub fn read_journal(path: &Path) -> Result<JournalRead, JournalError> {
             if last_file && all_zero(&bytes[pos..]) {
                 // A power loss after the file grew but before its data reached the disk.
                 read.torn = Some(damage(format!(
-                    "{rest} zero bytes at the end of the segment (a power loss before the data reached the disk)"
+                    "{rest} zero bytes at the end of the segment (space a player reserved and had not written: it still runs, or did not stop in good order; or a power loss before the data reached the disk)"
                 )));
                 return Ok(read);
             }
@@ -1237,4 +1403,39 @@ pub fn project_digest(p: &petrel_nets::compiled::CompiledProject) -> u64 {
         h = h.wrapping_mul(0x0100_0000_01b3);
     }
     h
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_borrowed_submit_encodes_as_the_entry() {
+        let params = vec![
+            Value::Int(-7),
+            Value::FloatList(vec![0.5, 1e300]),
+            Value::Text("é x".into()),
+            Value::Bool(true),
+        ];
+        let entry = Entry::Submit {
+            time: 123_456,
+            event: "waypoint".into(),
+            params: params.clone(),
+            origin: "program/PLN".into(),
+            seq: 1 << 40,
+        };
+        let borrowed = SubmitRecord {
+            variant: SUBMIT_VARIANT,
+            time: 123_456,
+            event: "waypoint",
+            params: &params,
+            origin: "program/PLN",
+            seq: 1 << 40,
+        };
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        encode_record(&entry, &mut Vec::new(), &mut a).unwrap();
+        encode_record(&borrowed, &mut Vec::new(), &mut b).unwrap();
+        assert_eq!(a, b);
+        assert_eq!(decode_entry(&b[8..]).unwrap(), entry);
+    }
 }

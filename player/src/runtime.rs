@@ -936,37 +936,35 @@ impl<'p> PlayerLoop<'p> {
             match r {
                 Ok(rcv) => {
                     let (sender, who, seq, missed) = (rcv.sender, rcv.origin, rcv.seq, rcv.missed);
-                    let origin = rcv.origin.to_string();
+                    let origin = who.as_str();
                     let time = engine.now();
-                    if let Some(reason) = builtin_refusal(&rcv.msg.name, &origin) {
+                    if let Some(reason) = builtin_refusal(&rcv.msg.name, origin) {
                         report.bad_messages += 1;
                         warn!(from = %origin, seq = rcv.seq, %reason, "event refused");
                         journal.append(&Entry::Refused {
                             time,
                             what: rcv.msg.name.clone(),
                             reason: reason.clone(),
-                            origin: origin.clone(),
+                            origin: origin.to_string(),
                         });
                         raise(
                             engine,
                             journal,
                             bad_message,
-                            vec![Value::Text(origin), Value::Text(reason)],
+                            vec![Value::Text(origin.to_string()), Value::Text(reason)],
                         );
                         return;
                     }
-                    let record = Entry::Submit {
-                        time,
-                        event: rcv.msg.name.clone(),
-                        params: rcv.msg.params.clone(),
-                        origin: origin.clone(),
-                        seq: rcv.seq,
-                    };
                     let mut params = engine.param_buffer();
                     params.extend(rcv.msg.params);
-                    match engine.submit_named(&rcv.msg.name, params) {
+                    let name = &rcv.msg.name;
+                    // Journaled from the parameters the engine keeps, before it queues the
+                    // event: no copy of the event on the way to its call.
+                    let submitted = engine.submit_named_with(name, params, |params| {
+                        journal.append_submit(time, name, params, origin, seq);
+                    });
+                    match submitted {
                         Ok(()) => {
-                            journal.append(&record);
                             ledger.taken(sender, who, seq, missed);
                         }
                         Err(refusal) => {
@@ -975,15 +973,17 @@ impl<'p> PlayerLoop<'p> {
                                 time,
                                 what: rcv.msg.name.clone(),
                                 reason: refusal.to_string(),
-                                origin: origin.clone(),
+                                origin: origin.to_string(),
                             });
                             if matches!(refusal, Refusal::AfterCatastrophic(_)) {
                                 info!(from = %origin, reason = %refusal, "event refused");
                             } else {
                                 report.bad_messages += 1;
                                 warn!(from = %origin, seq = rcv.seq, reason = %refusal, "event refused");
-                                let params =
-                                    vec![Value::Text(origin), Value::Text(refusal.to_string())];
+                                let params = vec![
+                                    Value::Text(origin.to_string()),
+                                    Value::Text(refusal.to_string()),
+                                ];
                                 raise(engine, journal, bad_message, params);
                             }
                         }

@@ -360,3 +360,48 @@ fn a_reload_entry_round_trips_and_leaves_the_earlier_entries_encoded_as_before()
     assert_eq!(decode_entry(&bytes).unwrap(), reload);
     assert_eq!(reload.time(), Some(2));
 }
+
+/// A player killed while it writes never drops its writer: the records it flushed are in the
+/// segment's mapped window (in the page cache), followed by the window's reserved zeros. They
+/// read back whole, the zeros as a torn tail, which `--resume` cuts off.
+#[test]
+fn a_writer_that_never_stops_leaves_every_flushed_record_before_its_reserved_zeros() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut w =
+        JournalWriter::open(dir.path(), header(), FlushPolicy::EveryRecord, 64 << 20).unwrap();
+    let mut all = vec![header()];
+    for i in 0..50 {
+        let e = step(i);
+        w.append(&e).unwrap();
+        all.push(e);
+    }
+    // What a SIGKILL leaves: no drop (no cut of the zeros, no unmap).
+    std::mem::forget(w);
+    let read = read_journal(dir.path()).unwrap();
+    assert_eq!(read.entries, all);
+    assert!(read.corrupt.is_none());
+    let torn = read.torn.expect("the window's zeros are a torn tail");
+    assert!(torn.what.contains("zero bytes"), "{torn}");
+    petrel_player::journal::cut_torn_tail(&torn).unwrap();
+    let again = read_journal(dir.path()).unwrap();
+    assert_eq!(again.entries, all);
+    assert!(again.torn.is_none() && again.corrupt.is_none());
+}
+
+/// A writer dropped in good order cuts its window's zeros off every segment, the last one
+/// included: each ends at its last record.
+#[test]
+fn segments_end_at_their_last_record_once_the_writer_is_dropped() {
+    let dir = tempfile::tempdir().unwrap();
+    let written = write(dir.path(), 400, 8192);
+    let files = segments(dir.path()).unwrap();
+    assert!(files.len() >= 3, "{files:?}");
+    for f in &files {
+        let one = read_journal(f).unwrap();
+        // Read alone, each is the last segment: zeros at its end would read as torn.
+        assert!(one.torn.is_none() && one.corrupt.is_none(), "{f:?}");
+    }
+    // Every record, and each later segment's header.
+    let read = read_journal(dir.path()).unwrap();
+    assert_eq!(read.entries.len(), written.len() + files.len() - 1);
+}

@@ -273,3 +273,70 @@ fn a_timer_fires_at_its_wall_clock_deadline_across_a_sigkill() {
     let o = petrel(&["replay", &journal.display().to_string()]);
     assert_eq!(o.status.code(), Some(0), "{}", text(&o));
 }
+
+/// The journal's crash guarantee with its mapped window (issue 17): records are copied into a
+/// shared mapping of the segment instead of written, so a SIGKILL leaves them in the page cache
+/// and the segment ending in the window's reserved zeros. Every event `petrel send` saw
+/// acknowledged is on record after the kill, `--resume` goes on from the last record, and the
+/// whole journal replays.
+#[test]
+fn every_acknowledged_event_survives_a_sigkill_of_the_player() {
+    let vehicle = unique_vehicle("mapkill");
+    let mut player = Player::start(&liveness_dir(), &vehicle);
+    let sent: Vec<i64> = (0..25).collect();
+    for n in &sent {
+        let o = player.send(&format!("tick({n})"), 1);
+        // Exit 0: taken and on record (acknowledged after the journal's flush).
+        assert!(o.status.success(), "tick({n}): {}", text(&o));
+    }
+    player.child.kill().unwrap(); // SIGKILL: no drop, no cut of the window's zeros
+    player.child.wait().unwrap();
+    let work = player.work.clone();
+    let journal = player.journal.clone();
+    drop(player);
+    // The records went through the window: the segment ends in its reserved zeros (a write
+    // through the file would have ended at the last record).
+    let last = journal_segments(&journal).pop().unwrap();
+    let bytes = std::fs::read(&last).unwrap();
+    let zeros = bytes.iter().rev().take_while(|&&b| b == 0).count();
+    assert!(
+        zeros >= 4096,
+        "{} bytes, {zeros} zeros at the end",
+        bytes.len()
+    );
+    let ticks = |entries: &[serde_json::Value]| -> Vec<i64> {
+        entries
+            .iter()
+            .filter(|e| e["kind"] == "submit" && e["event"] == "tick")
+            .filter_map(|e| e["params"][0].as_str()?.parse().ok())
+            .collect()
+    };
+    let (entries, o) = journal_json(&journal);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    assert_eq!(ticks(&entries), sent, "{}", text(&o));
+    // Resumed, the player cuts the zeros off and goes on from the last record.
+    let player = Player::start_in(&work, &liveness_dir(), &vehicle, &["--resume"]);
+    let s = player.wait_for(5.0, |s| s["stats"]["resumed_steps"].as_u64() > Some(0));
+    assert_eq!(s["stats"]["resumed_steps"], sent.len() as u64, "{s}");
+    let o = player.send("tick(100)", 1);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(player.stop().success());
+    let (entries, o) = journal_json(&journal);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let mut all = sent.clone();
+    all.push(100);
+    assert_eq!(ticks(&entries), all, "{}", text(&o));
+    // Stopped in good order, the player cut its window's zeros off: nothing torn is left.
+    assert!(
+        !String::from_utf8_lossy(&o.stderr).contains("torn"),
+        "{}",
+        text(&o)
+    );
+    let o = petrel(&["replay", &journal.display().to_string()]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains(&format!("{} steps", all.len())),
+        "{}",
+        text(&o)
+    );
+}
