@@ -36,14 +36,19 @@ pub fn journal(c: JournalCommand) -> Outcome {
     }
 }
 
-/// Reads a journal; a torn last record (a crash while writing it) is said and dropped.
+/// Reads a journal; a torn last record (a crash while writing it) is said and dropped, and space
+/// reserved but not yet written (a running player's) is said.
 fn read(journal: &Path) -> Result<petrel_player::journal::JournalRead, Outcome> {
     let read =
         petrel_player::journal::read_journal(journal).map_err(|e| Outcome::Usage(e.to_string()))?;
-    if let Some(t) = &read.torn {
-        eprintln!(
+    match &read.torn {
+        Some(t) if read.unwritten => eprintln!(
+            "note: the journal ends in zeros, space its player reserved and has not written yet (the player still runs, or was stopped without closing it; or a power loss before the data reached the disk): every record before them was read ({t})"
+        ),
+        Some(t) => eprintln!(
             "warning: the last record is torn (a crash while writing it): {t}; it is dropped"
-        );
+        ),
+        None => {}
     }
     Ok(read)
 }

@@ -1073,6 +1073,10 @@ pub struct JournalRead {
     pub entries: Vec<Entry>,
     /// A last record cut short by a crash, dropped.
     pub torn: Option<Damage>,
+    /// The torn tail is only zeros: space a player reserved and had not written yet (it still
+    /// runs, or it was killed), or a power loss before the data reached the disk. Every record
+    /// before them was read; no record was cut short.
+    pub unwritten: bool,
     /// A bad record in the middle: the journal was damaged; entries stop before it.
     pub corrupt: Option<Damage>,
 }
@@ -1153,6 +1157,7 @@ pub fn read_journal(path: &Path) -> Result<JournalRead, JournalError> {
                 read.torn = Some(damage(format!(
                     "{rest} zero bytes at the end of the segment (space a player reserved and had not written: it still runs, or did not stop in good order; or a power loss before the data reached the disk)"
                 )));
+                read.unwritten = true;
                 return Ok(read);
             }
             if rest < 8 {

@@ -339,7 +339,11 @@ fn resume<'p>(
         )));
     }
     if let Some(t) = &read.torn {
-        warn!(segment = %t.segment.display(), offset = t.offset, what = %t.what, "the end of the journal was torn by the crash: dropped, and cut off so that the journal goes on from its last good record");
+        if read.unwritten {
+            info!(segment = %t.segment.display(), offset = t.offset, what = %t.what, "the journal ends in zeros (space the stopped player had reserved and not written, or a power loss before the data reached the disk): cut off, every record before them kept");
+        } else {
+            warn!(segment = %t.segment.display(), offset = t.offset, what = %t.what, "the end of the journal was torn by the crash: dropped, and cut off so that the journal goes on from its last good record");
+        }
         crate::journal::cut_torn_tail(t).map_err(|e| {
             PlayError::Journal(format!(
                 "cannot cut the torn tail off {}: {e}",

@@ -79,6 +79,10 @@ fn a_record_cut_by_a_crash_is_torn_and_dropped() {
     let read = read_journal(dir.path()).unwrap();
     assert!(read.corrupt.is_none());
     let torn = read.torn.expect("torn");
+    assert!(
+        !read.unwritten,
+        "a record cut short is lost, not unwritten space"
+    );
     assert_eq!(torn.record, 10, "the last record (header is 0)");
     assert_eq!(read.entries.len(), 10, "header and the nine complete steps");
 }
@@ -382,6 +386,7 @@ fn a_writer_that_never_stops_leaves_every_flushed_record_before_its_reserved_zer
     assert!(read.corrupt.is_none());
     let torn = read.torn.expect("the window's zeros are a torn tail");
     assert!(torn.what.contains("zero bytes"), "{torn}");
+    assert!(read.unwritten, "reserved space, nothing lost");
     petrel_player::journal::cut_torn_tail(&torn).unwrap();
     let again = read_journal(dir.path()).unwrap();
     assert_eq!(again.entries, all);

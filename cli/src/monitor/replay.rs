@@ -26,7 +26,8 @@ pub fn read(path: &Path) -> Result<Read, Outcome> {
     let read =
         petrel_player::journal::read_journal(path).map_err(|e| Outcome::Usage(e.to_string()))?;
     let mut warnings = Vec::new();
-    if let Some(t) = &read.torn {
+    // Space a running player reserved and has not written loses nothing: no warning.
+    if let (Some(t), false) = (&read.torn, read.unwritten) {
         warnings.push(format!(
             "the last record is torn (a crash while writing it): {t}; it is left out"
         ));
