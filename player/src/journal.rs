@@ -680,7 +680,10 @@ impl Drop for JournalWriter {
         // A segment that stops here ends at its last record, not in a window's zeros (a crash
         // leaves them: a reader takes them as the end, `--resume` cuts them off).
         if self.tail_dirty {
-            let _ = self.cut_tail();
+            if let Err(e) = self.cut_tail() {
+                // Nothing is lost: a reader takes the zeros as the end, `--resume` cuts them.
+                tracing::warn!(dir = %self.dir.display(), error = %e, "cannot cut the journal's reserved zeros off its last segment");
+            }
         }
     }
 }
