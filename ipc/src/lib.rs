@@ -94,6 +94,6 @@ pub use reactor::{
     FdSource, Reactor, ReactorError, ReactorStats, Ready, Source, SourceKey, WaitStrategy,
 };
 pub use wire::{
-    Ack, AckRefusal, CallMsg, EventMsg, Heartbeat, MarkingMsg, Origin, Recorder, RecorderState,
-    ReloadAnswer, ReloadRequest, SignalsMsg, Value, WireError,
+    Ack, AckRefusal, CallMsg, CallRef, EventMsg, Heartbeat, MarkingMsg, Origin, Recorder,
+    RecorderState, ReloadAnswer, ReloadRequest, SignalsMsg, Value, WireError,
 };

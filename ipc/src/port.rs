@@ -521,6 +521,12 @@ impl<M: Message> Sender<M> {
     /// Returns an error when the message was not delivered to every connected receiver, so the
     /// caller can count refusals; [`SendError::seq`] tells whether it used a sequence number.
     pub fn send(&self, msg: &M) -> Result<Sent, SendError> {
+        self.send_body(msg)
+    }
+
+    /// [`send`](Self::send) of a body borrowed from the caller's data ([`wire::CallRef`]),
+    /// whose bytes are those of the message it stands for: nothing is built on the way.
+    pub fn send_body<B: wire::Body<Msg = M>>(&self, msg: &B) -> Result<Sent, SendError> {
         let len = match wire::encoded_len(msg) {
             Ok(len) => len,
             Err(error) => return Err(self.not_sent_wire(error)),

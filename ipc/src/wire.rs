@@ -127,6 +127,37 @@ impl CallMsg {
     }
 }
 
+/// A [`CallMsg`] borrowed: the function's name and the arguments as they are, each encoded as
+/// the [`Value`] it stands for (the player's arguments are borrowed from the net and the
+/// event). Its bytes are [`CallMsg`]'s (bincode writes a `&str` as a `String` and a sequence
+/// as its length then its items, as it writes a `Vec`), so that the player sends a call
+/// without building one: no copy of the name nor of the arguments. A test decodes it.
+#[derive(Debug, Clone, Copy)]
+pub struct CallRef<'a, A> {
+    /// The function's name as the manifest declares it.
+    pub function: &'a str,
+    /// The arguments, by position: each item encodes as a [`Value`] does.
+    pub args: A,
+}
+
+impl<A> Encode for CallRef<'_, A>
+where
+    A: Clone + ExactSizeIterator,
+    A::Item: Encode,
+{
+    fn encode<E: bincode::enc::Encoder>(
+        &self,
+        encoder: &mut E,
+    ) -> Result<(), bincode::error::EncodeError> {
+        self.function.encode(encoder)?;
+        (self.args.len() as u64).encode(encoder)?;
+        for arg in self.args.clone() {
+            arg.encode(encoder)?;
+        }
+        Ok(())
+    }
+}
+
 /// What one step of the player changed in the marking, for monitors. Names are text
 /// (`NET.transition`, `NET.place`, global places by their own name) so that a monitor needs
 /// nothing but the project to follow along.
@@ -479,6 +510,29 @@ mod sealed {
     impl Sealed for super::SignalsMsg {}
     impl Sealed for super::ReloadRequest {}
     impl Sealed for super::ReloadAnswer {}
+
+    pub trait SealedBody {}
+    impl<M: super::Message> SealedBody for M {}
+    impl<A> SealedBody for super::CallRef<'_, A> {}
+}
+
+/// What a [`Sender`](crate::Sender) of [`Msg`](Self::Msg) can send: the message itself, or
+/// a borrowed body whose bytes are the message's ([`CallRef`] for [`CallMsg`]). Sealed, like
+/// [`Message`].
+pub trait Body: Encode + sealed::SealedBody {
+    /// The message the body's bytes are.
+    type Msg: Message;
+}
+
+impl<M: Message> Body for M {
+    type Msg = M;
+}
+impl<A> Body for CallRef<'_, A>
+where
+    A: Clone + ExactSizeIterator,
+    A::Item: Encode,
+{
+    type Msg = CallMsg;
 }
 
 /// A message body of this crate. Sealed: only the four bodies above travel on Petrel's
@@ -645,14 +699,14 @@ impl std::error::Error for WireError {
 }
 
 /// The exact number of bytes [`encode_into`] will write for `msg`, measured without allocating.
-pub fn encoded_len<M: Message>(msg: &M) -> Result<usize, WireError> {
+pub fn encoded_len<B: Body + ?Sized>(msg: &B) -> Result<usize, WireError> {
     let mut encoder = EncoderImpl::new(SizeWriter::default(), CONFIG);
     msg.encode(&mut encoder).map_err(WireError::Encode)?;
     Ok(encoder.into_writer().bytes_written)
 }
 
 /// Encodes `msg` at the start of `dst` and returns the number of bytes written.
-pub fn encode_into<M: Message>(msg: &M, dst: &mut [u8]) -> Result<usize, WireError> {
+pub fn encode_into<B: Body + ?Sized>(msg: &B, dst: &mut [u8]) -> Result<usize, WireError> {
     bincode::encode_into_slice(msg, dst, CONFIG).map_err(WireError::Encode)
 }
 
@@ -699,6 +753,28 @@ mod tests {
         assert_eq!(encode_into(&msg, &mut buf).unwrap(), len);
         let back: M = decode(&buf).unwrap();
         assert_eq!(back, msg);
+    }
+
+    #[test]
+    fn a_borrowed_call_is_the_call_s_bytes_and_decodes_to_it() {
+        for args in [
+            every_value(),
+            vec![],
+            vec![Value::FloatList(vec![0.5; 300])],
+        ] {
+            let call = CallMsg::new("climb_to", args.clone());
+            let borrowed = CallRef {
+                function: "climb_to",
+                args: args.iter(),
+            };
+            let len = encoded_len(&borrowed).unwrap();
+            assert_eq!(len, encoded_len(&call).unwrap());
+            let (mut a, mut b) = (vec![0u8; len], vec![0u8; len]);
+            assert_eq!(encode_into(&borrowed, &mut a).unwrap(), len);
+            encode_into(&call, &mut b).unwrap();
+            assert_eq!(a, b);
+            assert_eq!(decode::<CallMsg>(&a).unwrap(), call);
+        }
     }
 
     #[test]

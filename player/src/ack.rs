@@ -35,6 +35,9 @@ pub struct Account {
 pub struct Ledger {
     accounts: HashMap<u64, Account>,
     tick: u64,
+    /// When the messages being accounted arrived ([`set_clock`](Self::set_clock)); `None`:
+    /// the clock is read for each.
+    clock: Option<Instant>,
 }
 
 impl Ledger {
@@ -43,10 +46,16 @@ impl Ledger {
         Ledger::default()
     }
 
+    /// The messages accounted from now on arrived at `now` (the player reads the clock once
+    /// when its wait ends, not once per message).
+    pub fn set_clock(&mut self, now: Instant) {
+        self.clock = Some(now);
+    }
+
     fn account(&mut self, sender: u64, origin: Origin, seq: u64, missed: u64) -> &mut Account {
         self.tick += 1;
         let order = self.tick;
-        let now = Instant::now();
+        let now = self.clock.unwrap_or_else(Instant::now);
         let a = self.accounts.entry(sender).or_insert_with(|| Account {
             ack: Ack {
                 sender,

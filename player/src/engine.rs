@@ -45,6 +45,17 @@ impl<'a> ArgValue<'a> {
         }
     }
 
+    /// Appends the value as the language writes it ([`Value::literal`]) to `out`.
+    pub fn write_literal(self, out: &mut String) {
+        match self {
+            ArgValue::Int(i) => Value::Int(i).write_literal(out),
+            ArgValue::Float(f) => petrel_value::write_float(out, f),
+            ArgValue::Bool(b) => Value::Bool(b).write_literal(out),
+            ArgValue::Text(s) => petrel_value::write_quoted(out, s),
+            ArgValue::FloatList(l) => petrel_value::write_float_list(out, l),
+        }
+    }
+
     /// An owned copy.
     pub fn to_value(self) -> Value {
         match self {
@@ -53,6 +64,39 @@ impl<'a> ArgValue<'a> {
             ArgValue::Bool(b) => Value::Bool(b),
             ArgValue::Text(s) => Value::Text(s.to_string()),
             ArgValue::FloatList(l) => Value::FloatList(l.to_vec()),
+        }
+    }
+}
+
+/// Encodes as the [`Value`] it borrows from (bincode's derive for `Value`: the variant's index,
+/// then its field), so that a call goes on the wire without copying its arguments
+/// ([`petrel_ipc::CallRef`]). A test compares the bytes.
+impl bincode::Encode for ArgValue<'_> {
+    fn encode<E: bincode::enc::Encoder>(
+        &self,
+        encoder: &mut E,
+    ) -> Result<(), bincode::error::EncodeError> {
+        match *self {
+            ArgValue::Int(i) => {
+                0u32.encode(encoder)?;
+                i.encode(encoder)
+            }
+            ArgValue::Float(f) => {
+                1u32.encode(encoder)?;
+                f.encode(encoder)
+            }
+            ArgValue::Bool(b) => {
+                2u32.encode(encoder)?;
+                b.encode(encoder)
+            }
+            ArgValue::Text(s) => {
+                3u32.encode(encoder)?;
+                s.encode(encoder)
+            }
+            ArgValue::FloatList(l) => {
+                4u32.encode(encoder)?;
+                l.encode(encoder)
+            }
         }
     }
 }
@@ -89,7 +133,7 @@ impl<'a> Args<'a> {
     }
 
     /// Every argument, in order.
-    pub fn iter(&self) -> impl Iterator<Item = ArgValue<'a>> + 'a {
+    pub fn iter(&self) -> impl ExactSizeIterator<Item = ArgValue<'a>> + Clone + 'a {
         let this = *self;
         (0..self.args.len()).map(move |i| this.get(i))
     }
@@ -961,5 +1005,49 @@ impl<S: Sink> Effects for Adapter<'_, '_, S> {
     fn livelock(&mut self) {
         self.livelock = self.last_fired.or(Some((0, 0)));
         self.sink.livelock();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn bytes<T: bincode::Encode>(v: &T) -> Vec<u8> {
+        bincode::encode_to_vec(v, bincode::config::standard()).unwrap()
+    }
+
+    #[test]
+    fn a_borrowed_argument_encodes_as_its_value() {
+        let values = [
+            Value::Int(-7),
+            Value::Int(i64::MAX),
+            Value::Float(-0.0),
+            Value::Float(1.5e300),
+            Value::Bool(true),
+            Value::Bool(false),
+            Value::Text(String::new()),
+            Value::Text("héllo \"x\"".into()),
+            Value::FloatList(vec![]),
+            Value::FloatList(vec![1.0, f64::NAN, -2.5]),
+        ];
+        for v in &values {
+            assert_eq!(bytes(&ArgValue::of(v)), bytes(v), "{v:?}");
+            let mut text = String::new();
+            ArgValue::of(v).write_literal(&mut text);
+            assert_eq!(text, v.literal());
+        }
+        // And as a call on the wire: the bytes of the call with owned arguments.
+        let call = petrel_ipc::CallMsg::new("f", values.to_vec());
+        let borrowed = petrel_ipc::CallRef {
+            function: "f",
+            args: values.iter().map(ArgValue::of),
+        };
+        let len = petrel_ipc::wire::encoded_len(&borrowed).unwrap();
+        let mut body = vec![0u8; len];
+        petrel_ipc::wire::encode_into(&borrowed, &mut body).unwrap();
+        assert_eq!(body, bytes(&call));
+        let back = petrel_ipc::wire::decode::<petrel_ipc::CallMsg>(&body).unwrap();
+        // NaN is not equal to itself: the texts say the values are the same.
+        assert_eq!(format!("{back:?}"), format!("{call:?}"));
     }
 }

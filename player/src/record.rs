@@ -36,6 +36,40 @@ pub struct StepRecord<'p> {
     pub activated: Vec<NetId>,
     /// Nets deactivated, in order.
     pub deactivated: Vec<NetId>,
+    /// Whether [`calls`](Self::calls) is kept (the player's record only needs the texts).
+    keep_calls: bool,
+    /// Texts of actions cleared, kept for the next ones (no allocation per step).
+    spare: Vec<String>,
+    /// The name and parameters of the event taken last, kept for the next one.
+    taken_spare: Option<(String, Vec<Value>)>,
+}
+
+/// The `NET.transition` names of fired transitions, encoded as the journal's `Vec<String>`
+/// (bincode: the count, then each name's length and bytes) without building the strings.
+#[derive(Clone, Copy)]
+pub struct FiredNames<'a> {
+    project: &'a CompiledProject,
+    fired: &'a [(NetId, u32)],
+}
+
+impl bincode::Encode for FiredNames<'_> {
+    fn encode<E: bincode::enc::Encoder>(
+        &self,
+        encoder: &mut E,
+    ) -> Result<(), bincode::error::EncodeError> {
+        use bincode::enc::write::Writer as _;
+        (self.fired.len() as u64).encode(encoder)?;
+        for &(n, t) in self.fired {
+            let net = &self.project.nets[n as usize];
+            let transition = &net.transitions[t as usize].name;
+            ((net.name.len() + 1 + transition.len()) as u64).encode(encoder)?;
+            let writer = encoder.writer();
+            writer.write(net.name.as_bytes())?;
+            writer.write(b".")?;
+            writer.write(transition.as_bytes())?;
+        }
+        Ok(())
+    }
 }
 
 impl<'p> StepRecord<'p> {
@@ -50,7 +84,24 @@ impl<'p> StepRecord<'p> {
             emits: Vec::new(),
             activated: Vec::new(),
             deactivated: Vec::new(),
+            keep_calls: true,
+            spare: Vec::new(),
+            taken_spare: None,
         }
+    }
+
+    /// The record without [`calls`](Self::calls): the calls are only in
+    /// [`actions`](Self::actions), as text (the player's record: nothing reads them apart, and
+    /// keeping them would copy every call's arguments).
+    pub fn without_calls(mut self) -> Self {
+        self.keep_calls = false;
+        self
+    }
+
+    /// An empty string for the next action's text, reused from a cleared step when there is
+    /// one.
+    fn action_text(&mut self) -> String {
+        self.spare.pop().unwrap_or_default()
     }
 
     /// The transitions fired since the last clear, as `NET.transition`.
@@ -61,11 +112,30 @@ impl<'p> StepRecord<'p> {
             .collect()
     }
 
+    /// The transitions fired since the last clear as the journal encodes
+    /// [`fired_names`](Self::fired_names), without building the names.
+    pub fn fired_encoded(&self) -> FiredNames<'_> {
+        FiredNames {
+            project: self.project,
+            fired: &self.fired,
+        }
+    }
+
+    /// Forgets the event taken, keeping its buffers for the next one.
+    pub fn forget_taken(&mut self) {
+        if let Some(taken) = self.taken.take() {
+            self.taken_spare = Some(taken);
+        }
+    }
+
     /// Forgets what was recorded (the step is over).
     pub fn clear(&mut self) {
-        self.taken = None;
+        self.forget_taken();
         self.fired.clear();
-        self.actions.clear();
+        for mut text in self.actions.drain(..) {
+            text.clear();
+            self.spare.push(text);
+        }
         self.calls.clear();
         self.emits.clear();
         self.activated.clear();
@@ -86,16 +156,38 @@ pub fn call_text(
     function: FunctionId,
     args: &[Value],
 ) -> String {
+    let mut out = String::new();
+    write_call_text(
+        &mut out,
+        project,
+        program,
+        function,
+        args.iter().map(ArgValue::of),
+    );
+    out
+}
+
+/// Appends [`call_text`]'s text to `out`, the arguments written in place (the player writes
+/// one per round trip: no intermediate string).
+pub fn write_call_text<'a>(
+    out: &mut String,
+    project: &CompiledProject,
+    program: ProgramId,
+    function: FunctionId,
+    args: impl IntoIterator<Item = ArgValue<'a>>,
+) {
     let prog = &project.programs[program as usize];
-    format!(
-        "{}.{}({})",
-        prog.name,
-        prog.functions[function as usize].name,
-        args.iter()
-            .map(Value::literal)
-            .collect::<Vec<_>>()
-            .join(", ")
-    )
+    out.push_str(&prog.name);
+    out.push('.');
+    out.push_str(&prog.functions[function as usize].name);
+    out.push('(');
+    for (i, arg) in args.into_iter().enumerate() {
+        if i > 0 {
+            out.push_str(", ");
+        }
+        arg.write_literal(out);
+    }
+    out.push(')');
 }
 
 /// What became of an event, in the words the journal, the replay, `petrel run`'s JSON lines and
@@ -160,21 +252,29 @@ fn seconds(t: Micros) -> f64 {
 
 impl Sink for StepRecord<'_> {
     fn taken(&mut self, event: EventId, params: &[Value]) {
-        self.taken = Some((
-            self.project.events[event as usize].name.clone(),
-            params.to_vec(),
-        ));
+        let (mut name, mut values) = self
+            .taken
+            .take()
+            .or_else(|| self.taken_spare.take())
+            .unwrap_or_default();
+        name.clear();
+        name.push_str(&self.project.events[event as usize].name);
+        values.clear();
+        values.extend_from_slice(params);
+        self.taken = Some((name, values));
     }
     fn fired(&mut self, net: NetId, transition: u32) {
         self.fired.push((net, transition));
     }
     fn call(&mut self, program: ProgramId, function: FunctionId, args: Args<'_>) {
-        let values: Vec<Value> = args.iter().map(ArgValue::to_value).collect();
-        self.actions.push(format!(
-            "call {}",
-            call_text(self.project, program, function, &values)
-        ));
-        self.calls.push((program, function, values));
+        let mut text = self.action_text();
+        text.push_str("call ");
+        write_call_text(&mut text, self.project, program, function, args.iter());
+        self.actions.push(text);
+        if self.keep_calls {
+            let values = args.iter().map(ArgValue::to_value).collect();
+            self.calls.push((program, function, values));
+        }
     }
     fn emitted(&mut self, event: EventId, params: &[Value]) {
         // The action's text stays `emit NAME` (journals hold it); the arguments are in `emits`.

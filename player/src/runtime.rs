@@ -17,13 +17,13 @@
 use crate::ack::Ledger;
 use crate::engine::{Args, Engine, Micros, Refusal, Sink, Stats};
 use crate::journal::{
-    Entry, FlushPolicy, Journal, JournalLock, JournalWriter, RecorderChange, Settlement,
+    Entry, FlushPolicy, Journal, JournalLock, JournalWriter, RecorderChange, Settlement, StepParts,
     BATCH_DELAY,
 };
 use crate::record::{marked_places, outcome_name, place_changes, StepRecord};
 use petrel_ipc::{
-    CallMsg, CallSender, EventMsg, EventReceiver, Heartbeat, HeartbeatPublisher, MarkingMsg,
-    MarkingPublisher, Participant, ProgramWatch, Reactor, RecvError, ReloadAnswer,
+    CallMsg, CallRef, CallSender, EventMsg, EventReceiver, Heartbeat, HeartbeatPublisher,
+    MarkingMsg, MarkingPublisher, Participant, ProgramWatch, Reactor, RecvError, ReloadAnswer,
     ReloadAnswerPublisher, ReloadReceiver, ReloadRequest, Role, SendError, Vehicle, WaitStrategy,
 };
 use petrel_nets::compiled::{
@@ -180,8 +180,11 @@ impl Sink for RuntimeSink<'_, '_> {
         let project = self.record.project;
         let prog = &project.programs[program as usize];
         let fname = &prog.functions[function as usize].name;
-        let msg = CallMsg::new(fname.clone(), args.iter().map(|a| a.to_value()).collect());
-        let sent = self.calls[program as usize].send(&msg);
+        // Encoded from the borrowed arguments straight into the loaned sample.
+        let sent = self.calls[program as usize].send_body(&CallRef {
+            function: fname,
+            args: args.iter(),
+        });
         // The call's text for the journal and the monitors once the call is out.
         self.record.call(program, function, args);
         match sent {
@@ -587,7 +590,7 @@ impl<'p> PlayerLoop<'p> {
         };
         let mut journal = Journal::with_backlog(writer, opts.journal_backlog);
         journal.batch_records();
-        let mut record = StepRecord::new(project);
+        let mut record = StepRecord::new(project).without_calls();
         let mut failed = Vec::new();
         let mut report = PlayReport::default();
         let (engine, base) = match resumed {
@@ -676,10 +679,12 @@ impl<'p> PlayerLoop<'p> {
         })
     }
 
-    /// Mission time now: wall-clock time since the mission started, read from the monotonic
-    /// clock within a run (so it never goes backwards), from the wall clock across a resume.
-    fn now(&self) -> Micros {
-        self.base + self.t0.elapsed().as_micros().min(u64::MAX as u128) as u64
+    /// Mission time at `instant`: wall-clock time since the mission started, read from the
+    /// monotonic clock within a run (so it never goes backwards), from the wall clock across a
+    /// resume.
+    fn mission_time(&self, instant: Instant) -> Micros {
+        let since = instant.saturating_duration_since(self.t0);
+        self.base + since.as_micros().min(u64::MAX as u128) as u64
     }
 
     /// Runs until SIGINT/SIGTERM (or `run_for`) and reports what was done.
@@ -692,7 +697,10 @@ impl<'p> PlayerLoop<'p> {
         }
         loop {
             self.process_queue();
-            self.heartbeat_if_due();
+            // The clock is read twice a round: here, for what is due before the wait (the
+            // heartbeat, the journal's hold, the wait's timeout), and when the wait ends.
+            let now = Instant::now();
+            self.heartbeat_if_due(now);
             // Everything journaled reaches the operating system before the player sleeps.
             // A spinning player holds a round's records while the next event may come (at
             // most BATCH_DELAY), so that their write is not on that event's path.
@@ -703,7 +711,7 @@ impl<'p> PlayerLoop<'p> {
             }
             .and_then(|window| {
                 let since = self.journal.batch_since()?;
-                let left = BATCH_DELAY.saturating_sub(since.elapsed());
+                let left = BATCH_DELAY.saturating_sub(now.saturating_duration_since(since));
                 (!left.is_zero()).then(|| window.map_or(left, |w| w.min(left)))
             });
             if hold.is_none() {
@@ -714,7 +722,7 @@ impl<'p> PlayerLoop<'p> {
                 continue;
             }
             if let Some(limit) = self.opts.run_for {
-                if self.t0.elapsed() >= limit {
+                if now.saturating_duration_since(self.t0) >= limit {
                     info!("run time over");
                     break;
                 }
@@ -722,9 +730,11 @@ impl<'p> PlayerLoop<'p> {
             let mut timeout = self
                 .next_heartbeat
                 .min(self.next_liveness)
-                .saturating_duration_since(Instant::now());
+                .saturating_duration_since(now);
             if let Some(d) = self.engine.next_deadline() {
-                timeout = timeout.min(Duration::from_micros(d.saturating_sub(self.now())));
+                timeout = timeout.min(Duration::from_micros(
+                    d.saturating_sub(self.mission_time(now)),
+                ));
             }
             if self.pending.is_some() {
                 // The verifier's thread says nothing when it is done: look again soon.
@@ -749,9 +759,11 @@ impl<'p> PlayerLoop<'p> {
                 info!("termination requested: stopping");
                 break;
             }
-            self.engine.advance_to(self.now());
+            let woke = Instant::now();
+            self.engine.advance_to(self.mission_time(woke));
+            self.ledger.set_clock(woke);
             let someone_died = self.take_events();
-            if someone_died || Instant::now() >= self.next_liveness {
+            if someone_died || woke >= self.next_liveness {
                 self.check_liveness();
             }
             self.take_reload_requests();
@@ -805,16 +817,20 @@ impl<'p> PlayerLoop<'p> {
                 }
                 break;
             };
-            let (event, params) = self.record.taken.clone().unwrap_or_default();
-            self.journal.append(&Entry::Step {
+            let (event, params) = match &self.record.taken {
+                Some((event, params)) => (event.as_str(), params.as_slice()),
+                None => ("", &[][..]),
+            };
+            // Encoded from the record and the engine as they are: no copy of the step.
+            self.journal.append_step(&StepParts {
                 time: self.engine.now(),
                 event,
                 params,
-                outcome: outcome_name(step.outcome).into(),
-                fired: self.record.fired_names(),
-                actions: self.record.actions.clone(),
-                state: self.engine.state().to_vec(),
-                deadlines: self.engine.deadlines().to_vec(),
+                outcome: outcome_name(step.outcome),
+                fired: self.record.fired_encoded(),
+                actions: &self.record.actions,
+                state: self.engine.state(),
+                deadlines: self.engine.deadlines(),
             });
             self.publish_delta();
             self.step_no += 1;
@@ -860,8 +876,7 @@ impl<'p> PlayerLoop<'p> {
     /// Publishes the heartbeat, with the live status and the acknowledgements, when its period
     /// is over. The journal is flushed first: what it holds is then settled, what it still
     /// keeps in memory stays pending, what it dropped is unrecorded.
-    fn heartbeat_if_due(&mut self) {
-        let instant = Instant::now();
+    fn heartbeat_if_due(&mut self, instant: Instant) {
         if instant < self.next_heartbeat {
             return;
         }
@@ -1332,7 +1347,7 @@ impl<'p> PlayerLoop<'p> {
         self.ports.calls = calls;
         self.engine = engine;
         self.project = new;
-        self.record = StepRecord::new(new);
+        self.record = StepRecord::new(new).without_calls();
         self.watch = ProgramWatch::new(&self.vehicle, new.programs.iter().map(|p| p.name.clone()));
         if let Err(e) = self.watch.check() {
             warn!(error = %e, "liveness check failed");
@@ -1371,7 +1386,7 @@ impl<'p> PlayerLoop<'p> {
             self.snapshot_next = true;
             self.previous.clear();
             self.previous.extend_from_slice(self.engine.state());
-            self.record.taken = None;
+            self.record.forget_taken();
             self.record.activated.clear();
             self.record.deactivated.clear();
             return;
@@ -1755,6 +1770,27 @@ mod tests {
         let (_, c, d, _) = petrel_nets::project::from_sources(manifest, &[("a.pn", net)]);
         assert!(!d.has_errors(), "{d:?}");
         c.unwrap()
+    }
+
+    #[test]
+    fn the_journal_s_fired_names_are_the_record_s() {
+        let p = project();
+        let mut engine = Engine::new(&p);
+        let mut record = StepRecord::new(&p).without_calls();
+        engine.start(0, &mut record);
+        record.clear();
+        engine.submit(p.event_id("go").unwrap(), vec![]).unwrap();
+        engine.step(&mut record).unwrap();
+        let names = record.fired_names();
+        assert_eq!(names, ["A.t", "B.u"]);
+        let config = bincode::config::standard();
+        assert_eq!(
+            bincode::encode_to_vec(record.fired_encoded(), config).unwrap(),
+            bincode::encode_to_vec(&names, config).unwrap()
+        );
+        // The next step's record starts empty, whatever it keeps for reuse.
+        record.clear();
+        assert!(record.taken.is_none() && record.fired.is_empty() && record.actions.is_empty());
     }
 
     #[test]

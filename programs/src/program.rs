@@ -319,12 +319,12 @@ impl Program {
             if let Some(call) = self.try_take()? {
                 return Ok(Some(call));
             }
-            let now = Instant::now();
+            let mut now = Instant::now();
             if !self.outbox.is_empty() && now >= self.next_retry {
                 self.next_retry = now + self.config.retry_period;
                 self.flush()?;
+                now = Instant::now();
             }
-            let now = Instant::now();
             let mut wait = match deadline {
                 Some(d) if now >= d => return Ok(None),
                 Some(d) => Some(d - now),
@@ -334,9 +334,15 @@ impl Program {
                 let retry = self.next_retry.saturating_duration_since(now);
                 wait = Some(wait.map_or(retry, |w| w.min(retry)));
             }
-            let sources: Vec<&dyn Source> =
-                self.hosts.iter().map(|h| &h.calls as &dyn Source).collect();
-            let ready = self.reactor.wait(&sources, wait)?;
+            // One hosted program (the usual case) waits without collecting its sources.
+            let ready = match &self.hosts[..] {
+                [host] => self.reactor.wait(&[&host.calls as &dyn Source], wait)?,
+                hosts => {
+                    let sources: Vec<&dyn Source> =
+                        hosts.iter().map(|h| &h.calls as &dyn Source).collect();
+                    self.reactor.wait(&sources, wait)?
+                }
+            };
             if ready.termination_requested() {
                 self.terminated = true;
                 return Err(ProgramError::Terminated);
