@@ -38,8 +38,10 @@ pub(super) struct Cache {
     key_mask: Vec<u64>,
     /// Per component, whether some delivery of it may be cached (else it is never looked up).
     cacheable: Vec<bool>,
-    /// Per component, the entry of each key.
+    /// Per component, the entry of each key (by its word when a state is one word: no slice
+    /// hashed and compared).
     maps: Vec<FxMap<Vec<u64>, u32>>,
+    maps_one: Vec<FxMap<u64, u32>>,
     /// Each entry's successors (a range of the lists below), in delivery order.
     entries: Vec<Range<u32>>,
     /// Each cached successor's delivery, its component's bits (`words` words), and its label
@@ -128,6 +130,7 @@ impl Cache {
             key_mask,
             cacheable,
             maps: (0..n).map(|_| FxMap::default()).collect(),
+            maps_one: (0..n).map(|_| FxMap::default()).collect(),
             entries: Vec::new(),
             delivery: Vec::new(),
             local: Vec::new(),
@@ -165,8 +168,12 @@ impl Cache {
         if !self.cacheable[c] {
             return None;
         }
-        self.key_of(c, s);
-        let e = self.maps[c].get(self.key.as_slice()).copied();
+        let e = if self.words == 1 {
+            self.maps_one[c].get(&(s[0] & self.key_mask[c])).copied()
+        } else {
+            self.key_of(c, s);
+            self.maps[c].get(self.key.as_slice()).copied()
+        };
         self.hits += u64::from(e.is_some());
         e
     }
@@ -215,8 +222,12 @@ impl Cache {
         }
         let e = self.entries.len() as u32;
         self.entries.push(from..self.delivery.len() as u32);
-        self.key_of(c, s);
-        self.maps[c].insert(self.key.clone(), e);
+        if self.words == 1 {
+            self.maps_one[c].insert(s[0] & self.key_mask[c], e);
+        } else {
+            self.key_of(c, s);
+            self.maps[c].insert(self.key.clone(), e);
+        }
         self.stored += 1;
         true
     }
