@@ -44,11 +44,11 @@ pub(super) struct Cache {
     maps_one: Vec<FxMap<u64, u32>>,
     /// Each entry's successors (a range of the lists below), in delivery order.
     entries: Vec<Range<u32>>,
-    /// Each cached successor's delivery, its component's bits (`words` words), and its label
-    /// and fired set.
+    /// Each cached successor's delivery, its component's bits (`words` words), and its label,
+    /// fired set and step kind.
     delivery: Vec<u32>,
     local: Vec<u64>,
-    meta: Vec<(u32, u32)>,
+    meta: Vec<(u32, u32, u32)>,
     key: Vec<u64>,
     /// Components' moves taken from the cache, and computed and stored.
     pub hits: u64,
@@ -183,9 +183,10 @@ impl Cache {
         self.entries[e as usize].clone()
     }
 
-    /// Cached successor `k`: its delivery, its component's bits, its label and fired set.
+    /// Cached successor `k`: its delivery, its component's bits, its label, fired set and
+    /// step kind.
     #[inline]
-    pub fn successor(&self, k: u32) -> (u32, &[u64], (u32, u32)) {
+    pub fn successor(&self, k: u32) -> (u32, &[u64], (u32, u32, u32)) {
         let k = k as usize;
         (
             self.delivery[k],
@@ -194,14 +195,14 @@ impl Cache {
         )
     }
 
-    /// Stores the moves of component `c` in state `s`: `successors`, (delivery, state, label,
-    /// fired set) in delivery order. Not when a successor differs from `s` outside `c`'s bits
+    /// Stores the moves of component `c` in state `s`: `successors`, (delivery, state, (label,
+    /// fired set, step kind)) in delivery order. Not when a successor differs from `s` outside `c`'s bits
     /// (returns whether it stored).
     pub fn store<'a>(
         &mut self,
         c: usize,
         s: &[u64],
-        successors: impl Iterator<Item = (u32, &'a [u64], (u32, u32))> + Clone,
+        successors: impl Iterator<Item = (u32, &'a [u64], (u32, u32, u32))> + Clone,
     ) -> bool {
         let w = self.words;
         let m = &self.mask[c * w..(c + 1) * w];

@@ -52,6 +52,9 @@ pub(super) struct FreePlace {
 /// The event of a label that is no event: the environment changed a global place (`--net`).
 pub(super) const NO_EVENT: EventId = EventId::MAX;
 
+/// The step kind of a successor whose kind is not looked up yet.
+const NO_KIND: u32 = u32::MAX;
+
 /// An edge of the graph from a given state: a step to another stable state (or the same),
 /// and its step kind (an index in [`Graph::steps`]: its label and fired set).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -440,8 +443,8 @@ pub(super) fn run_step_into(
 pub(super) struct Successors {
     words: usize,
     data: Vec<u64>,
-    /// Label and fired set of each.
-    meta: Vec<(u32, u32)>,
+    /// Label, fired set and step kind of each (the kind `NO_KIND` until it is known).
+    meta: Vec<(u32, u32, u32)>,
 }
 
 impl Successors {
@@ -461,7 +464,7 @@ impl Successors {
     fn push(&mut self, t: &[u64], label: u32, fired: u32) {
         debug_assert_eq!(t.len(), self.words);
         self.data.extend_from_slice(t);
-        self.meta.push((label, fired));
+        self.meta.push((label, fired, NO_KIND));
     }
 
     fn states(&self) -> std::slice::ChunksExact<'_, u64> {
@@ -480,7 +483,7 @@ impl Successors {
 
     /// Adds `s` with the bits of `mask` taken from `local`: a successor from the cache.
     #[inline]
-    fn push_masked(&mut self, s: &[u64], mask: &[u64], local: &[u64], meta: (u32, u32)) {
+    fn push_masked(&mut self, s: &[u64], mask: &[u64], local: &[u64], meta: (u32, u32, u32)) {
         self.data.extend(
             s.iter()
                 .zip(mask)
@@ -1105,6 +1108,12 @@ impl Ctx<'_> {
                     let first = out.len();
                     self.flagged = false;
                     self.run(at, i, s, m, &w.moves.counters, out)?;
+                    // The step kinds now, in successor order as they would be made after:
+                    // the cache keeps them too.
+                    for k in first..out.len() {
+                        let (label, fired, _) = out.meta[k];
+                        out.meta[k].2 = self.step(at, label, fired);
+                    }
                     if let Some(c) = comp {
                         w.unstorable[c as usize] |= self.flagged;
                         w.computed
@@ -1142,11 +1151,14 @@ impl Ctx<'_> {
         w.s = s;
         g.states
             .find_all(w.succ.states(), &mut w.slots, &mut w.found);
-        for (&(label, fired), known) in w.succ.meta.iter().zip(&w.found) {
+        for (&(label, fired, kind), known) in w.succ.meta.iter().zip(&w.found) {
             let to = known.expect(NOT_REPLAYED);
             out.push(Edge {
                 to,
-                kind: self.step(at, label, fired),
+                kind: match kind {
+                    NO_KIND => self.step(at, label, fired),
+                    k => k,
+                },
             });
         }
     }
@@ -1571,7 +1583,7 @@ pub(super) fn explore<'a>(
         }
         g.states
             .find_all(successors.states(), &mut slots, &mut found);
-        for ((t, &(label, fired)), known) in successors
+        for ((t, &(label, fired, kind)), known) in successors
             .states()
             .zip(successors.meta.iter())
             .zip(found.iter())
@@ -1595,7 +1607,10 @@ pub(super) fn explore<'a>(
                     j
                 }
             };
-            let step = ctx.step(&mut At::Explore(&mut g), label, fired);
+            let step = match kind {
+                NO_KIND => ctx.step(&mut At::Explore(&mut g), label, fired),
+                k => k,
+            };
             g.edges += 1;
             if g.edges_kept {
                 g.edge_to.push(u64::from(j));

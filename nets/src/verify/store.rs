@@ -149,7 +149,8 @@ impl StateStore {
     ) {
         if !self.slots.is_empty() {
             // One random read per state, independent of the others: the processor overlaps
-            // their cache misses by itself.
+            // their cache misses by itself (reading them all first, then comparing, as for
+            // wider states, was slower here: docs/benchmarks.md, the fourth round).
             out.clear();
             out.extend(states.map(|s| self.slot_one(s[0]).1));
             return;
@@ -287,10 +288,12 @@ impl Packed {
         if w > self.width {
             self.widen(w);
         }
+        // The eight bytes of `v` over the padding (its bytes past `width` are zeros: padding
+        // again), then `width` more zeros: a copy of a fixed size, where copies of `width`
+        // bytes were calls to `memmove` (docs/benchmarks.md, the fourth round).
         let end = self.len * self.width;
-        self.bytes.truncate(end);
-        self.bytes.extend_from_slice(&v.to_le_bytes()[..self.width]);
-        self.bytes.extend_from_slice(&PAD);
+        self.bytes[end..end + 8].copy_from_slice(&v.to_le_bytes());
+        self.bytes.resize(end + self.width + 8, 0);
         self.len += 1;
     }
 
