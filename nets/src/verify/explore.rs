@@ -55,6 +55,9 @@ pub(super) const NO_EVENT: EventId = EventId::MAX;
 /// The step kind of a successor whose kind is not looked up yet.
 const NO_KIND: u32 = u32::MAX;
 
+/// Successors the transition cache may hold whatever the number of states.
+const CACHE_ROOM: usize = 4096;
+
 /// An edge of the graph from a given state: a step to another stable state (or the same),
 /// and its step kind (an index in [`Graph::steps`]: its label and fired set).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -106,10 +109,8 @@ pub(super) struct Graph {
     /// States expanded with one component's deliveries only (partial-order reduction): when
     /// there are any, the graph holds only some of the reachable states.
     pub reduced: u64,
-    /// Components' moves the exploration took from the transition cache, and computed and
-    /// stored there ([`super::cache`]).
+    /// Components' moves the exploration took from the transition cache ([`super::cache`]).
     pub cache_hits: u64,
-    pub cache_stored: u64,
 }
 
 impl Graph {
@@ -138,7 +139,6 @@ impl Graph {
             alone: false,
             reduced: 0,
             cache_hits: 0,
-            cache_stored: 0,
         }
     }
 
@@ -1122,8 +1122,14 @@ impl Ctx<'_> {
                 }
             }
         }
+        // A bounded cache: a quarter of a successor per state explored, and a few thousand.
+        let room = at.graph().states.len() / 4 + CACHE_ROOM;
         for c in 0..n {
-            if w.hit[c].is_some() || w.unstorable[c] || !cache.cacheable(c) {
+            if w.hit[c].is_some()
+                || w.unstorable[c]
+                || !cache.cacheable(c)
+                || cache.successors() >= room
+            {
                 continue;
             }
             let list = w
@@ -1626,7 +1632,7 @@ pub(super) fn explore<'a>(
     }
     g.deliveries = ctx.deliveries.clone();
     if let Some(c) = &ctx.cache {
-        (g.cache_hits, g.cache_stored) = (c.hits, c.stored);
+        g.cache_hits = c.hits;
     }
     // What expanded the states replays them: the same labels, fired sets and step kinds.
     let replay = Replay {
