@@ -5,7 +5,7 @@
 
 use petrel_nets::compiled::CompiledProject;
 use petrel_nets::project::{from_sources, load_and_check};
-use petrel_nets::verify::{check_replay, verify, EdgeMemory, Report, VerifyOptions};
+use petrel_nets::verify::{check_cache, check_replay, verify, EdgeMemory, Report, VerifyOptions};
 use proptest::prelude::*;
 use std::collections::BTreeSet;
 use std::path::Path;
@@ -484,4 +484,147 @@ proptest! {
         let same = same_report_replayed(&c, false);
         prop_assert!(same.is_ok(), "{:?}\n{}\n{}", same, manifest, nets);
     }
+}
+
+/// The verification without the transition cache against the one with it: the same report,
+/// edges kept and replayed, but for the time and the graph's bytes.
+fn same_report_cached(c: &CompiledProject) -> Result<(), String> {
+    let run = |no_cache: bool, edges: EdgeMemory| {
+        verify(
+            c,
+            VerifyOptions {
+                no_reduction: true,
+                no_cache,
+                edges,
+                ..Default::default()
+            },
+        )
+        .map(|mut r| {
+            r.seconds = 0.0;
+            r.graph_bytes = 0;
+            r
+        })
+        .map_err(|e| e.to_string())
+    };
+    let json = |r: &Report| serde_json::to_value(r).map_err(|e| e.to_string());
+    for edges in [EdgeMemory::Keep, EdgeMemory::Replay] {
+        let (cached, plain) = (run(false, edges)?, run(true, edges)?);
+        if json(&cached)? != json(&plain)? {
+            return Err(format!("cached {cached:?}\nnot cached {plain:?}"));
+        }
+    }
+    Ok(())
+}
+
+#[test]
+fn the_transition_cache_builds_the_same_graph_on_every_mission_and_the_toggles() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut dirs: Vec<_> = std::fs::read_dir(root.join("../missions"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|d| d.join("petrel.toml").is_file())
+        .collect();
+    dirs.push(root.join("tests/data/verify/flawed"));
+    for sub in ["tests/data/progress", "tests/data/timed"] {
+        for d in std::fs::read_dir(root.join(sub)).unwrap() {
+            dirs.push(d.unwrap().path());
+        }
+    }
+    dirs.sort();
+    for dir in &dirs {
+        let (_, c, d) = load_and_check(dir).expect("reads");
+        assert!(!d.has_errors(), "{}", dir.display());
+        let c = c.expect("compiles");
+        check_cache(&c, VerifyOptions::default())
+            .unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
+        same_report_cached(&c).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
+    }
+    for n in [2usize, 5, 9] {
+        let c = toggles(n);
+        let hits = check_cache(&c, VerifyOptions::default()).expect("the same graph");
+        // Each of the 2^n states but the first few takes every component's moves from the
+        // cache (a component has two local states): the cache is what built the graph.
+        assert!(hits >= ((1u64 << n) - 4) * n as u64, "n = {n}: {hits} hits");
+        same_report_cached(&c).expect("the same report");
+    }
+}
+
+#[test]
+fn the_transition_cache_applies_to_many_generated_projects() {
+    // The property below is worth something only if the cache is used on generated projects.
+    let mut used = 0;
+    for seed in 1..=200u64 {
+        let (manifest, nets) = generated(seed.wrapping_mul(0x9e37_79b9_7f4a_7c15));
+        let (_, c, _, _) = from_sources(&manifest, &[("a.pn", &nets)]);
+        if let Some(c) = c {
+            let hits = check_cache(&c, VerifyOptions::default())
+                .unwrap_or_else(|e| panic!("{e}\n{manifest}\n{nets}"));
+            used += usize::from(hits > 0);
+        }
+    }
+    eprintln!("the cache gave moves in {used} of 200 generated projects");
+    assert!(
+        used >= 25,
+        "the cache gave moves in {used} of 200 generated projects"
+    );
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 120, ..ProptestConfig::default() })]
+
+    #[test]
+    fn generated_projects_explore_the_same_with_the_transition_cache(seed in any::<u64>()) {
+        let (manifest, nets) = generated(seed);
+        let (_, c, _, _) = from_sources(&manifest, &[("a.pn", &nets)]);
+        let Some(c) = c else { return Ok(()) };
+        let same = check_cache(&c, VerifyOptions::default());
+        prop_assert!(same.is_ok(), "{:?}\n{}\n{}", same, manifest, nets);
+        let same = same_report_cached(&c);
+        prop_assert!(same.is_ok(), "{:?}\n{}\n{}", same, manifest, nets);
+    }
+}
+
+/// A net whose immediate transition waits on a guard the verifier cannot decide (a net
+/// parameter) stays enabled in a stable state, and every step of another component runs into
+/// it again (its fixpoint asks the guard both ways): the cache must not give that component's
+/// moves as they were in a state where the transition was not enabled (here, `T`'s moves met
+/// first while `WAIT` is `early`).
+#[test]
+fn the_transition_cache_leaves_alone_states_with_an_undecided_immediate_transition() {
+    let manifest = r#"[project]
+name = "undecided"
+files = ["a.pn"]
+start = ["BOSS", "T"]
+
+[events]
+begin = { category = "nominal", params = ["go: bool"] }
+poke = { category = "nominal" }
+flip = { category = "nominal" }
+"#;
+    let nets = r#"net BOSS {
+    place idle = 1
+    place busy
+    transition start on begin(go): idle -> busy {
+        activate WAIT(go)
+    }
+}
+net WAIT(go: bool) {
+    place early = 1
+    place ready
+    place gone
+    transition come on poke: early -> ready
+    transition leave if self.go: ready -> gone
+}
+net T {
+    place off = 1
+    place on
+    transition up on flip: off -> on
+    transition down on flip: on -> off
+}
+"#;
+    let (_, c, d, _) = from_sources(manifest, &[("a.pn", nets)]);
+    let c = c.unwrap_or_else(|| panic!("{d:?}"));
+    let hits = check_cache(&c, VerifyOptions::default()).expect("the same graph");
+    assert!(hits > 0, "the cache applies elsewhere");
+    same_report_cached(&c).expect("the same report");
 }

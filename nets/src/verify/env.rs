@@ -517,6 +517,23 @@ impl Env {
         }
     }
 
+    /// Each function counter's function and first bit (its two bits are this one and the
+    /// next), for the transition cache.
+    pub fn function_counter_bits(
+        &self,
+    ) -> impl Iterator<Item = ((ProgramId, FunctionId), u32)> + '_ {
+        self.function_counter
+            .iter()
+            .map(|(&k, &c)| (k, self.base + 2 * c))
+    }
+
+    /// Each internal event counter's event and first bit, likewise.
+    pub fn internal_counter_bits(&self) -> impl Iterator<Item = (EventId, u32)> + '_ {
+        self.internal_counter
+            .iter()
+            .map(|(&(e, _), &c)| (e, self.base + 2 * c))
+    }
+
     /// Whether, and how, `event` addressed to `target` may come in `s`.
     pub fn gate(&self, s: &[u64], event: EventId, target: Option<NetId>) -> Gate {
         let list = &self.answered_by[event as usize];

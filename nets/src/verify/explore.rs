@@ -6,6 +6,7 @@
 //! single step shows: firings refused for safety, loops of immediate transitions, conflicts,
 //! invariants broken.
 
+use super::cache::Cache;
 use super::env::{
     deliveries, Delivery, Env, Gate, MayHold, Oracle, Requests, Truth, MAX_GUARD_RUNS,
 };
@@ -50,6 +51,12 @@ pub(super) struct FreePlace {
 
 /// The event of a label that is no event: the environment changed a global place (`--net`).
 pub(super) const NO_EVENT: EventId = EventId::MAX;
+
+/// The step kind of a successor whose kind is not looked up yet.
+const NO_KIND: u32 = u32::MAX;
+
+/// Successors the transition cache may hold whatever the number of states.
+const CACHE_ROOM: usize = 4096;
 
 /// An edge of the graph from a given state: a step to another stable state (or the same),
 /// and its step kind (an index in [`Graph::steps`]: its label and fired set).
@@ -102,6 +109,8 @@ pub(super) struct Graph {
     /// States expanded with one component's deliveries only (partial-order reduction): when
     /// there are any, the graph holds only some of the reachable states.
     pub reduced: u64,
+    /// Components' moves the exploration took from the transition cache ([`super::cache`]).
+    pub cache_hits: u64,
 }
 
 impl Graph {
@@ -129,6 +138,7 @@ impl Graph {
             max_tokens_per_marking: 0,
             alone: false,
             reduced: 0,
+            cache_hits: 0,
         }
     }
 
@@ -433,8 +443,8 @@ pub(super) fn run_step_into(
 pub(super) struct Successors {
     words: usize,
     data: Vec<u64>,
-    /// Label and fired set of each.
-    meta: Vec<(u32, u32)>,
+    /// Label, fired set and step kind of each (the kind `NO_KIND` until it is known).
+    meta: Vec<(u32, u32, u32)>,
 }
 
 impl Successors {
@@ -454,11 +464,33 @@ impl Successors {
     fn push(&mut self, t: &[u64], label: u32, fired: u32) {
         debug_assert_eq!(t.len(), self.words);
         self.data.extend_from_slice(t);
-        self.meta.push((label, fired));
+        self.meta.push((label, fired, NO_KIND));
     }
 
     fn states(&self) -> std::slice::ChunksExact<'_, u64> {
         self.data.chunks_exact(self.words)
+    }
+
+    /// How many.
+    fn len(&self) -> usize {
+        self.meta.len()
+    }
+
+    /// Successor `k`.
+    fn state(&self, k: usize) -> &[u64] {
+        &self.data[k * self.words..(k + 1) * self.words]
+    }
+
+    /// Adds `s` with the bits of `mask` taken from `local`: a successor from the cache.
+    #[inline]
+    fn push_masked(&mut self, s: &[u64], mask: &[u64], local: &[u64], meta: (u32, u32, u32)) {
+        self.data.extend(
+            s.iter()
+                .zip(mask)
+                .zip(local)
+                .map(|((&a, &m), &b)| (a & !m) | b),
+        );
+        self.meta.push(meta);
     }
 
     fn append(&mut self, other: &mut Successors) {
@@ -483,6 +515,21 @@ struct Move {
 struct Moves {
     list: Vec<Move>,
     counters: Vec<Option<u32>>,
+}
+
+/// What [`Ctx::expand`] reuses from one state to the next.
+#[derive(Default)]
+pub(super) struct Expansion {
+    moves: Moves,
+    /// Per component, its cache entry in this state; per delivery, whether a cache entry gives
+    /// its moves; per component, the next cached successor to take, whether its moves here
+    /// must not be stored, and the successors computed here (component, number in the
+    /// successors, delivery).
+    hit: Vec<Option<u32>>,
+    skip: Vec<bool>,
+    cursor: Vec<u32>,
+    unstorable: Vec<bool>,
+    computed: Vec<(u32, u32, u32)>,
 }
 
 /// The graph a state's expansion works on: the exploration's, which it adds labels, fired sets
@@ -546,6 +593,14 @@ struct Ctx<'a> {
     /// whose expiry it is, when its event is a timer's and comes from nowhere else).
     timing: Option<Timing>,
     timer_of: Vec<Option<usize>>,
+    /// The transition cache of the full exploration (none when timed, reducing, `--net`, or
+    /// the nets make one component).
+    cache: Option<Cache>,
+    /// Whether a step since it was last cleared recorded something or asked the oracle (its
+    /// component's moves are then not cached), and the deliveries whose conflicts the last
+    /// [`Ctx::moves`] recorded.
+    flagged: bool,
+    conflicted: Vec<usize>,
 }
 
 /// The label, fired set or step kind a replay did not find: the exploration made them all, so
@@ -713,12 +768,16 @@ impl Ctx<'_> {
         st
     }
 
-    /// The deliveries the environment can make in state `i` (`s`), and the conflicts they
-    /// show (while exploring).
-    fn moves(&mut self, at: &mut At, i: u32, s: &[u64], out: &mut Moves) {
+    /// The deliveries the environment can make in state `i` (`s`), but those `skip` says
+    /// (none when it is empty), and the conflicts they show (while exploring).
+    fn moves(&mut self, at: &mut At, i: u32, s: &[u64], skip: &[bool], out: &mut Moves) {
         out.list.clear();
         out.counters.clear();
+        self.conflicted.clear();
         for di in 0..self.deliveries.len() {
+            if skip.get(di).copied().unwrap_or(false) {
+                continue;
+            }
             let d = &self.deliveries[di];
             let gate = self.env.gate(s, d.event, d.target);
             // Timed: a timer's event comes when its clock reaches its duration, and only then.
@@ -787,6 +846,7 @@ impl Ctx<'_> {
                         if self.sem.layout.share_input(ra, rb)
                             && self.conflict_seen.insert((ra, rb))
                         {
+                            self.conflicted.push(di);
                             let mut trace = g.trace(i);
                             trace.push(self.deliveries[di].label.clone());
                             g.conflicts.push(ConflictFinding {
@@ -846,6 +906,7 @@ impl Ctx<'_> {
                     };
                     tm.step(&self.sem.layout, &mut t, k, &self.rec.timer_ops);
                 }
+                self.flagged |= !self.rec.refused.is_empty() || self.rec.livelock.is_some();
                 let key = (di as u32, Vec::new(), counter, true);
                 let lid = match self.known_label(&key) {
                     Some(l) => l,
@@ -897,6 +958,9 @@ impl Ctx<'_> {
                     tm.step(&self.sem.layout, &mut t, k, &self.rec.timer_ops);
                 }
                 Oracle::next_prefixes(&prefix, self.rec.oracle.used, &mut prefixes);
+                self.flagged |= self.rec.oracle.used > 0
+                    || !self.rec.refused.is_empty()
+                    || self.rec.livelock.is_some();
                 let choices: Vec<bool> = (0..self.rec.oracle.used)
                     .map(|k| prefix.get(k).copied().unwrap_or(false))
                     .collect();
@@ -949,6 +1013,135 @@ impl Ctx<'_> {
         Ok(())
     }
 
+    /// Every move of state `i` (`s`, not over) run, its successors appended to `out` in
+    /// delivery order; whether there was any move. With the transition cache, a component
+    /// whose bits of `s` were met before in a state like this one takes its moves from the
+    /// cache (the same successors, labels and fired sets, in the same order: the graph is the
+    /// same, docs/verification.md), and one whose were not has them computed and stored.
+    fn expand(
+        &mut self,
+        at: &mut At,
+        i: u32,
+        s: &[u64],
+        w: &mut Expansion,
+        out: &mut Successors,
+    ) -> Result<bool, VerifyError> {
+        let from = out.len();
+        let l = &self.sem.layout;
+        // An enabled immediate transition (refused, or its guard undecided) is tried again by
+        // every step's fixpoint, whatever its component; after a loop of immediate
+        // transitions, states are not stable. No cache then.
+        let usable = self.cache.is_some()
+            && self.livelock_seen.is_empty()
+            && !l.immediate.iter().any(|&r| l.enabled(s, r));
+        let cache = if usable { self.cache.take() } else { None };
+        let Some(mut cache) = cache else {
+            self.moves(at, i, s, &[], &mut w.moves);
+            for m in &w.moves.list {
+                self.run(at, i, s, m, &w.moves.counters, out)?;
+            }
+            return Ok(out.len() > from);
+        };
+        let done = self.expand_cached(&mut cache, at, i, s, w, out);
+        self.cache = Some(cache);
+        done?;
+        Ok(out.len() > from)
+    }
+
+    /// [`Ctx::expand`] with the cache.
+    fn expand_cached(
+        &mut self,
+        cache: &mut Cache,
+        at: &mut At,
+        i: u32,
+        s: &[u64],
+        w: &mut Expansion,
+        out: &mut Successors,
+    ) -> Result<(), VerifyError> {
+        let n = cache.components();
+        w.hit.clear();
+        for c in 0..n {
+            w.hit.push(cache.lookup(c, s));
+        }
+        w.skip.clear();
+        w.skip.extend(
+            cache
+                .of_delivery
+                .iter()
+                .map(|c| c.is_some_and(|c| w.hit[c as usize].is_some())),
+        );
+        self.moves(at, i, s, &w.skip, &mut w.moves);
+        w.unstorable.clear();
+        w.unstorable.resize(n, false);
+        for &di in &self.conflicted {
+            if let Some(c) = cache.of_delivery[di] {
+                w.unstorable[c as usize] = true;
+            }
+        }
+        w.cursor.clear();
+        w.cursor
+            .extend(w.hit.iter().map(|h| h.map_or(0, |e| cache.entry(e).start)));
+        w.computed.clear();
+        // In delivery order, as without the cache: the cached successors of the components
+        // met before, the computed ones of the others.
+        let mut next_move = 0;
+        for di in 0..self.deliveries.len() {
+            match cache.of_delivery[di] {
+                Some(c) if w.hit[c as usize].is_some() => {
+                    let c = c as usize;
+                    let end = w.hit[c].map_or(0, |e| cache.entry(e).end);
+                    let mask = cache.mask(c);
+                    while w.cursor[c] < end {
+                        let (d, local, meta) = cache.successor(w.cursor[c]);
+                        if d as usize != di {
+                            break;
+                        }
+                        out.push_masked(s, mask, local, meta);
+                        w.cursor[c] += 1;
+                    }
+                }
+                comp => {
+                    let Some(m) = w.moves.list.get(next_move).filter(|m| m.delivery == di) else {
+                        continue;
+                    };
+                    next_move += 1;
+                    let first = out.len();
+                    self.flagged = false;
+                    self.run(at, i, s, m, &w.moves.counters, out)?;
+                    // The step kinds now, in successor order as they would be made after:
+                    // the cache keeps them too.
+                    for k in first..out.len() {
+                        let (label, fired, _) = out.meta[k];
+                        out.meta[k].2 = self.step(at, label, fired);
+                    }
+                    if let Some(c) = comp {
+                        w.unstorable[c as usize] |= self.flagged;
+                        w.computed
+                            .extend((first..out.len()).map(|k| (c, k as u32, di as u32)));
+                    }
+                }
+            }
+        }
+        // A bounded cache: a quarter of a successor per state explored, and a few thousand.
+        let room = at.graph().states.len() / 4 + CACHE_ROOM;
+        for c in 0..n {
+            if w.hit[c].is_some()
+                || w.unstorable[c]
+                || !cache.cacheable(c)
+                || cache.successors() >= room
+            {
+                continue;
+            }
+            let list = w
+                .computed
+                .iter()
+                .filter(|&&(k, _, _)| k as usize == c)
+                .map(|&(_, k, d)| (d, out.state(k as usize), out.meta[k as usize]));
+            cache.store(c, s, list);
+        }
+        Ok(())
+    }
+
     /// The edges of state `i` of the finished graph `g`, recomputed: the same moves, steps and
     /// order as when the exploration expanded it in full, each target looked up in the store.
     fn replay(&mut self, g: &Graph, i: u32, w: &mut ReplayBuffers, out: &mut Vec<Edge>) {
@@ -958,20 +1151,20 @@ impl Ctx<'_> {
         let s = std::mem::take(&mut w.s);
         w.succ.clear();
         if !self.sem.layout.is_over(&s) {
-            self.moves(at, i, &s, &mut w.moves);
-            for m in &w.moves.list {
-                self.run(at, i, &s, m, &w.moves.counters, &mut w.succ)
-                    .expect(NOT_REPLAYED);
-            }
+            self.expand(at, i, &s, &mut w.exp, &mut w.succ)
+                .expect(NOT_REPLAYED);
         }
         w.s = s;
         g.states
             .find_all(w.succ.states(), &mut w.slots, &mut w.found);
-        for (&(label, fired), known) in w.succ.meta.iter().zip(&w.found) {
+        for (&(label, fired, kind), known) in w.succ.meta.iter().zip(&w.found) {
             let to = known.expect(NOT_REPLAYED);
             out.push(Edge {
                 to,
-                kind: self.step(at, label, fired),
+                kind: match kind {
+                    NO_KIND => self.step(at, label, fired),
+                    k => k,
+                },
             });
         }
     }
@@ -980,7 +1173,7 @@ impl Ctx<'_> {
 /// What a replay reuses from one state to the next.
 struct ReplayBuffers {
     s: State,
-    moves: Moves,
+    exp: Expansion,
     succ: Successors,
     slots: Vec<(usize, u32)>,
     found: Vec<Option<u32>>,
@@ -1092,6 +1285,9 @@ pub(super) fn explore<'a>(
         unsafe_seen: HashSet::new(),
         conflict_seen: HashSet::new(),
         livelock_seen: HashSet::new(),
+        cache: None,
+        flagged: false,
+        conflicted: Vec::new(),
     };
     let mut g = Graph::new(words, l.rules.len(), p.nets.len());
     // Breadth-first depth of each state, and whether it was (or must be) expanded in full:
@@ -1168,6 +1364,11 @@ pub(super) fn explore<'a>(
         None => Vec::new(),
     };
     let reducing = components.is_some();
+    // The transition cache: in the full exploration, untimed, of the whole project.
+    if !reducing && !opts.no_cache && !opts.timed && free.is_empty() {
+        let comps = super::reduction::Components::new(p, l);
+        ctx.cache = Cache::new(p, l, env, &ctx.deliveries, &comps);
+    }
     if reducing {
         depth.resize(g.states.len(), 0);
         full.resize(g.states.len(), false);
@@ -1179,6 +1380,7 @@ pub(super) fn explore<'a>(
     let mut last_progress = Instant::now();
     let mut next = 0usize;
     let mut moves = Moves::default();
+    let mut expansion = Expansion::default();
     let mut tried = Successors::new(words);
     let mut successors = Successors::new(words);
     let mut s = State::new();
@@ -1221,13 +1423,22 @@ pub(super) fn explore<'a>(
         }
         g.max_tokens_per_marking = g.max_tokens_per_marking.max(l.tokens(&s) as u64);
         successors.clear();
-        if l.is_over(&s) {
+        if l.is_over(&s) || !reducing {
             moves.list.clear();
         } else {
-            ctx.moves(&mut At::Explore(&mut g), i, &s, &mut moves);
+            ctx.moves(&mut At::Explore(&mut g), i, &s, &[], &mut moves);
         }
         // A drop counts: the player still has that event to process.
         let mut any_enabled = !moves.list.is_empty();
+        if !reducing && !l.is_over(&s) {
+            any_enabled = ctx.expand(
+                &mut At::Explore(&mut g),
+                i,
+                &s,
+                &mut expansion,
+                &mut successors,
+            )?;
+        }
 
         // One component's deliveries, when they make a persistent set (no catastrophic event
         // enabled: it touches everything) and pass the cycle proviso; else every delivery.
@@ -1378,7 +1589,7 @@ pub(super) fn explore<'a>(
         }
         g.states
             .find_all(successors.states(), &mut slots, &mut found);
-        for ((t, &(label, fired)), known) in successors
+        for ((t, &(label, fired, kind)), known) in successors
             .states()
             .zip(successors.meta.iter())
             .zip(found.iter())
@@ -1402,7 +1613,10 @@ pub(super) fn explore<'a>(
                     j
                 }
             };
-            let step = ctx.step(&mut At::Explore(&mut g), label, fired);
+            let step = match kind {
+                NO_KIND => ctx.step(&mut At::Explore(&mut g), label, fired),
+                k => k,
+            };
             g.edges += 1;
             if g.edges_kept {
                 g.edge_to.push(u64::from(j));
@@ -1417,12 +1631,15 @@ pub(super) fn explore<'a>(
         g.edge_start.push(g.edge_to.len() as u64);
     }
     g.deliveries = ctx.deliveries.clone();
+    if let Some(c) = &ctx.cache {
+        g.cache_hits = c.hits;
+    }
     // What expanded the states replays them: the same labels, fired sets and step kinds.
     let replay = Replay {
         ctx,
         w: ReplayBuffers {
             s: State::new(),
-            moves: Moves::default(),
+            exp: Expansion::default(),
             succ: Successors::new(words),
             slots: Vec::new(),
             found: Vec::new(),

@@ -31,6 +31,13 @@ pub(super) struct Components {
     /// The component of the nets named in the `final` and `goal` markings (one, by
     /// construction); `None` when there are none, or they name global places no net touches.
     pub ends: Option<u32>,
+    /// Per global place, per event, per timer and per function (programs' functions one
+    /// after the other), the component it belongs to; `None` when no net touches it. What
+    /// [`super::cache`] needs to tell each component's bits of a state.
+    pub of_global: Vec<Option<u32>>,
+    pub of_event: Vec<Option<u32>>,
+    pub of_timer: Vec<Option<u32>>,
+    pub of_function: Vec<Vec<Option<u32>>>,
 }
 
 struct UnionFind(Vec<u32>);
@@ -171,10 +178,28 @@ impl Components {
             of_net.push(number[root]);
         }
         let ends = ends_root.map(|r| number[r]).filter(|&c| c != u32::MAX);
+        let mut of = |node: u32| Some(number[uf.find(node) as usize]).filter(|&c| c != u32::MAX);
+        let of_global = (0..p.globals.len() as u32).map(|g| of(global(g))).collect();
+        let of_event = (0..p.events.len() as u32).map(|e| of(event(e))).collect();
+        let of_timer = (0..p.timers.len() as u32).map(|t| of(timer(t))).collect();
+        let of_function = p
+            .programs
+            .iter()
+            .zip(&fbase)
+            .map(|(prog, &base)| {
+                (0..prog.functions.len() as u32)
+                    .map(|f| of(base + f))
+                    .collect()
+            })
+            .collect();
         Components {
             of_net,
             count,
             ends,
+            of_global,
+            of_event,
+            of_timer,
+            of_function,
         }
     }
 

@@ -14,11 +14,38 @@ use std::hash::{BuildHasherDefault, Hasher};
 pub(super) struct StateStore {
     words: usize,
     data: Vec<u64>,
-    /// State numbers, `EMPTY` where free; a power of two long, at most half full.
+    /// State numbers, `EMPTY` where free; a power of two long, at most half full. Empty when
+    /// states are one word: `slots` then.
     table: Vec<u32>,
+    /// States of one word: each slot holds the state's number and its word, so that a lookup
+    /// reads one random place of memory (the slot) instead of two (the slot, then the state's
+    /// words): 12 bytes a slot where `table` takes 4 (docs/benchmarks.md, the fourth round).
+    slots: Vec<Slot>,
 }
 
 const EMPTY: u32 = u32::MAX;
+
+/// A slot of a table of one-word states: its number (`EMPTY` where free) and its word, in
+/// 32-bit halves so that a slot is 12 bytes, not 16.
+#[derive(Clone, Copy)]
+struct Slot {
+    number: u32,
+    lo: u32,
+    hi: u32,
+}
+
+const FREE: Slot = Slot {
+    number: EMPTY,
+    lo: 0,
+    hi: 0,
+};
+
+impl Slot {
+    #[inline]
+    fn word(self) -> u64 {
+        (u64::from(self.hi) << 32) | u64::from(self.lo)
+    }
+}
 
 fn hash(s: &[u64]) -> u64 {
     // A multiply-xorshift over the words (FxHash-like): states are bit vectors, not chosen by
@@ -33,10 +60,12 @@ fn hash(s: &[u64]) -> u64 {
 impl StateStore {
     /// An empty store of states of `words` words each.
     pub fn new(words: usize) -> StateStore {
+        let one = words == 1;
         StateStore {
             words,
             data: Vec::new(),
-            table: vec![EMPTY; 64],
+            table: if one { Vec::new() } else { vec![EMPTY; 64] },
+            slots: if one { vec![FREE; 64] } else { Vec::new() },
         }
     }
 
@@ -48,7 +77,7 @@ impl StateStore {
     /// The bytes its states and table take (their lengths: the spare capacity of a growing
     /// vector is not touched, so not resident), for the benchmarks' count.
     pub fn heap_bytes(&self) -> usize {
-        self.data.len() * 8 + self.table.len() * 4
+        self.data.len() * 8 + self.table.len() * 4 + self.slots.len() * std::mem::size_of::<Slot>()
     }
 
     /// State `i`.
@@ -61,7 +90,27 @@ impl StateStore {
         (0..self.len()).map(|i| self.get(i))
     }
 
+    /// The slot of one-word state `w`, and its number if it is stored.
+    #[inline]
+    fn slot_one(&self, w: u64) -> (usize, Option<u32>) {
+        let mask = self.slots.len() - 1;
+        let mut k = hash(&[w]) as usize & mask;
+        loop {
+            let sl = self.slots[k];
+            if sl.number == EMPTY {
+                return (k, None);
+            }
+            if sl.word() == w {
+                return (k, Some(sl.number));
+            }
+            k = (k + 1) & mask;
+        }
+    }
+
     fn slot(&self, s: &[u64]) -> (usize, Option<u32>) {
+        if !self.slots.is_empty() {
+            return self.slot_one(s[0]);
+        }
         let mask = self.table.len() - 1;
         self.probe(hash(s) as usize & mask, s)
     }
@@ -98,6 +147,14 @@ impl StateStore {
         slots: &mut Vec<(usize, u32)>,
         out: &mut Vec<Option<u32>>,
     ) {
+        if !self.slots.is_empty() {
+            // One random read per state, independent of the others: the processor overlaps
+            // their cache misses by itself (reading them all first, then comparing, as for
+            // wider states, was slower here: docs/benchmarks.md, the fourth round).
+            out.clear();
+            out.extend(states.map(|s| self.slot_one(s[0]).1));
+            return;
+        }
         let mask = self.table.len() - 1;
         slots.clear();
         slots.extend(states.clone().map(|s| {
@@ -117,6 +174,34 @@ impl StateStore {
     /// Stores `s` (not stored yet) and returns its number.
     pub fn push(&mut self, s: &[u64]) -> u32 {
         debug_assert_eq!(s.len(), self.words);
+        if !self.slots.is_empty() {
+            if 2 * (self.len() + 1) > self.slots.len() {
+                let mut table = vec![FREE; self.slots.len() * 2];
+                let mask = table.len() - 1;
+                for (j, &w) in self.data.iter().enumerate() {
+                    let mut k = hash(&[w]) as usize & mask;
+                    while table[k].number != EMPTY {
+                        k = (k + 1) & mask;
+                    }
+                    table[k] = Slot {
+                        number: j as u32,
+                        lo: w as u32,
+                        hi: (w >> 32) as u32,
+                    };
+                }
+                self.slots = table;
+            }
+            let (k, found) = self.slot_one(s[0]);
+            debug_assert!(found.is_none());
+            let j = self.len() as u32;
+            self.data.push(s[0]);
+            self.slots[k] = Slot {
+                number: j,
+                lo: s[0] as u32,
+                hi: (s[0] >> 32) as u32,
+            };
+            return j;
+        }
         if 2 * (self.len() + 1) > self.table.len() {
             let mut table = vec![EMPTY; self.table.len() * 2];
             let mask = table.len() - 1;
@@ -203,10 +288,12 @@ impl Packed {
         if w > self.width {
             self.widen(w);
         }
+        // The eight bytes of `v` over the padding (its bytes past `width` are zeros: padding
+        // again), then `width` more zeros: a copy of a fixed size, where copies of `width`
+        // bytes were calls to `memmove` (docs/benchmarks.md, the fourth round).
         let end = self.len * self.width;
-        self.bytes.truncate(end);
-        self.bytes.extend_from_slice(&v.to_le_bytes()[..self.width]);
-        self.bytes.extend_from_slice(&PAD);
+        self.bytes[end..end + 8].copy_from_slice(&v.to_le_bytes());
+        self.bytes.resize(end + self.width + 8, 0);
         self.len += 1;
     }
 
@@ -295,6 +382,26 @@ mod tests {
         assert_eq!(out, vec![Some(5), None, Some(999), Some(0)]);
         assert_eq!(st.len(), 1000);
         assert_eq!(st.iter().count(), 1000);
+    }
+
+    #[test]
+    fn one_word_states_are_found_in_their_slots() {
+        let mut st = StateStore::new(1);
+        let word = |k: u64| k.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ (k << 40);
+        for k in 0..1000u64 {
+            assert_eq!(st.find(&[word(k)]), None);
+            assert_eq!(st.push(&[word(k)]), k as u32);
+        }
+        for k in 0..1000u64 {
+            assert_eq!(st.find(&[word(k)]), Some(k as u32));
+            assert_eq!(&st[k as usize], &[word(k)]);
+        }
+        let (mut slots, mut out) = (Vec::new(), Vec::new());
+        let asked: Vec<[u64; 1]> = vec![[word(5)], [word(1000)], [word(999)], [word(0)]];
+        st.find_all(asked.iter().map(|s| &s[..]), &mut slots, &mut out);
+        assert_eq!(out, vec![Some(5), None, Some(999), Some(0)]);
+        // 2048 slots of 12 bytes for 1000 states of 8.
+        assert_eq!(st.heap_bytes(), 1000 * 8 + 2048 * 12);
     }
 
     #[test]
