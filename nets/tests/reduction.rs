@@ -584,13 +584,9 @@ proptest! {
     }
 }
 
-/// A net whose immediate transition waits on a guard the verifier cannot decide (a net
-/// parameter) stays enabled in a stable state, and every step of another component runs into
-/// it again (its fixpoint asks the guard both ways): the cache must not give that component's
-/// moves as they were in a state where the transition was not enabled (here, `T`'s moves met
-/// first while `WAIT` is `early`).
-#[test]
-fn the_transition_cache_leaves_alone_states_with_an_undecided_immediate_transition() {
+/// BOSS activates WAIT, whose immediate transition `leave` waits on a guard the verifier
+/// cannot decide (a net parameter); T toggles on its own.
+fn undecided() -> CompiledProject {
     let manifest = r#"[project]
 name = "undecided"
 files = ["a.pn"]
@@ -623,8 +619,32 @@ net T {
 }
 "#;
     let (_, c, d, _) = from_sources(manifest, &[("a.pn", nets)]);
-    let c = c.unwrap_or_else(|| panic!("{d:?}"));
+    c.unwrap_or_else(|| panic!("{d:?}"))
+}
+
+/// A net whose immediate transition waits on a guard the verifier cannot decide (a net
+/// parameter) stays enabled in a stable state, and every step of another component runs into
+/// it again (its fixpoint asks the guard both ways): the cache must not give that component's
+/// moves as they were in a state where the transition was not enabled (here, `T`'s moves met
+/// first while `WAIT` is `early`).
+#[test]
+fn the_transition_cache_leaves_alone_states_with_an_undecided_immediate_transition() {
+    let c = undecided();
     let hits = check_cache(&c, VerifyOptions::default()).expect("the same graph");
     assert!(hits > 0, "the cache applies elsewhere");
     same_report_cached(&c).expect("the same report");
+}
+
+/// The same project reduced: once `leave` stays enabled in a stable state (its guard taken
+/// false), every step of T's component may fire it, so the components are no longer
+/// independent and the verifier explores in full (as after a loop of immediate transitions):
+/// the same states and findings as `--no-reduction`.
+#[test]
+fn an_immediate_transition_left_enabled_makes_the_reduction_explore_in_full() {
+    let c = undecided();
+    let (red, full) = (run(&c, true), run(&c, false));
+    assert_eq!(red.reduced_states, 0, "explored in full");
+    assert_eq!(red.states, full.states);
+    assert_eq!(findings(&red), findings(&full));
+    assert_eq!(dead_depths(&red), dead_depths(&full));
 }

@@ -1535,7 +1535,13 @@ pub(super) fn explore<'a>(
         } else {
             g.reduced += 1;
         }
-        if components.is_some() && !ctx.livelock_seen.is_empty() {
+        // An immediate transition left enabled in a stable state (refused for safety, or its
+        // guard undecided and taken false) is tried again by every later step's fixpoint,
+        // whatever component the step is of: a delivery of one component may then fire another
+        // component's transition, and the components are no longer independent (the
+        // transition cache declines such states for the same reason).
+        let coupled = reducing && l.immediate.iter().any(|&r| l.enabled(&s, r));
+        if components.is_some() && (!ctx.livelock_seen.is_empty() || coupled) {
             // A loop of immediate transitions leaves a state that is not stable: every later
             // step's fixpoint runs into it again, whatever component the step is of, and the
             // components are no longer independent. Explore again, in full.

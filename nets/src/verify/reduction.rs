@@ -5,9 +5,12 @@
 //! one group reads or writes anything of another. Two nets are in one component when they
 //! share a global place, when one activates, deactivates or finishes into the other (or is its
 //! parent or child), when both wait for one event (a delivery of it touches both), when one
-//! emits an event the other waits for, calls a function whose answer the other waits for, or
-//! starts or cancels a timer whose event the other waits for (the environment's counters and
-//! the timer's bit are then shared), and when an invariant names both. A delivery touches the
+//! emits an event the other waits for or addresses one to the other, calls a function whose
+//! answer the other waits for, or starts or cancels a timer whose event the other waits for
+//! (the environment's counters and the timer's bit are then shared), and when an invariant
+//! names both. An immediate transition left enabled in a stable state (refused, or its guard
+//! undecided) joins every component (any step's fixpoint tries it): the exploration then
+//! starts again in full. A delivery touches the
 //! component of the nets that wait for its event; a catastrophic event touches everything (it
 //! ends the mission). Deliveries of different components therefore commute, and none enables
 //! or disables another: in a state, the enabled deliveries of one component form a persistent
@@ -134,7 +137,17 @@ impl Components {
                                 uf.union(f, event(e));
                             }
                         }
-                        Action::Emit { event: e, .. } => uf.union(n, event(*e)),
+                        Action::Emit {
+                            event: e, target, ..
+                        } => {
+                            uf.union(n, event(*e));
+                            // `emit e to m`: its delivery is counted as `m`'s group's, and
+                            // its counter is the emitter's (even when `m` does not wait for
+                            // `e`, and its delivery is then an unused one).
+                            if let Some(m) = target {
+                                uf.union(n, *m);
+                            }
+                        }
                     }
                 }
             }
