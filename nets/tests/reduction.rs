@@ -440,8 +440,8 @@ fn same_report_replayed(c: &CompiledProject, timed: bool) -> Result<(), String> 
     Ok(())
 }
 
-#[test]
-fn every_mission_verifies_the_same_with_its_edges_replayed() {
+/// Every mission of the repository and the verifier's test projects (flawed, progress, timed).
+fn project_dirs() -> Vec<std::path::PathBuf> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut dirs: Vec<_> = std::fs::read_dir(root.join("../missions"))
         .unwrap()
@@ -455,7 +455,12 @@ fn every_mission_verifies_the_same_with_its_edges_replayed() {
         }
     }
     dirs.sort();
-    for dir in &dirs {
+    dirs
+}
+
+#[test]
+fn every_mission_verifies_the_same_with_its_edges_replayed() {
+    for dir in &project_dirs() {
         let (_, c, d) = load_and_check(dir).expect("reads");
         assert!(!d.has_errors(), "{}", dir.display());
         let c = c.expect("compiles");
@@ -518,20 +523,7 @@ fn same_report_cached(c: &CompiledProject) -> Result<(), String> {
 
 #[test]
 fn the_transition_cache_builds_the_same_graph_on_every_mission_and_the_toggles() {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let mut dirs: Vec<_> = std::fs::read_dir(root.join("../missions"))
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|d| d.join("petrel.toml").is_file())
-        .collect();
-    dirs.push(root.join("tests/data/verify/flawed"));
-    for sub in ["tests/data/progress", "tests/data/timed"] {
-        for d in std::fs::read_dir(root.join(sub)).unwrap() {
-            dirs.push(d.unwrap().path());
-        }
-    }
-    dirs.sort();
-    for dir in &dirs {
+    for dir in &project_dirs() {
         let (_, c, d) = load_and_check(dir).expect("reads");
         assert!(!d.has_errors(), "{}", dir.display());
         let c = c.expect("compiles");
