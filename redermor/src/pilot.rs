@@ -11,6 +11,11 @@
 //!   target depth is the seabed's (depth + altitude) less the altitude wanted, never closer to
 //!   the seabed than the minimum altitude.
 //!
+//! - Braking ([`Pilot::brake`]): thrust against the speed through the water in proportion to
+//!   it, so that it fades as the vehicle slows; no integral, so nothing winds up. A command
+//!   held over a long control step (a slow computer) then cannot drive the vehicle far the
+//!   other way, as a fixed astern order does once it has passed zero.
+//!
 //! Each PID saturates its output and stops integrating while saturated in the direction of the
 //! error (anti-windup by conditional integration).
 
@@ -94,6 +99,14 @@ pub struct PilotConfig {
     pub max_depth: f64,
     /// Closest to the seabed commanded (m).
     pub min_altitude: f64,
+    /// Braking: rpm against the motion per square root of the speed through the water
+    /// (rpm per √(m/s)). The thrust, as the square of the rpm, is then proportional to the
+    /// speed: the speed decays exponentially (at about 0.22/s for Redermor) and the command
+    /// fades with it.
+    pub brake_rpm: f64,
+    /// The most rpm braking uses: the thrusters' power goes as the cube of their rpm, and a
+    /// hard brake from cruise speed would pull the battery's voltage under its alarm level.
+    pub brake_max_rpm: f64,
 }
 
 impl Default for PilotConfig {
@@ -106,6 +119,14 @@ impl Default for PilotConfig {
             max_rpm: 3000.0,
             max_depth: 300.0,
             min_altitude: 2.0,
+            // 2 × 1.5e-4 N/rpm² × 1500² rpm² per m/s over 3000 kg: 0.225/s. A command held
+            // up to 4 s does not reverse the vehicle (1/0.225 = 4.4 s), and it stops from half
+            // the cruise speed within about 3 m.
+            brake_rpm: 1500.0,
+            // 2 × 150 W × 1.2³ ≈ 520 W, about 21 A: a volt under the battery's no-load voltage
+            // (uncapped, braking from 1.5 m/s took 1840 rpm and the voltage to 21.5 V, under
+            // the data server's battery_low level of 22 V).
+            brake_max_rpm: 1200.0,
         }
     }
 }
@@ -173,7 +194,47 @@ impl Pilot {
         let room = (c.max_rpm - diff.abs()).max(0.0);
         let mean = mean.clamp(-room, room);
 
-        let target = self.target_depth(sp.depth, nav);
+        let depth = self.depth_command(dt, sp.depth, nav);
+        Commands {
+            rpm_left: mean + diff,
+            rpm_right: mean - diff,
+            depth,
+            enable: true,
+        }
+    }
+
+    /// The commands that brake the vehicle to a stop after `dt` seconds, holding `heading` and
+    /// `depth`: both thrusters against the speed through the water, at
+    /// [`PilotConfig::brake_rpm`] times the square root of its magnitude (less what the
+    /// heading needs), and none once it is zero.
+    pub fn brake(&mut self, dt: f64, heading: f64, depth: DepthTarget, nav: &NavState) -> Commands {
+        let c = self.config;
+        let error = geom::wrap_pi(heading - nav.heading);
+        let diff = self.heading.update(error, -nav.yaw_rate, dt);
+        // The speed loop's integral belongs to the speed it held: braking does without it,
+        // and whatever comes after starts afresh.
+        self.speed.reset();
+        let speed = if nav.water_speed.is_finite() {
+            nav.water_speed
+        } else {
+            0.0
+        };
+        let mean = -speed.signum() * (c.brake_rpm * speed.abs().sqrt()).min(c.brake_max_rpm);
+        let room = (c.max_rpm - diff.abs()).max(0.0);
+        let mean = mean.clamp(-room, room);
+        let depth = self.depth_command(dt, depth, nav);
+        Commands {
+            rpm_left: mean + diff,
+            rpm_right: mean - diff,
+            depth,
+            enable: true,
+        }
+    }
+
+    /// The depth to command for `target` after `dt` seconds: the target trimmed by its PI,
+    /// never into the seabed.
+    fn depth_command(&mut self, dt: f64, target: DepthTarget, nav: &NavState) -> f64 {
+        let target = self.target_depth(target, nav);
         let trim = self.depth_trim.update(target - nav.depth, 0.0, dt);
         let mut depth = (target + trim).clamp(0.0, self.config.max_depth);
         if let Some(altitude) = nav.altitude {
@@ -181,12 +242,7 @@ impl Pilot {
             let floor = (nav.depth + altitude - self.config.min_altitude).max(0.0);
             depth = depth.min(floor);
         }
-        Commands {
-            rpm_left: mean + diff,
-            rpm_right: mean - diff,
-            depth,
-            enable: true,
-        }
+        depth
     }
 }
 
@@ -224,6 +280,38 @@ mod tests {
         assert!(c.enable);
         let stop = pilot.update(0.1, None, &nav);
         assert!(!stop.enable && stop.depth == 0.0);
+    }
+
+    #[test]
+    fn the_brake_opposes_the_motion_and_fades_with_it() {
+        let mut pilot = Pilot::new(PilotConfig::default());
+        let mut nav = *Gdd::new(geom::pos(0.0, 0.0), 0).state();
+        let depth = DepthTarget::Depth(0.0);
+        let mean = |c: Commands| (c.rpm_left + c.rpm_right) / 2.0;
+        nav.water_speed = 0.5;
+        let ahead = mean(pilot.brake(0.1, 0.0, depth, &nav));
+        assert!(ahead < 0.0, "astern while going ahead: {ahead}");
+        nav.water_speed = 0.05;
+        let slow = mean(pilot.brake(0.1, 0.0, depth, &nav));
+        assert!(
+            slow < 0.0 && slow > ahead,
+            "weaker as it slows: {slow} against {ahead}"
+        );
+        nav.water_speed = 0.0;
+        assert_eq!(
+            mean(pilot.brake(0.1, 0.0, depth, &nav)),
+            0.0,
+            "nothing once stopped"
+        );
+        nav.water_speed = -0.5;
+        assert!(
+            mean(pilot.brake(0.1, 0.0, depth, &nav)) > 0.0,
+            "ahead while going astern"
+        );
+        nav.water_speed = 3.0;
+        let hard = mean(pilot.brake(0.1, 0.0, depth, &nav));
+        assert_eq!(hard, -PilotConfig::default().brake_max_rpm, "capped");
+        assert!(pilot.brake(0.1, 0.0, depth, &nav).enable);
     }
 
     #[test]

@@ -348,12 +348,15 @@ pub const SURFACE_DEPTH: f64 = 0.5;
 /// A sensor silent this long (µs of the vehicle's time) is not trusted.
 pub const SENSOR_TIMEOUT_US: u64 = 2_000_000;
 
-/// The speed through the water asked for while braking at the surface (m/s, astern): the
-/// thrusters' thrust goes as the square of their rpm, so braking needs a firm astern command.
+/// The speed through the water asked for while slowing down to turn round towards the point
+/// to surface at (m/s, astern): the thrusters' thrust goes as the square of their rpm, so
+/// slowing needs a firm astern command. (The final stop at that point is the pilot's brake,
+/// which fades with the speed.)
 pub const BRAKE_SPEED: f64 = -0.5;
 
 /// Below this speed through the water (m/s) the vehicle is stopped: what it still drifts
-/// once its thrusters are off is a few metres at most.
+/// once its thrusters are off is a few metres at most. A speed that changed sign while
+/// braking means stopped too: the vehicle passed zero between two control steps.
 pub const STOPPED_SPEED: f64 = 0.05;
 
 /// The longest IDC brakes at the surface (µs of the vehicle's time) before it reports the
@@ -386,8 +389,20 @@ struct Surfacing {
     anchor: Position,
     /// At the surface: since when (µs of the vehicle's time).
     at_surface: Option<u64>,
-    /// At the surface at the anchor and braking: since when (µs of the vehicle's time).
-    braking: Option<u64>,
+    /// At the surface at the anchor and braking.
+    braking: Option<Braking>,
+}
+
+/// IDC braking to a stop at the anchor.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Braking {
+    /// Since when (µs of the vehicle's time).
+    since: u64,
+    /// The heading held meanwhile (radians).
+    heading: f64,
+    /// The sign of the speed through the water when it began: the vehicle has stopped once
+    /// the speed has the other sign, however few control steps saw it slow down.
+    direction: f64,
 }
 
 /// GDD, GUI and IDC: the vehicle's state, the route flown, the controllers.
@@ -403,6 +418,9 @@ pub struct Nav {
     inspection: Option<Guidance>,
     suspended: Option<(Option<Guidance>, Option<Order>)>,
     hold: Option<Setpoint>,
+    /// GUI stopped every route: the heading and depth the vehicle holds while braking to a
+    /// stop where it is, until it is given another order.
+    halt: Option<(f64, DepthTarget)>,
     engaged: bool,
     /// The end of the route GUI last flew to its end, until it is given another.
     route_end: Option<Position>,
@@ -430,6 +448,7 @@ impl Nav {
             inspection: None,
             suspended: None,
             hold: None,
+            halt: None,
             engaged: false,
             route_end: None,
             surfacing: None,
@@ -574,10 +593,16 @@ impl Nav {
                 self.order = None;
                 self.inspection = None;
                 self.suspended = None;
-                self.hold_here();
+                // Brake to a stop where it is rather than cruise on: the next route starts from
+                // where GDD said the vehicle was, and a replan on a slow computer takes minutes
+                // of the vehicle's time, over 200 m at cruise speed, into a forbidden zone
+                // perhaps.
+                let heading = self.gdd.state().heading;
+                self.halt = self.hold.take().map(|h| (heading, h.depth));
             }
             ("IDC", "engage") => self.engaged = true,
             ("IDC", "surface") => {
+                self.halt = None;
                 self.surfacing = Some(Surfacing {
                     since: self.tracker.time_us(),
                     anchor: self.route_end.unwrap_or(self.gdd.state().position),
@@ -587,6 +612,7 @@ impl Nav {
             }
             ("IDC", "stop") | ("IDC", "emergency_surface") => {
                 self.engaged = false;
+                self.halt = None;
                 self.surfacing = None;
                 self.route = None;
                 self.order = None;
@@ -667,13 +693,18 @@ impl Nav {
         }
         if setpoint.is_some() {
             self.hold = setpoint;
+            // A new order: the stop GUI was told is over.
+            self.halt = None;
         }
 
+        // The heading and depth to hold while braking to a stop, when GUI or IDC stops.
+        let mut brake = self.halt;
         if let Some(surfacing) = &mut self.surfacing {
             let depth_known =
                 !self
                     .gdd
                     .is_stale(Sensor::Depth, now, surfacing.since, SENSOR_TIMEOUT_US);
+            brake = None;
             let surfaced = if !depth_known {
                 // No depth: stop the thrusters, the buoyant vehicle rises; the GPS's first fix
                 // says it is out.
@@ -692,28 +723,33 @@ impl Nav {
             } else {
                 // Up at the anchor: brake to a stop before saying so, so that the vehicle is
                 // where it surfaced when its thrusters go off (it would coast on for tens of
-                // metres).
+                // metres). The pilot's brake fades with the speed, so that a slow computer's
+                // long control step does not drive the vehicle astern; a speed that changed
+                // sign between two steps is a stop.
                 surfacing.at_surface.get_or_insert(now);
-                let since = *surfacing.braking.get_or_insert(now);
-                setpoint = Some(Setpoint {
+                let b = *surfacing.braking.get_or_insert(Braking {
+                    since: now,
                     heading: nav.heading,
-                    speed: BRAKE_SPEED,
-                    depth: DepthTarget::Depth(0.0),
+                    direction: if nav.water_speed < 0.0 { -1.0 } else { 1.0 },
                 });
+                brake = Some((b.heading, DepthTarget::Depth(0.0)));
+                setpoint = None;
                 nav.water_speed.abs() <= STOPPED_SPEED
-                    || now.saturating_sub(since) >= BRAKE_TIMEOUT_US
+                    || nav.water_speed * b.direction < 0.0
+                    || now.saturating_sub(b.since) >= BRAKE_TIMEOUT_US
             };
             if surfaced {
                 self.surfacing = None;
                 self.hold = None;
                 setpoint = None;
+                brake = None;
                 out.push(answer("IDC", "surfaced", vec![]));
             }
         }
-        self.commands = if self.engaged {
-            self.pilot.update(dt, setpoint.as_ref(), &nav)
-        } else {
-            self.pilot.update(dt, None, &nav)
+        self.commands = match (self.engaged, brake) {
+            (true, Some((heading, depth))) => self.pilot.brake(dt, heading, depth, &nav),
+            (true, None) => self.pilot.update(dt, setpoint.as_ref(), &nav),
+            (false, _) => self.pilot.update(dt, None, &nav),
         };
         (out, Some(self.commands))
     }
