@@ -208,7 +208,8 @@ impl Report {
              rounds not recorded) while the others are paused, {blocks} blocks each, the turns going \
              forwards then backwards through raw iceoryx2 busy poll, Petrel spin, spin-then-block, \
              raw iceoryx2 WaitSet, TCP, Petrel block, Unix socket (each goal's pair next to each \
-             other). Each row is all its blocks in one histogram. Paused means that nothing of it \
+             other). Each row is all its blocks in one histogram (the time limit counts all of a \
+             set-up's blocks together). Paused means that nothing of it \
              runs: the player is stopped (SIGSTOP; it runs `petrel play`'s loop, which has no pause \
              of its own) and continued before its block, raw iceoryx2's answering process sleeps \
              until it is told to go on, a socket's sleeps in its read anyway. The goals give the \
