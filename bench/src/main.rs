@@ -2,12 +2,13 @@
 //!
 //! `petrel-bench run` measures, in one go on the machine at hand: the transport round trip
 //! (program -> player -> program) per wait strategy beside raw iceoryx2, Unix-socket and TCP
-//! ping-pongs; the vehicle path through the CAN data server on the in-memory bus and on vcan0
+//! ping-pongs, all measured in alternating blocks; the vehicle path through the CAN data server on the in-memory bus and on vcan0
 //! in the VM bench beside a bare echo; the same round trips under load; the processes'
 //! footprint; and the round trip with 1, 10 and 50 programs. It writes docs/benchmarks.md's
 //! latency section and CDF plots in docs/bench/. `petrel-bench role ...` are the processes a
 //! measurement starts (this binary again); `petrel-bench vcan` is what runs inside the VM.
 
+mod alternate;
 mod footprint;
 mod measure;
 mod project;
@@ -176,6 +177,7 @@ fn main() -> ExitCode {
                 rounds,
                 warmup,
                 max: Duration::from_secs(max_secs),
+                blocks: 1,
                 scale_secs: 0.0,
                 scale: Vec::new(),
                 petrel: None,
@@ -306,6 +308,7 @@ fn run(a: RunArgs) -> roles::Res<()> {
         rounds: if a.short { 300 } else { 20_000 },
         warmup: if a.short { 50 } else { 1_000 },
         max: Duration::from_secs(if a.short { 10 } else { 20 }),
+        blocks: if a.short { 5 } else { 20 },
         scale_secs: if a.short { 0.5 } else { 5.0 },
         scale: vec![1, 10, 50],
         petrel: next_to_me("petrel"),
@@ -330,26 +333,8 @@ fn run(a: RunArgs) -> roles::Res<()> {
     let say = |what: &str| eprintln!("[{:>5.0} s] {what}", started.elapsed().as_secs_f64());
 
     if want("transport") || want("load") {
-        say("transport");
-        r.transport.push((
-            report::IOX_BUSY.to_owned(),
-            measure::iox_rt(&s, false, Load::Idle),
-        ));
-        r.transport.push((
-            report::IOX_WAITSET.to_owned(),
-            measure::iox_rt(&s, true, Load::Idle),
-        ));
-        r.transport
-            .push((report::UDS.to_owned(), measure::uds_rt(&s, Load::Idle)));
-        r.transport
-            .push((report::TCP.to_owned(), measure::tcp_rt(&s, Load::Idle)));
-        for wait in measure::strategies() {
-            say(&format!("transport: Petrel, {wait}"));
-            r.transport.push((
-                report::petrel_name(&wait.to_string()),
-                measure::petrel_rt(&s, wait, Load::Idle).map(|(l, _)| l),
-            ));
-        }
+        say("transport: starting and warming up each set-up");
+        (r.transport, r.transport_blocks) = transport(&s);
     }
     if want("vehicle") {
         say("vehicle path: memory bus");
@@ -451,6 +436,88 @@ fn run(a: RunArgs) -> roles::Res<()> {
         return Err(format!("{failures} measurement(s) failed: see the report"));
     }
     Ok(())
+}
+
+/// A set-up of part 1, started when its turn to warm up comes.
+type Start = Box<dyn FnOnce() -> roles::Res<Box<dyn alternate::Side>>>;
+
+/// Part 1: every set-up started and warmed up, then measured in alternating blocks (see
+/// `alternate`), so that the goals' ratios compare the same minutes. The turns put each goal's
+/// pair next to each other: raw iceoryx2 busy poll and Petrel spin, Petrel block and the Unix
+/// socket. Returns the series in the table's order, and each one's blocks.
+fn transport(s: &measure::Settings) -> (Vec<report::Series>, Vec<report::Blocks>) {
+    let stb = WaitStrategy::SpinThenBlock(Duration::from_micros(200));
+    let petrel = |w: WaitStrategy| -> (String, Start) {
+        (
+            report::petrel_name(&w.to_string()),
+            Box::new(move || measure::PetrelSide::start(w)),
+        )
+    };
+    let turns: Vec<(String, Start)> = vec![
+        (
+            report::IOX_BUSY.to_owned(),
+            Box::new(|| measure::IoxPingPong::start(false)),
+        ),
+        petrel(WaitStrategy::Spin),
+        petrel(stb),
+        (
+            report::IOX_WAITSET.to_owned(),
+            Box::new(|| measure::IoxPingPong::start(true)),
+        ),
+        (report::TCP.to_owned(), Box::new(measure::tcp_side)),
+        petrel(WaitStrategy::Block),
+        (report::UDS.to_owned(), Box::new(measure::uds_side)),
+    ];
+    // Each set-up is started and warmed up while the ones before it are paused, then paused.
+    let mut names = Vec::new();
+    let mut sides = Vec::new();
+    for (name, start) in turns {
+        sides.push(alternate::prepare(start(), s.warmup));
+        names.push(name);
+    }
+    let plan = alternate::Plan {
+        rounds: s.rounds,
+        blocks: s.blocks,
+        block_warmup: (s.warmup / s.blocks.max(1)).max(1),
+        max: s.max,
+    };
+    eprintln!(
+        "  measuring in {} alternating blocks of about {} rounds each",
+        s.blocks,
+        s.rounds / s.blocks.max(1)
+    );
+    let mut measured: Vec<_> = names
+        .into_iter()
+        .zip(alternate::alternate(sides, &plan))
+        .collect();
+    // The table's order: baselines, then Petrel per strategy.
+    let mut order = vec![
+        report::IOX_BUSY.to_owned(),
+        report::IOX_WAITSET.to_owned(),
+        report::UDS.to_owned(),
+        report::TCP.to_owned(),
+    ];
+    order.extend(
+        measure::strategies()
+            .iter()
+            .map(|w| report::petrel_name(&w.to_string())),
+    );
+    let mut series = Vec::new();
+    let mut blocks = Vec::new();
+    for name in order {
+        let Some(at) = measured.iter().position(|(n, _)| *n == name) else {
+            continue;
+        };
+        let (name, r) = measured.remove(at);
+        match r {
+            Ok(a) => {
+                blocks.push((name.clone(), a.blocks));
+                series.push((name, Ok(a.latencies)));
+            }
+            Err(e) => series.push((name, Err(e))),
+        }
+    }
+    (series, blocks)
 }
 
 fn count_failures(r: &Report) -> usize {

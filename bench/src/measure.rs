@@ -11,6 +11,7 @@ use std::time::{Duration, Instant};
 use petrel_ipc::iceoryx2::prelude::*;
 use petrel_ipc::{Participant, Role, Vehicle, WaitStrategy};
 
+use crate::alternate::{alternate, prepare, Plan, Side};
 use crate::roles::{self, err, Res};
 use crate::stats::Latencies;
 
@@ -23,6 +24,8 @@ pub struct Settings {
     pub warmup: usize,
     /// Longest time one measurement takes (rounds past it are not done, and said so).
     pub max: Duration,
+    /// Blocks the transport part's set-ups take turns in (see `alternate`).
+    pub blocks: usize,
     /// Seconds each scale measurement runs.
     pub scale_secs: f64,
     /// Program counts of the scale measurement.
@@ -120,6 +123,31 @@ impl Kid {
         Ok(line)
     }
 
+    /// Writes a line to its standard input.
+    pub fn tell(&mut self, line: &str) -> Res<()> {
+        let name = &self.name;
+        let stdin = self
+            .stdin
+            .as_mut()
+            .ok_or_else(|| format!("{name}: no input"))?;
+        writeln!(stdin, "{line}")
+            .and_then(|()| stdin.flush())
+            .map_err(|e| format!("{name}: {e}"))
+    }
+
+    /// Reads its lines until `want` (fails at the end of its output).
+    pub fn expect(&mut self, want: &str) -> Res<()> {
+        loop {
+            let line = self.line()?;
+            if line.is_empty() {
+                return Err(format!("{} ended before saying {want}", self.name));
+            }
+            if line.trim() == want {
+                return Ok(());
+            }
+        }
+    }
+
     /// Closes its standard input (it stops), and returns the rest of its output.
     pub fn finish(mut self) -> Res<String> {
         drop(self.stdin.take());
@@ -203,6 +231,7 @@ pub struct PlayerRun {
     dir: tempfile::TempDir,
     player: Option<Kid>,
     load: Vec<Kid>,
+    paused: bool,
 }
 
 impl PlayerRun {
@@ -230,6 +259,7 @@ impl PlayerRun {
             dir,
             player: Some(player),
             load: Vec::new(),
+            paused: false,
         };
         match load {
             Load::Idle => {}
@@ -262,8 +292,34 @@ impl PlayerRun {
         self.dir.path()
     }
 
+    /// Stops the player (SIGSTOP) until [`resume`](Self::resume): it runs `petrel play`'s loop,
+    /// which has no pause of its own, and a spinning player would take a CPU from what is
+    /// measured meanwhile (a sleeping one would still wake for its heartbeats).
+    pub fn pause(&mut self) -> Res<()> {
+        if let Some(pid) = self.player_pid() {
+            signal(pid, "STOP")?;
+            self.paused = true;
+            await_stopped(pid, true)?;
+        }
+        Ok(())
+    }
+
+    /// Lets the player go on (SIGCONT).
+    pub fn resume(&mut self) -> Res<()> {
+        if let Some(pid) = self.player_pid() {
+            signal(pid, "CONT")?;
+            self.paused = false;
+            await_stopped(pid, false)?;
+        }
+        Ok(())
+    }
+
     /// Stops everything; returns what the background processes said.
     pub fn stop(mut self) -> Res<Vec<String>> {
+        if self.paused {
+            // A stopped player would not see its SIGTERM.
+            let _ = self.resume();
+        }
         let mut said = Vec::new();
         for k in self.load.drain(..) {
             said.push(k.finish()?.trim().to_owned());
@@ -279,6 +335,46 @@ impl PlayerRun {
 /// CPUs of this machine.
 pub fn cpus() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// Sends signal `sig` (a name: STOP, CONT, TERM) to process `pid`.
+fn signal(pid: u32, sig: &str) -> Res<()> {
+    let status = Command::new("kill")
+        .args([&format!("-{sig}"), &pid.to_string()])
+        .status()
+        .map_err(|e| format!("kill -{sig} {pid}: {e}"))?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!("kill -{sig} {pid}: {status}"))
+    }
+}
+
+/// The state letter of process `pid` (`/proc/PID/stat`'s third field: `T` when stopped).
+fn process_state(pid: u32) -> Res<char> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat"))
+        .map_err(|e| format!("process {pid}: {e}"))?;
+    // The second field (the command) is in parentheses and may hold spaces: the state follows
+    // the last closing one.
+    stat.rsplit_once(')')
+        .and_then(|(_, rest)| rest.trim_start().chars().next())
+        .ok_or_else(|| format!("process {pid}: unexpected /proc/{pid}/stat"))
+}
+
+/// Waits until process `pid` is stopped (`stopped`) or runs again (a signal is delivered when
+/// the process is next scheduled, not when `kill` returns).
+fn await_stopped(pid: u32, stopped: bool) -> Res<()> {
+    let until = Instant::now() + Duration::from_secs(5);
+    loop {
+        if (process_state(pid)? == 'T') == stopped {
+            return Ok(());
+        }
+        if Instant::now() > until {
+            let what = if stopped { "stop" } else { "go on" };
+            return Err(format!("process {pid} did not {what} within 5 s"));
+        }
+        std::thread::sleep(Duration::from_micros(100));
+    }
 }
 
 /// Round trips program -> player -> program, measured by a program in this process.
@@ -298,80 +394,216 @@ pub fn petrel_rt(s: &Settings, wait: WaitStrategy, load: Load) -> Res<(Latencies
     Ok((measured?.latencies, said))
 }
 
+/// Petrel's round trip as a set-up measured in blocks: a player with `wait` on a vehicle of its
+/// own, and a program in this process.
+pub struct PetrelSide {
+    pinger: Option<roles::Pinger>,
+    run: Option<PlayerRun>,
+}
+
+impl PetrelSide {
+    /// Starts the player and connects the program.
+    pub fn start(wait: WaitStrategy) -> Res<Box<dyn Side>> {
+        let run = PlayerRun::start(1, wait, Load::Idle)?;
+        let pinger = roles::Pinger::connect(&roles::RoundTrips {
+            vehicle: run.vehicle.clone(),
+            program: crate::project::program_name(0),
+            event: "pong_0".to_owned(),
+            wait,
+            warmup: 0,
+            rounds: 0,
+            max: Duration::ZERO,
+            gate: None,
+        });
+        match pinger {
+            Ok(p) => Ok(Box::new(PetrelSide {
+                pinger: Some(p),
+                run: Some(run),
+            })),
+            Err(e) => {
+                let _ = run.stop();
+                Err(e)
+            }
+        }
+    }
+}
+
+impl Side for PetrelSide {
+    fn rounds(
+        &mut self,
+        n: usize,
+        mut into: Option<&mut Latencies>,
+        until: Option<Instant>,
+    ) -> Res<usize> {
+        let pinger = self.pinger.as_mut().ok_or("finished")?;
+        let mut done = 0;
+        for _ in 0..n {
+            if until.is_some_and(|u| Instant::now() > u) {
+                break;
+            }
+            let d = pinger.round()?;
+            if let Some(l) = into.as_deref_mut() {
+                l.record(d);
+            }
+            done += 1;
+        }
+        Ok(done)
+    }
+
+    fn pause(&mut self) -> Res<()> {
+        // The program is this process, idle between blocks: only the player runs.
+        self.run.as_mut().map_or(Ok(()), PlayerRun::pause)
+    }
+
+    fn resume(&mut self) -> Res<()> {
+        self.run.as_mut().map_or(Ok(()), PlayerRun::resume)
+    }
+
+    fn finish(mut self: Box<Self>) -> Res<()> {
+        // No close(): it waits for the player's acknowledgement of the last events, which the
+        // measurement does not need.
+        drop(self.pinger.take());
+        match self.run.take() {
+            Some(run) => run.stop().map(|_| ()),
+            None => Ok(()),
+        }
+    }
+}
+
 /// Raw iceoryx2 publish-subscribe ping-pong, busy polling or sleeping in a WaitSet, with the
-/// Petrel event's size.
-pub fn iox_rt(s: &Settings, waitset: bool, load: Load) -> Res<Latencies> {
-    let len = payload_len();
-    let vehicle = Vehicle::isolated("ioxrt").map_err(|e| e.to_string())?;
-    let result = {
-        let me = Participant::join(&vehicle, Role::tool("ioxping").map_err(|e| e.to_string())?)
-            .map_err(|e| e.to_string())?;
-        let side = roles::iox_side(me.node(), "bench/ping", "bench/pong", len)?;
-        let ws = WaitSetBuilder::new()
-            .create::<ipc::Service>()
-            .map_err(err("waitset"))?;
-        let _guard = if waitset {
-            Some(
-                ws.attach_notification(&side.listener)
-                    .map_err(err("attach"))?,
-            )
-        } else {
-            None
+/// Petrel event's size, as a set-up measured in blocks; its answering process pauses on its
+/// gate between blocks.
+pub struct IoxPingPong {
+    // Declared in the order they are dropped: ports, then the node, then the vehicle's files.
+    side: Option<roles::IoxSide>,
+    ws: Option<WaitSet<ipc::Service>>,
+    me: Option<Participant>,
+    vehicle: Vehicle,
+    pong: Option<Kid>,
+    buf: Vec<u8>,
+    next: u64,
+}
+
+impl IoxPingPong {
+    /// Opens the ports and starts the answering process.
+    pub fn start(waitset: bool) -> Res<Box<dyn Side>> {
+        let len = payload_len();
+        let vehicle = Vehicle::isolated("ioxrt").map_err(|e| e.to_string())?;
+        let mut me = IoxPingPong {
+            side: None,
+            ws: None,
+            me: None,
+            vehicle,
+            pong: None,
+            buf: vec![0u8; len],
+            next: 0,
         };
-        let loaders = start_load(load)?;
+        match me.open(waitset, len) {
+            Ok(()) => Ok(Box::new(me)),
+            Err(e) => {
+                let _ = Box::new(me).finish();
+                Err(e)
+            }
+        }
+    }
+
+    fn open(&mut self, waitset: bool, len: usize) -> Res<()> {
+        let me = Participant::join(
+            &self.vehicle,
+            Role::tool("ioxping").map_err(|e| e.to_string())?,
+        )
+        .map_err(|e| e.to_string())?;
+        self.side = Some(roles::iox_side(me.node(), "bench/ping", "bench/pong", len)?);
+        self.me = Some(me);
+        if waitset {
+            self.ws = Some(
+                WaitSetBuilder::new()
+                    .create::<ipc::Service>()
+                    .map_err(err("waitset"))?,
+            );
+        }
         let mut pong = Kid::role(&[
             "iox-pong",
             "--name",
-            vehicle.name(),
+            self.vehicle.name(),
             "--prefix",
-            vehicle.prefix(),
+            self.vehicle.prefix(),
             "--mode",
             if waitset { "waitset" } else { "busy" },
             "--len",
             &len.to_string(),
         ])?;
-        pong.ready()?;
-        let mut buf = vec![0u8; len];
-        let mut lat = Latencies::new();
-        let start = Instant::now();
-        let mut done = 0usize;
-        let mut result = Ok(());
-        for i in 0..(s.warmup + s.rounds) as u64 {
-            if i as usize >= s.warmup && start.elapsed() > s.max {
+        let ready = pong.ready();
+        self.pong = Some(pong);
+        ready
+    }
+
+    fn pong(&mut self) -> Res<&mut Kid> {
+        self.pong
+            .as_mut()
+            .ok_or_else(|| "iox-pong: not started".to_owned())
+    }
+}
+
+impl Side for IoxPingPong {
+    fn rounds(
+        &mut self,
+        n: usize,
+        mut into: Option<&mut Latencies>,
+        until: Option<Instant>,
+    ) -> Res<usize> {
+        let side = self.side.as_ref().ok_or("finished")?;
+        // Attached for the block only (a guard borrows the WaitSet), outside the timed rounds.
+        let _guard = match &self.ws {
+            Some(ws) => Some(
+                ws.attach_notification(&side.listener)
+                    .map_err(err("attach"))?,
+            ),
+            None => None,
+        };
+        let mut done = 0;
+        for _ in 0..n {
+            if until.is_some_and(|u| Instant::now() > u) {
                 break;
             }
-            buf[..8].copy_from_slice(&i.to_le_bytes());
+            let i = self.next;
+            self.next += 1;
+            self.buf[..8].copy_from_slice(&i.to_le_bytes());
             let t = Instant::now();
-            let sent = roles::iox_send(&side.publisher, &buf).and_then(|()| {
-                if waitset {
-                    side.notifier.notify().map(|_| ()).map_err(err("notify"))
-                } else {
-                    Ok(())
-                }
-            });
-            if let Err(e) = sent.and_then(|()| {
-                roles::iox_recv(
-                    &side,
-                    waitset.then_some(&ws),
-                    i,
-                    t + Duration::from_secs(10),
-                )
-            }) {
-                result = Err(e);
-                break;
+            roles::iox_send(&side.publisher, &self.buf)?;
+            if self.ws.is_some() {
+                side.notifier.notify().map_err(err("notify"))?;
             }
-            if i as usize >= s.warmup {
-                lat.record(t.elapsed());
-                done += 1;
+            roles::iox_recv(side, self.ws.as_ref(), i, t + Duration::from_secs(10))?;
+            if let Some(l) = into.as_deref_mut() {
+                l.record(t.elapsed());
             }
+            done += 1;
         }
-        lat.cut_short = (s.rounds - done.min(s.rounds)) as u64;
-        let _ = pong.finish();
-        stop_load(loaders)?;
-        result.map(|()| lat)
-    };
-    let _ = petrel_ipc::remove_vehicle_files(&vehicle);
-    result
+        Ok(done)
+    }
+
+    fn pause(&mut self) -> Res<()> {
+        let pong = self.pong()?;
+        pong.tell("pause")?;
+        pong.expect("PAUSED")
+    }
+
+    fn resume(&mut self) -> Res<()> {
+        let pong = self.pong()?;
+        pong.tell("go")?;
+        pong.expect("GOING")
+    }
+
+    fn finish(mut self: Box<Self>) -> Res<()> {
+        // The end of its input stops the answering process, paused or not.
+        let stopped = self.pong.take().map_or(Ok(()), |p| p.finish().map(|_| ()));
+        drop(self.side.take());
+        drop(self.ws.take());
+        drop(self.me.take());
+        let _ = petrel_ipc::remove_vehicle_files(&self.vehicle);
+        stopped
+    }
 }
 
 fn start_load(load: Load) -> Res<Vec<Kid>> {
@@ -393,38 +625,84 @@ fn stop_load(kids: Vec<Kid>) -> Res<()> {
     Ok(())
 }
 
-fn socket_rt(s: &Settings, mut stream: impl Read + Write, mut pong: Kid) -> Res<Latencies> {
-    let len = payload_len();
-    pong.ready()?;
-    let mut buf = vec![0u8; len];
-    let mut lat = Latencies::new();
-    let start = Instant::now();
-    let mut done = 0;
-    for i in 0..s.warmup + s.rounds {
-        if i >= s.warmup && start.elapsed() > s.max {
-            break;
-        }
-        buf[..8].copy_from_slice(&(i as u64).to_le_bytes());
-        let t = Instant::now();
-        stream.write_all(&buf).map_err(err("socket write"))?;
-        stream.read_exact(&mut buf).map_err(err("socket read"))?;
-        if i >= s.warmup {
-            lat.record(t.elapsed());
-            done += 1;
-        }
-    }
-    lat.cut_short = (s.rounds - done) as u64;
-    drop(stream);
-    pong.finish()?;
-    Ok(lat)
+/// A socket ping-pong (blocking reads, the Petrel event's size) as a set-up measured in
+/// blocks. Between blocks nothing of it runs: the answering process sleeps in its read.
+pub struct SocketSide<S: Read + Write> {
+    stream: Option<S>,
+    pong: Option<Kid>,
+    buf: Vec<u8>,
+    next: u64,
+    // The Unix socket's directory, removed at the end.
+    _dir: Option<tempfile::TempDir>,
 }
 
-/// Unix-domain stream socket ping-pong (blocking reads), the Petrel event's size.
-pub fn uds_rt(s: &Settings, load: Load) -> Res<Latencies> {
+impl<S: Read + Write + 'static> SocketSide<S> {
+    fn started(stream: S, mut pong: Kid, dir: Option<tempfile::TempDir>) -> Res<Box<dyn Side>> {
+        let ready = pong.ready();
+        let side = Box::new(SocketSide {
+            stream: Some(stream),
+            pong: Some(pong),
+            buf: vec![0u8; payload_len()],
+            next: 0,
+            _dir: dir,
+        });
+        match ready {
+            Ok(()) => Ok(side),
+            Err(e) => {
+                let _ = side.finish();
+                Err(e)
+            }
+        }
+    }
+}
+
+impl<S: Read + Write> Side for SocketSide<S> {
+    fn rounds(
+        &mut self,
+        n: usize,
+        mut into: Option<&mut Latencies>,
+        until: Option<Instant>,
+    ) -> Res<usize> {
+        let stream = self.stream.as_mut().ok_or("finished")?;
+        let mut done = 0;
+        for _ in 0..n {
+            if until.is_some_and(|u| Instant::now() > u) {
+                break;
+            }
+            self.buf[..8].copy_from_slice(&self.next.to_le_bytes());
+            self.next += 1;
+            let t = Instant::now();
+            stream.write_all(&self.buf).map_err(err("socket write"))?;
+            stream
+                .read_exact(&mut self.buf)
+                .map_err(err("socket read"))?;
+            if let Some(l) = into.as_deref_mut() {
+                l.record(t.elapsed());
+            }
+            done += 1;
+        }
+        Ok(done)
+    }
+
+    fn pause(&mut self) -> Res<()> {
+        Ok(())
+    }
+
+    fn resume(&mut self) -> Res<()> {
+        Ok(())
+    }
+
+    fn finish(mut self: Box<Self>) -> Res<()> {
+        drop(self.stream.take());
+        self.pong.take().map_or(Ok(()), |p| p.finish().map(|_| ()))
+    }
+}
+
+/// Starts a Unix-domain stream socket ping-pong.
+pub fn uds_side() -> Res<Box<dyn Side>> {
     let dir = tempfile::tempdir().map_err(|e| format!("tempdir: {e}"))?;
     let path = dir.path().join("pp.sock");
     let listener = UnixListener::bind(&path).map_err(err("bind"))?;
-    let loaders = start_load(load)?;
     let pong = Kid::role(&[
         "sock-pong",
         "--uds",
@@ -433,17 +711,13 @@ pub fn uds_rt(s: &Settings, load: Load) -> Res<Latencies> {
         &payload_len().to_string(),
     ])?;
     let (stream, _) = listener.accept().map_err(err("accept"))?;
-    let r = socket_rt(s, stream, pong);
-    stop_load(loaders)?;
-    r
+    SocketSide::started(stream, pong, Some(dir))
 }
 
-/// TCP loopback ping-pong (TCP_NODELAY, blocking reads), the Petrel event's size: what
-/// ProCoSA used.
-pub fn tcp_rt(s: &Settings, load: Load) -> Res<Latencies> {
+/// Starts a TCP loopback ping-pong (`TCP_NODELAY`): what ProCoSA used.
+pub fn tcp_side() -> Res<Box<dyn Side>> {
     let listener = TcpListener::bind("127.0.0.1:0").map_err(err("bind"))?;
     let addr = listener.local_addr().map_err(err("addr"))?;
-    let loaders = start_load(load)?;
     let pong = Kid::role(&[
         "sock-pong",
         "--tcp",
@@ -453,7 +727,28 @@ pub fn tcp_rt(s: &Settings, load: Load) -> Res<Latencies> {
     ])?;
     let (stream, _): (TcpStream, _) = listener.accept().map_err(err("accept"))?;
     stream.set_nodelay(true).map_err(err("nodelay"))?;
-    let r = socket_rt(s, stream, pong);
+    SocketSide::started(stream, pong, None)
+}
+
+/// One set-up measured alone: warm-up, then all its rounds in one block.
+pub fn alone(s: &Settings, side: Res<Box<dyn Side>>) -> Res<Latencies> {
+    let plan = Plan {
+        rounds: s.rounds,
+        blocks: 1,
+        block_warmup: 0,
+        max: s.max,
+    };
+    let mut r = alternate(vec![prepare(side, s.warmup)], &plan);
+    r.pop()
+        .unwrap_or_else(|| Err("nothing measured".to_owned()))
+        .map(|a| a.latencies)
+}
+
+/// Unix-domain stream socket ping-pong (blocking reads), the Petrel event's size, alone, under
+/// `load`.
+pub fn uds_rt(s: &Settings, load: Load) -> Res<Latencies> {
+    let loaders = start_load(load)?;
+    let r = alone(s, uds_side());
     stop_load(loaders)?;
     r
 }

@@ -6,6 +6,7 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
+use crate::alternate::{block_ratios, spread};
 use crate::footprint::Footprint;
 use crate::measure::{Load, ScaleResult, Settings};
 use crate::roles::Res;
@@ -19,6 +20,9 @@ pub const END: &str = "<!-- latency-suite:end -->";
 /// One measured series.
 pub type Series = (String, Res<Latencies>);
 
+/// A series' summary per block of part 1 (one per turn of the alternation).
+pub type Blocks = (String, Vec<Summary>);
+
 /// One figure under load: the load, the series' name, its latencies and what the load
 /// processes said.
 pub type LoadRow = (Load, String, Res<(Latencies, Vec<String>)>);
@@ -29,6 +33,8 @@ pub struct Report {
     pub header: String,
     /// Transport round trips: baselines first, then Petrel per strategy.
     pub transport: Vec<Series>,
+    /// The transport series' blocks (measured in alternating blocks), by series name.
+    pub transport_blocks: Vec<Blocks>,
     /// Under load: (load, strategy or baseline name, latencies, what the load processes said).
     pub load: Vec<LoadRow>,
     /// The vehicle path on the memory bus: baseline first.
@@ -50,6 +56,7 @@ impl Default for Report {
         Report {
             header: String::new(),
             transport: Vec::new(),
+            transport_blocks: Vec::new(),
             load: Vec::new(),
             vehicle_mem: Vec::new(),
             vehicle_vcan: Err("not run".to_owned()),
@@ -150,14 +157,15 @@ impl Report {
             o,
             "Every latency is an HDR histogram (hdrhistogram, 3 significant digits) of {} rounds after {} \
              rounds of warm-up that are not recorded (a measurement stops after {} s: the rounds not done \
-             are said in the note). Ratios are p50 / p99 against a baseline measured in the same run, \
-             minutes apart on the same machine.\n",
+             are said in the note). Ratios are p50 / p99 against a baseline measured in the same run: in \
+             part 1 in the same minutes, in alternating blocks (below); in the other parts minutes apart \
+             on the same machine.\n",
             s.rounds,
             s.warmup,
             s.max.as_secs()
         );
         if !self.transport.is_empty() {
-            self.transport_md(&mut o);
+            self.transport_md(&mut o, s);
         }
         if !self.vehicle_mem.is_empty() {
             self.vehicle_md(&mut o);
@@ -175,7 +183,7 @@ impl Report {
         o
     }
 
-    fn transport_md(&self, o: &mut String) {
+    fn transport_md(&self, o: &mut String, s: &Settings) {
         let payload = crate::measure::payload_len();
         let _ = writeln!(
             o,
@@ -189,6 +197,27 @@ impl Report {
              ping-pong (busy polling both sides; and sleeping in a WaitSet woken by an event service), \
              and a Unix-domain stream socket and TCP loopback (`TCP_NODELAY`, what ProCoSA used) with \
              blocking reads.\n"
+        );
+        let blocks = s.blocks.max(1);
+        let _ = writeln!(
+            o,
+            "**Measured in alternating blocks**, so that a ratio compares the same minutes of the \
+             machine (whose CPUs go from idle and slow to wake to busy with others' work within \
+             seconds). The seven set-ups are started and warmed up one at a time ({} rounds each, \
+             the others paused), then take turns: each measures a block of about {} rounds (after {} \
+             rounds not recorded) while the others are paused, {blocks} blocks each, the turns going \
+             forwards then backwards through raw iceoryx2 busy poll, Petrel spin, spin-then-block, \
+             raw iceoryx2 WaitSet, TCP, Petrel block, Unix socket (each goal's pair next to each \
+             other). Each row is all its blocks in one histogram (the time limit counts all of a \
+             set-up's blocks together). Paused means that nothing of it \
+             runs: the player is stopped (SIGSTOP; it runs `petrel play`'s loop, which has no pause \
+             of its own) and continued before its block, raw iceoryx2's answering process sleeps \
+             until it is told to go on, a socket's sleeps in its read anyway. The goals give the \
+             pair's p50 ratio block by block too: the median, the range, and the blocks within the \
+             goal.\n",
+            s.warmup,
+            s.rounds / blocks,
+            (s.warmup / blocks).max(1)
         );
         let base = [
             (
@@ -205,17 +234,21 @@ impl Report {
             lat_row(o, name, r, &base);
         }
         let p = |w: &str| find(&self.transport, &petrel_name(w)).and_then(summary_of);
-        let goal =
-            |name: &str, a: Option<Summary>, b: Option<Summary>, k: f64, what: &str| match (a, b) {
-                (Some(a), Some(b)) => format!(
-                    "- {name}: p50 {} µs against {what} {} µs x {k}: **{}** ({}).",
-                    us(a.p50),
-                    us(b.p50),
-                    if a.p50 <= b.p50 * k { "met" } else { "not met" },
-                    ratio(a.p50, b.p50)
-                ),
-                _ => format!("- {name}: not measured."),
-            };
+        let goal = |name: &str,
+                    a: Option<Summary>,
+                    b: Option<Summary>,
+                    k: f64,
+                    what: &str,
+                    per_block: String| match (a, b) {
+            (Some(a), Some(b)) => format!(
+                "- {name}: p50 {} µs against {what} {} µs x {k}: **{}** ({}){per_block}.",
+                us(a.p50),
+                us(b.p50),
+                if a.p50 <= b.p50 * k { "met" } else { "not met" },
+                ratio(a.p50, b.p50)
+            ),
+            _ => format!("- {name}: not measured."),
+        };
         let _ = writeln!(
             o,
             "\nGoals:\n{}\n{}\n\n![round trip CDFs](bench/transport.svg)\n",
@@ -224,16 +257,39 @@ impl Report {
                 p("spin"),
                 base[0].1,
                 3.0,
-                "raw iceoryx2 busy poll"
+                "raw iceoryx2 busy poll",
+                self.block_spread(&petrel_name("spin"), IOX_BUSY, 3.0)
             ),
             goal(
                 "block no slower than the Unix socket round trip",
                 p("block"),
                 base[1].1,
                 1.0,
-                "the Unix socket"
+                "the Unix socket",
+                self.block_spread(&petrel_name("block"), UDS, 1.0)
             )
         );
+    }
+
+    /// `a`'s p50 against `b`'s block by block (blocks of the same turn), as the end of a goal's
+    /// line: the median, the range, how many blocks are within `goal` (two decimals: near a
+    /// goal of 1x, "1.0x" would not say on which side a block is).
+    fn block_spread(&self, a: &str, b: &str, goal: f64) -> String {
+        let blocks = |name: &str| {
+            self.transport_blocks
+                .iter()
+                .find(|(n, _)| n == name)
+                .map(|(_, v)| v.as_slice())
+                .unwrap_or_default()
+        };
+        match spread(&block_ratios(blocks(a), blocks(b)), goal) {
+            Some(s) => format!(
+                "; block by block ({} pairs of blocks of the same turn): median {:.2}x, {:.2}x to \
+                 {:.2}x, within {goal}x in {} of {}",
+                s.n, s.median, s.min, s.max, s.within, s.n
+            ),
+            None => String::new(),
+        }
     }
 
     fn vehicle_md(&self, o: &mut String) {

@@ -7,7 +7,7 @@
 use std::io::{BufRead, Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
 use petrel_ipc::iceoryx2::prelude::*;
@@ -26,8 +26,7 @@ pub fn err<E: std::fmt::Debug>(what: &'static str) -> impl FnOnce(E) -> String {
 
 /// Says READY to the orchestrator.
 pub fn ready() {
-    println!("READY");
-    let _ = std::io::stdout().flush();
+    say("READY");
 }
 
 /// A flag set once standard input reaches its end (the orchestrator let go of us).
@@ -41,6 +40,81 @@ pub fn stop_on_stdin_eof() -> Arc<AtomicBool> {
         flag.store(true, Ordering::Relaxed);
     });
     stop
+}
+
+/// A pause switch worked from standard input, for a process that must not run while another
+/// set-up is measured (a busy-polling peer would take a CPU from it): a `pause` line pauses
+/// it, a `go` line lets it go on, the end of the input stops it.
+#[derive(Clone)]
+pub struct Gate {
+    paused: Arc<AtomicBool>,
+    stop: Arc<AtomicBool>,
+    // The paused process sleeps on it, and the switch changes under its lock: a `go` is
+    // never missed.
+    wake: Arc<(Mutex<()>, Condvar)>,
+}
+
+impl Gate {
+    /// Reads the orchestrator's lines on a thread of its own.
+    pub fn on_stdin() -> Gate {
+        let gate = Gate {
+            paused: Arc::new(AtomicBool::new(false)),
+            stop: Arc::new(AtomicBool::new(false)),
+            wake: Arc::new((Mutex::new(()), Condvar::new())),
+        };
+        let g = gate.clone();
+        std::thread::spawn(move || {
+            let mut line = String::new();
+            let mut stdin = std::io::stdin().lock();
+            loop {
+                line.clear();
+                match stdin.read_line(&mut line) {
+                    Ok(n) if n > 0 => match line.trim() {
+                        "pause" => g.set(|| g.paused.store(true, Ordering::SeqCst)),
+                        "go" => g.set(|| g.paused.store(false, Ordering::SeqCst)),
+                        _ => {}
+                    },
+                    _ => break,
+                }
+            }
+            g.set(|| g.stop.store(true, Ordering::SeqCst));
+        });
+        gate
+    }
+
+    fn set(&self, change: impl FnOnce()) {
+        let (lock, cv) = &*self.wake;
+        let _held = lock.lock().unwrap_or_else(|p| p.into_inner());
+        change();
+        cv.notify_all();
+    }
+
+    /// Whether the input has ended.
+    pub fn stopped(&self) -> bool {
+        self.stop.load(Ordering::Relaxed)
+    }
+
+    /// When paused: says `PAUSED`, sleeps until `go` (then says `GOING`) or the end of the
+    /// input. A relaxed load when not paused, so that a busy loop may call it every turn.
+    pub fn hold(&self) {
+        if !self.paused.load(Ordering::Relaxed) {
+            return;
+        }
+        say("PAUSED");
+        let (lock, cv) = &*self.wake;
+        let mut held = lock.lock().unwrap_or_else(|p| p.into_inner());
+        while self.paused.load(Ordering::SeqCst) && !self.stop.load(Ordering::SeqCst) {
+            held = cv.wait(held).unwrap_or_else(|p| p.into_inner());
+        }
+        drop(held);
+        say("GOING");
+    }
+}
+
+/// Says a line to the orchestrator at once.
+fn say(line: &str) {
+    println!("{line}");
+    let _ = std::io::stdout().flush();
 }
 
 /// Loads and checks a project (what `petrel play` starts with).
@@ -95,39 +169,65 @@ pub struct Measured {
     pub latencies: Latencies,
 }
 
-/// A program that measures the round trip program -> player -> program: it emits an event
-/// and waits for the call the player's transition makes, again and again.
-pub fn petrel_round_trips(cfg: &RoundTrips) -> Res<Measured> {
-    let vehicle = Vehicle::new(&cfg.vehicle).map_err(|e| e.to_string())?;
-    let config = ProgramConfig {
-        wait: cfg.wait,
-        handle_signals: false,
-        // The default checks that the player lives before every send (~0.2 ms): a program
-        // that talks to the player thousands of times a second trusts a check for a second.
-        player_check: PlayerCheck::Every(Duration::from_secs(1)),
-        ..ProgramConfig::default()
-    };
-    let mut program = Program::connect_with(&vehicle, &[cfg.program.as_str()], config)
-        .map_err(|e| e.to_string())?;
-    let round = |program: &mut Program, i: usize| -> Res<Duration> {
+/// The measuring side of a Petrel round trip: a program that emits an event and waits for
+/// the call the player's transition makes, one round at a time.
+pub struct Pinger {
+    program: Program,
+    name: String,
+    event: String,
+    next: usize,
+}
+
+impl Pinger {
+    /// Connects the program `cfg.program` to the vehicle's player (with `cfg.wait`).
+    pub fn connect(cfg: &RoundTrips) -> Res<Pinger> {
+        let vehicle = Vehicle::new(&cfg.vehicle).map_err(|e| e.to_string())?;
+        let config = ProgramConfig {
+            wait: cfg.wait,
+            handle_signals: false,
+            // The default checks that the player lives before every send (~0.2 ms): a program
+            // that talks to the player thousands of times a second trusts a check for a second.
+            player_check: PlayerCheck::Every(Duration::from_secs(1)),
+            ..ProgramConfig::default()
+        };
+        let program = Program::connect_with(&vehicle, &[cfg.program.as_str()], config)
+            .map_err(|e| e.to_string())?;
+        Ok(Pinger {
+            program,
+            name: cfg.program.clone(),
+            event: cfg.event.clone(),
+            next: 0,
+        })
+    }
+
+    /// One round trip: from the emit to the arrival of its call.
+    pub fn round(&mut self) -> Res<Duration> {
+        let i = self.next;
+        self.next += 1;
         let start = Instant::now();
-        program
-            .emit(cfg.event.clone(), round_payload(i))
-            .map_err(|e| format!("{}: emit: {e}", cfg.program))?;
+        self.program
+            .emit(self.event.clone(), round_payload(i))
+            .map_err(|e| format!("{}: emit: {e}", self.name))?;
         loop {
-            match program.recv(Some(Duration::from_secs(20))) {
+            match self.program.recv(Some(Duration::from_secs(20))) {
                 Ok(Some(call)) => {
                     if call.function == "ping" && call.args.first() == Some(&Value::Int(i as i64)) {
                         return Ok(start.elapsed());
                     }
                 }
-                Ok(None) => return Err(format!("{}: no call for round {i}", cfg.program)),
-                Err(e) => return Err(format!("{}: {e}", cfg.program)),
+                Ok(None) => return Err(format!("{}: no call for round {i}", self.name)),
+                Err(e) => return Err(format!("{}: {e}", self.name)),
             }
         }
-    };
-    for i in 0..cfg.warmup {
-        round(&mut program, i)?;
+    }
+}
+
+/// A program that measures the round trip program -> player -> program: it emits an event
+/// and waits for the call the player's transition makes, again and again.
+pub fn petrel_round_trips(cfg: &RoundTrips) -> Res<Measured> {
+    let mut pinger = Pinger::connect(cfg)?;
+    for _ in 0..cfg.warmup {
+        pinger.round()?;
     }
     if let Some(gate) = &cfg.gate {
         ready();
@@ -142,17 +242,17 @@ pub fn petrel_round_trips(cfg: &RoundTrips) -> Res<Measured> {
     let mut latencies = Latencies::new();
     let start = Instant::now();
     let mut done = 0;
-    for i in cfg.warmup..cfg.warmup + cfg.rounds {
+    for _ in 0..cfg.rounds {
         if start.elapsed() > cfg.max {
             break;
         }
-        latencies.record(round(&mut program, i)?);
+        latencies.record(pinger.round()?);
         done += 1;
     }
     latencies.cut_short = (cfg.rounds - done) as u64;
     // No close(): it waits for the player's acknowledgement of the last events, which the
     // measurement does not need; the player is stopped next.
-    drop(program);
+    drop(pinger);
     Ok(Measured { latencies })
 }
 
@@ -262,9 +362,11 @@ pub fn iox_recv(
     }
 }
 
-/// The answering side of the raw iceoryx2 ping-pong.
+/// The answering side of the raw iceoryx2 ping-pong. It pauses on its [`Gate`] (`pause` and
+/// `go` lines): the busy-polling one would otherwise take a CPU from the set-up measured
+/// beside it.
 pub fn iox_pong(name: &str, prefix: &str, waitset: bool, len: usize) -> Res<()> {
-    let stop = stop_on_stdin_eof();
+    let gate = Gate::on_stdin();
     let vehicle = Vehicle::with_prefix(name, prefix).map_err(|e| e.to_string())?;
     let me = Participant::join(&vehicle, Role::tool("ioxpong").map_err(|e| e.to_string())?)
         .map_err(|e| e.to_string())?;
@@ -288,7 +390,8 @@ pub fn iox_pong(name: &str, prefix: &str, waitset: bool, len: usize) -> Res<()> 
     ready();
     let mut buf = vec![0u8; len];
     let mut idle = 0u32;
-    while !stop.load(Ordering::Relaxed) {
+    while !gate.stopped() {
+        gate.hold();
         let mut got = false;
         while let Some(sample) = side.subscriber.receive().map_err(err("receive"))? {
             let n = sample.payload().len().min(len);
