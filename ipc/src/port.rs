@@ -527,10 +527,21 @@ impl<M: Message> Sender<M> {
     /// [`send`](Self::send) of a body borrowed from the caller's data ([`wire::CallRef`]),
     /// whose bytes are those of the message it stands for: nothing is built on the way.
     pub fn send_body<B: wire::Body<Msg = M>>(&self, msg: &B) -> Result<Sent, SendError> {
-        let len = match wire::encoded_len(msg) {
-            Ok(len) => len,
-            Err(error) => return Err(self.not_sent_wire(error)),
-        };
+        match wire::encoded_len(msg) {
+            Ok(len) => self.send_measured(msg, len),
+            Err(error) => Err(self.not_sent_wire(error)),
+        }
+    }
+
+    /// [`send_body`](Self::send_body) of a body whose encoded length the caller measured
+    /// already ([`wire::encoded_len`]), so that it is not measured twice. A `len` that is not
+    /// the body's is refused as [`WireError`] (nothing is sent): the encoding must fill
+    /// exactly `len` bytes.
+    pub fn send_measured<B: wire::Body<Msg = M>>(
+        &self,
+        msg: &B,
+        len: usize,
+    ) -> Result<Sent, SendError> {
         if len > self.spec.max_body_len {
             return Err(self.not_sent_wire(WireError::TooLarge {
                 len,

@@ -50,6 +50,29 @@ fn event_round_trip_with_origin_and_sequence() {
 }
 
 #[test]
+fn a_body_sent_with_its_measured_length_arrives_and_a_wrong_length_sends_nothing() {
+    let vehicle = TestVehicle::new("auv");
+    let (player, pln) = pair(&vehicle);
+    let rx = player.event_receiver().unwrap();
+    let tx = pln.event_sender().unwrap();
+    let msg = EventMsg::new("depth", vec![Value::Float(12.5), Value::Int(3)]);
+    let len = petrel_ipc::wire::encoded_len(&msg).unwrap();
+    for wrong in [len - 1, len + 1] {
+        let err = tx.send_measured(&msg, wrong).unwrap_err();
+        assert!(matches!(err, SendError::Wire { .. }), "{err}");
+    }
+    assert_eq!(tx.stats().not_sent, 2);
+    assert_eq!(tx.stats().sent, 0);
+    let sent = tx.send_measured(&msg, len).unwrap();
+    // The wrong lengths used no sequence number: no gap at the receiver.
+    assert_eq!(sent.seq, 1);
+    let r = rx.try_recv().unwrap().unwrap();
+    assert_eq!(r.msg, msg);
+    assert_eq!(r.missed, 0);
+    assert!(rx.try_recv().unwrap().is_none());
+}
+
+#[test]
 fn no_receiver_is_reported_and_leaves_a_gap() {
     let vehicle = TestVehicle::new("auv");
     let (player, pln) = pair(&vehicle);

@@ -515,8 +515,9 @@ impl Program {
             event: msg.name.clone(),
             error,
         };
-        match wire::encoded_len(&msg) {
-            Ok(len) if len <= EVENTS.max_body_len => {}
+        // Measured once: the send below encodes into exactly this many bytes.
+        let len = match wire::encoded_len(&msg) {
+            Ok(len) if len <= EVENTS.max_body_len => len,
             Ok(len) => {
                 return Err(unsendable(WireError::TooLarge {
                     len,
@@ -524,24 +525,24 @@ impl Program {
                 }))
             }
             Err(error) => return Err(unsendable(error)),
-        }
+        };
         self.stats.emitted += 1;
         let ready = match self.player_ready() {
             Ok(ready) => ready,
             Err(e) => {
                 // Keep the event; report the loss of an older one first, if any.
-                return Err(self.enqueue(host, msg).err().unwrap_or(e));
+                return Err(self.enqueue(host, msg, len).err().unwrap_or(e));
             }
         };
         if !ready {
             self.player_gone();
-            return self.enqueue(host, msg);
+            return self.enqueue(host, msg, len);
         }
         if let Err(e) = self.deliver_queued() {
-            return Err(self.enqueue(host, msg).err().unwrap_or(e));
+            return Err(self.enqueue(host, msg, len).err().unwrap_or(e));
         }
         if self.outbox.is_empty() {
-            match self.send_now(host, &msg) {
+            match self.send_now(host, &msg, len) {
                 Ok(true) => {
                     self.stats.delivered += 1;
                     return Ok(());
@@ -553,11 +554,11 @@ impl Program {
                 }
             }
         }
-        self.enqueue(host, msg)
+        self.enqueue(host, msg, len)
     }
 
-    fn enqueue(&mut self, host: usize, msg: EventMsg) -> Result<(), ProgramError> {
-        match self.outbox.push(Queued { host, msg }) {
+    fn enqueue(&mut self, host: usize, msg: EventMsg, len: usize) -> Result<(), ProgramError> {
+        match self.outbox.push(Queued { host, msg, len }) {
             None => Ok(()),
             Some(dropped) => {
                 self.stats.dropped += 1;
@@ -666,7 +667,7 @@ impl Program {
     fn deliver_queued(&mut self) -> Result<usize, ProgramError> {
         let mut delivered = 0;
         while let Some(item) = self.outbox.pop_front() {
-            match self.send_now(item.host, &item.msg) {
+            match self.send_now(item.host, &item.msg, item.len) {
                 Ok(true) => {
                     delivered += 1;
                     self.stats.delivered += 1;
@@ -686,13 +687,13 @@ impl Program {
         Ok(delivered)
     }
 
-    /// Sends `msg` as `host`: `Ok(true)` when the player got it, `Ok(false)` when it should be
-    /// tried again later.
-    fn send_now(&mut self, host: usize, msg: &EventMsg) -> Result<bool, ProgramError> {
+    /// Sends `msg`, whose encoded length is `len`, as `host`: `Ok(true)` when the player got
+    /// it, `Ok(false)` when it should be tried again later.
+    fn send_now(&mut self, host: usize, msg: &EventMsg, len: usize) -> Result<bool, ProgramError> {
         let Some(sender) = self.hosts[host].events.as_ref() else {
             return Ok(false);
         };
-        match sender.send(msg) {
+        match sender.send_measured(msg, len) {
             Ok(sent) => {
                 self.hosts[host].last_seq = sent.seq;
                 Ok(true)
