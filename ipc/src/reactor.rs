@@ -16,7 +16,7 @@ use std::cell::{Cell, RefCell};
 use std::fmt;
 use std::io;
 use std::os::fd::RawFd;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use iceoryx2::prelude::FileDescriptorBased;
@@ -261,6 +261,10 @@ impl std::error::Error for ReactorError {}
 
 /// Most sources one [`Reactor::wait`] watches.
 pub const MAX_SOURCES: usize = 64;
+
+/// Sources whose futex words a doorbell sleep keeps on the stack (more go in a `Vec`): the
+/// player waits on two, a program on one per hosted name.
+const INLINE_WORDS: usize = 4;
 
 /// While spinning, how often file descriptors without a shared-memory check are polled.
 const FD_POLL_PERIOD: Duration = Duration::from_micros(500);
@@ -663,17 +667,35 @@ impl Reactor {
                 ..Ready::default()
             });
         }
-        let bells: Vec<&Doorbell> = sources.iter().filter_map(|s| s.doorbell()).collect();
-        for bell in &bells {
+        // Every source has a doorbell (the caller checked): each is asked for it again
+        // rather than collected, and the words go on the stack for a few sources, so that a
+        // sleep allocates nothing.
+        let bells = || sources.iter().filter_map(|s| s.doorbell());
+        for bell in bells() {
             bell.announce(doorbell::FUTEX);
         }
         doorbell::announced();
         // The words before the last look: a ring after this changes them, so the sleep below
         // returns at once (the module's argument).
-        let words: Vec<_> = bells.iter().map(|b| (b.word_ref(), b.word())).collect();
+        let mut inline = [(&doorbell::NO_WORD, 0u32); INLINE_WORDS];
+        let spilled: Vec<(&AtomicU32, u32)>;
+        let words: &[(&AtomicU32, u32)] = if sources.len() <= INLINE_WORDS {
+            let mut n = 0;
+            for (slot, bell) in inline.iter_mut().zip(bells()) {
+                *slot = (bell.word_ref(), bell.word());
+                n += 1;
+            }
+            &inline[..n]
+        } else {
+            spilled = bells().map(|b| (b.word_ref(), b.word())).collect();
+            &spilled
+        };
         let look = |listeners: bool| {
             let mut mask = 0u64;
-            for (index, (source, bell)) in sources.iter().zip(&bells).enumerate() {
+            for (index, source) in sources.iter().enumerate() {
+                let Some(bell) = source.doorbell() else {
+                    continue;
+                };
                 let news = bell.take_news();
                 let ready = if news || listeners {
                     source.signalled()
@@ -695,9 +717,9 @@ impl Reactor {
             });
         }
         let slice = timeout.map_or(self.slice, |t| t.min(self.slice));
-        let slept = match words.as_slice() {
+        let slept = match words {
             [(word, expected)] => doorbell::futex_wait(word, *expected, slice),
-            _ => doorbell::futex_waitv(&words, slice),
+            _ => doorbell::futex_waitv(words, slice),
         };
         wake_all(sources);
         match slept {
