@@ -314,12 +314,15 @@ impl Program {
         if self.terminated {
             return Err(ProgramError::Terminated);
         }
-        let deadline = timeout.map(|t| Instant::now() + t);
+        // The deadline counts from the first look that found no call: a call already there
+        // is taken without reading the clock, and a wait reads it once.
+        let mut from_first_look: Option<Option<Instant>> = None;
         loop {
             if let Some(call) = self.try_take()? {
                 return Ok(Some(call));
             }
             let mut now = Instant::now();
+            let deadline = *from_first_look.get_or_insert_with(|| timeout.map(|t| now + t));
             if !self.outbox.is_empty() && now >= self.next_retry {
                 self.next_retry = now + self.config.retry_period;
                 self.flush()?;
