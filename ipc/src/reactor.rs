@@ -503,15 +503,21 @@ impl Reactor {
                 ..Ready::default()
             });
         }
-        let ready = poll_pending(sources);
-        if ready != 0 {
-            return Ok(Ready {
-                mask: ready,
-                ..Ready::default()
-            });
+        // A blocking wait on doorbells looks for work once it announced its sleep (the
+        // doorbell's argument needs that look): a look here too would read every receiver's
+        // shared memory twice when nothing waits, the usual case.
+        let looks_before_sleep = self.strategy == WaitStrategy::Block && self.on_doorbells(sources);
+        if !looks_before_sleep {
+            let ready = poll_pending(sources);
+            if ready != 0 {
+                return Ok(Ready {
+                    mask: ready,
+                    ..Ready::default()
+                });
+            }
         }
         match self.strategy {
-            WaitStrategy::Block => self.block(sources, deadline),
+            WaitStrategy::Block => self.block(sources, deadline, Some(start)),
             WaitStrategy::Spin => match self.spin(sources, deadline)? {
                 Some(ready) => Ok(ready),
                 None => Ok(Ready {
@@ -527,7 +533,7 @@ impl Reactor {
                 if let Some(ready) = self.spin(sources, Some(spin_until))? {
                     return Ok(ready);
                 }
-                self.block(sources, deadline)
+                self.block(sources, deadline, None)
             }
         }
     }
@@ -588,12 +594,14 @@ impl Reactor {
         &self,
         sources: &[&dyn Source],
         deadline: Option<Instant>,
+        mut now: Option<Instant>,
     ) -> Result<Ready, ReactorError> {
         let mut slept = false;
         loop {
             let remaining = match deadline {
                 Some(d) => {
-                    let now = Instant::now();
+                    // The caller's reading of the clock for the first round, if it just made one.
+                    let now = now.take().unwrap_or_else(Instant::now);
                     if now >= d {
                         return Ok(Ready {
                             timed_out: true,
@@ -604,24 +612,28 @@ impl Reactor {
                 }
                 None => None,
             };
-            if !slept {
-                // Counted once it is sure to sleep: a deadline that passed while spinning
-                // returns above without a system call.
-                slept = true;
-                self.count(|s| s.sleeps += 1);
-            }
-            let on_doorbells =
-                self.doorbells.get() && sources.iter().all(|s| s.doorbell().is_some());
-            let ready = if on_doorbells {
-                self.count(|s| s.doorbell_sleeps += 1);
-                self.doorbell_sleep(sources, remaining)?
+            let ready = if self.on_doorbells(sources) {
+                // Counts its sleep itself, once its last look found nothing to do.
+                self.doorbell_sleep(sources, remaining, &mut slept)?
             } else {
+                if !slept {
+                    // Counted once it is sure to sleep: a deadline that passed while spinning
+                    // returns above without a system call.
+                    slept = true;
+                    self.count(|s| s.sleeps += 1);
+                }
                 self.epoll_sleep(sources, remaining)?
             };
             if ready.any() || ready.termination_requested {
                 return Ok(ready);
             }
         }
+    }
+
+    /// Whether a sleep on `sources` goes on their doorbells (all have one, and the kernel and
+    /// the senders ring them) rather than epoll.
+    fn on_doorbells(&self, sources: &[&dyn Source]) -> bool {
+        self.doorbells.get() && sources.iter().all(|s| s.doorbell().is_some())
     }
 
     /// Sleeps in epoll, the receivers' doorbells saying so (their senders notify through
@@ -660,6 +672,7 @@ impl Reactor {
         &self,
         sources: &[&dyn Source],
         timeout: Option<Duration>,
+        slept: &mut bool,
     ) -> Result<Ready, ReactorError> {
         if self.handles_signals && SignalHandler::termination_requested() {
             return Ok(Ready {
@@ -716,6 +729,11 @@ impl Reactor {
                 ..Ready::default()
             });
         }
+        if !*slept {
+            *slept = true;
+            self.count(|s| s.sleeps += 1);
+        }
+        self.count(|s| s.doorbell_sleeps += 1);
         let slice = timeout.map_or(self.slice, |t| t.min(self.slice));
         let slept = match words {
             [(word, expected)] => doorbell::futex_wait(word, *expected, slice),

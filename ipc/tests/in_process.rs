@@ -291,6 +291,34 @@ fn reactor_strategies_wake_on_events_and_time_out() {
 }
 
 #[test]
+fn a_blocking_wait_returns_at_once_for_samples_already_there_without_sleeping() {
+    let vehicle = TestVehicle::new("auv");
+    let player = Participant::join(&vehicle, Role::Player).unwrap();
+    let events = player.event_receiver().unwrap();
+    let reload = player.reload_receiver().unwrap();
+    assert!(events.has_doorbell() && reload.has_doorbell());
+    let pln = Participant::join(&vehicle, Role::program("PLN").unwrap()).unwrap();
+    let tx = pln.event_sender().unwrap();
+    let reactor = Reactor::without_signal_handling(WaitStrategy::Block).unwrap();
+    // The sender's arrival is news: taken by a first wait.
+    reactor
+        .wait(&[&reload, &events], Some(Duration::from_secs(5)))
+        .unwrap();
+    events.take_wakeups().unwrap();
+    let before = reactor.stats();
+    tx.send(&EventMsg::new("go", vec![])).unwrap();
+    let ready = reactor
+        .wait(&[&reload, &events], Some(Duration::from_secs(5)))
+        .unwrap();
+    assert!(ready.is_ready(1) && !ready.is_ready(0), "{ready:?}");
+    let after = reactor.stats();
+    assert_eq!(after.waits, before.waits + 1);
+    assert_eq!(after.sleeps, before.sleeps, "{after:?}");
+    assert_eq!(after.doorbell_sleeps, before.doorbell_sleeps, "{after:?}");
+    assert_eq!(events.drain(|r| assert!(r.is_ok())).unwrap().messages, 1);
+}
+
+#[test]
 fn reactor_reports_a_sender_joining() {
     let vehicle = TestVehicle::new("auv");
     let (player, pln) = pair(&vehicle);
