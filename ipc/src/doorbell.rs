@@ -349,12 +349,28 @@ pub(crate) fn futex_wait(word: &AtomicU32, expected: u32, timeout: Duration) -> 
 
 /// The kernel's `struct futex_waitv`.
 #[repr(C)]
+#[derive(Clone, Copy)]
 struct FutexWaitv {
     val: u64,
     uaddr: u64,
     flags: u32,
     reserved: u32,
 }
+
+impl FutexWaitv {
+    const EMPTY: FutexWaitv = FutexWaitv {
+        val: 0,
+        uaddr: 0,
+        flags: 0,
+        reserved: 0,
+    };
+}
+
+/// Words [`futex_waitv`] passes to the kernel from the stack; more go in a `Vec`.
+const INLINE_WAITV: usize = 4;
+
+/// A futex word no sleeper waits on, to fill the unused slots of a list of words.
+pub(crate) static NO_WORD: AtomicU32 = AtomicU32::new(0);
 
 /// `FUTEX2_SIZE_U32`: the words are 32 bits (shared: no private flag).
 const FUTEX2_SIZE_U32: u32 = 0x02;
@@ -365,15 +381,24 @@ pub(crate) const MAX_WAITV: usize = 128;
 /// Sleeps on several futex words while each holds its expected value, for at most `timeout`.
 pub(crate) fn futex_waitv(words: &[(&AtomicU32, u32)], timeout: Duration) -> Slept {
     debug_assert!(words.len() <= MAX_WAITV);
-    let waiters: Vec<FutexWaitv> = words
-        .iter()
-        .map(|(word, expected)| FutexWaitv {
-            val: u64::from(*expected),
-            uaddr: word.as_ptr() as u64,
-            flags: FUTEX2_SIZE_U32,
-            reserved: 0,
-        })
-        .collect();
+    let waiter = |(word, expected): &(&AtomicU32, u32)| FutexWaitv {
+        val: u64::from(*expected),
+        uaddr: word.as_ptr() as u64,
+        flags: FUTEX2_SIZE_U32,
+        reserved: 0,
+    };
+    // A few words (the usual case) on the stack: a sleep allocates nothing.
+    let mut inline = [FutexWaitv::EMPTY; INLINE_WAITV];
+    let spilled: Vec<FutexWaitv>;
+    let waiters: &[FutexWaitv] = if words.len() <= INLINE_WAITV {
+        for (slot, word) in inline.iter_mut().zip(words) {
+            *slot = waiter(word);
+        }
+        &inline[..words.len()]
+    } else {
+        spilled = words.iter().map(waiter).collect();
+        &spilled
+    };
     // futex_waitv takes an absolute time on the given clock.
     let mut now = libc::timespec {
         tv_sec: 0,
@@ -616,6 +641,28 @@ mod tests {
             futex_waitv(&words, Duration::from_millis(1)),
             Slept::TimedOut
         );
+    }
+
+    #[test]
+    fn a_changed_word_among_a_few_or_many_ends_a_waitv() {
+        let prefix = prefix() + "v_";
+        let bells: Vec<Doorbell> = (0..6)
+            .map(|i| Doorbell::create(&prefix, 21, i).unwrap())
+            .collect();
+        // Two words go on the stack, six in a Vec.
+        for n in [2usize, 6] {
+            let words: Vec<_> = bells[..n]
+                .iter()
+                .map(|b| (b.word_ref(), b.word()))
+                .collect();
+            assert_eq!(
+                futex_waitv(&words, Duration::from_millis(1)),
+                Slept::TimedOut
+            );
+            bells[n - 1].announce(FUTEX);
+            Doorbell::open(&prefix, 21, n as u128 - 1).unwrap().ring();
+            assert_eq!(futex_waitv(&words, Duration::from_secs(30)), Slept::Woken);
+        }
     }
 
     #[test]

@@ -527,10 +527,21 @@ impl<M: Message> Sender<M> {
     /// [`send`](Self::send) of a body borrowed from the caller's data ([`wire::CallRef`]),
     /// whose bytes are those of the message it stands for: nothing is built on the way.
     pub fn send_body<B: wire::Body<Msg = M>>(&self, msg: &B) -> Result<Sent, SendError> {
-        let len = match wire::encoded_len(msg) {
-            Ok(len) => len,
-            Err(error) => return Err(self.not_sent_wire(error)),
-        };
+        match wire::encoded_len(msg) {
+            Ok(len) => self.send_measured(msg, len),
+            Err(error) => Err(self.not_sent_wire(error)),
+        }
+    }
+
+    /// [`send_body`](Self::send_body) of a body whose encoded length the caller measured
+    /// already ([`wire::encoded_len`]), so that it is not measured twice. A `len` that is not
+    /// the body's is refused as [`WireError`] (nothing is sent): the encoding must fill
+    /// exactly `len` bytes.
+    pub fn send_measured<B: wire::Body<Msg = M>>(
+        &self,
+        msg: &B,
+        len: usize,
+    ) -> Result<Sent, SendError> {
         if len > self.spec.max_body_len {
             return Err(self.not_sent_wire(WireError::TooLarge {
                 len,
@@ -919,6 +930,57 @@ pub struct Drained {
     pub wakeups: Wakeups,
 }
 
+/// A receiver's accounts of its senders, found by the sender's id.
+///
+/// A list and the index of the last account used rather than a hash map: a receiver hears
+/// from a few senders (128 at most, the events service's slots), the sender of one sample is
+/// most often that of the one before, and a look-up is then one comparison instead of a hash.
+#[derive(Debug, Default)]
+struct Accounts {
+    list: Vec<SenderAccount>,
+    last: usize,
+}
+
+impl Accounts {
+    fn position(&self, sender: u64) -> Option<usize> {
+        if self.list.get(self.last).is_some_and(|a| a.sender == sender) {
+            return Some(self.last);
+        }
+        self.list.iter().position(|a| a.sender == sender)
+    }
+
+    /// The account of `sender`, opened (from `origin`, nothing seen yet) if it has none.
+    fn entry(&mut self, sender: u64, origin: Origin) -> &mut SenderAccount {
+        let index = match self.position(sender) {
+            Some(index) => index,
+            None => {
+                self.list.push(SenderAccount {
+                    sender,
+                    origin,
+                    last_seq: 0,
+                    received: 0,
+                    undecodable: 0,
+                    missing: 0,
+                });
+                self.list.len() - 1
+            }
+        };
+        self.last = index;
+        &mut self.list[index]
+    }
+
+    fn get_mut(&mut self, sender: u64) -> Option<&mut SenderAccount> {
+        let index = self.position(sender)?;
+        Some(&mut self.list[index])
+    }
+
+    fn remove(&mut self, sender: u64) {
+        if let Some(index) = self.position(sender) {
+            self.list.swap_remove(index);
+        }
+    }
+}
+
 /// The receiving side of one service: takes samples, checks their headers, accounts for every
 /// sender's sequence, and decodes bodies.
 pub struct Receiver<M: Message> {
@@ -928,7 +990,7 @@ pub struct Receiver<M: Message> {
     listener: Listener<ipc::Service>,
     factory: publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>,
     stats: Cell<ReceiverStats>,
-    senders: RefCell<HashMap<u64, SenderAccount>>,
+    senders: RefCell<Accounts>,
     /// The pieces taken so far of each sender's body in pieces ([`wire::FRAGMENT`]): the
     /// number of messages missed before its first piece, and its bytes.
     pieces: RefCell<HashMap<u64, (u64, Vec<u8>)>>,
@@ -995,7 +1057,7 @@ impl<M: Message> Receiver<M> {
             listener,
             factory,
             stats: Cell::new(ReceiverStats::default()),
-            senders: RefCell::new(HashMap::new()),
+            senders: RefCell::new(Accounts::default()),
             pieces: RefCell::new(HashMap::new()),
             pending_wakeups: Cell::new(Wakeups::default()),
             wakeup_period: Cell::new(None),
@@ -1059,7 +1121,7 @@ impl<M: Message> Receiver<M> {
 
     /// What this receiver knows of each sender it heard from.
     pub fn senders(&self) -> Vec<SenderAccount> {
-        let mut v: Vec<_> = self.senders.borrow().values().copied().collect();
+        let mut v = self.senders.borrow().list.clone();
         v.sort_by_key(|a| (a.origin.bytes(), a.sender));
         v
     }
@@ -1079,7 +1141,7 @@ impl<M: Message> Receiver<M> {
     /// no longer shows in [`senders`](Self::senders). Should it send again, its sequence
     /// numbers are accounted from scratch.
     pub fn forget_sender(&self, sender: u64) {
-        self.senders.borrow_mut().remove(&sender);
+        self.senders.borrow_mut().remove(sender);
         self.pieces.borrow_mut().remove(&sender);
     }
 
@@ -1306,14 +1368,7 @@ impl<M: Message> Receiver<M> {
         let mut stats = self.stats.get();
         stats.received += 1;
         let mut senders = self.senders.borrow_mut();
-        let account = senders.entry(header.sender).or_insert(SenderAccount {
-            sender: header.sender,
-            origin,
-            last_seq: 0,
-            received: 0,
-            undecodable: 0,
-            missing: 0,
-        });
+        let account = senders.entry(header.sender, origin);
         account.received += 1;
         let missed = if header.seq > account.last_seq {
             let missed = header.seq - account.last_seq - 1;
@@ -1333,8 +1388,39 @@ impl<M: Message> Receiver<M> {
         let mut stats = self.stats.get();
         stats.undecodable += 1;
         self.stats.set(stats);
-        if let Some(account) = self.senders.borrow_mut().get_mut(&sender) {
+        if let Some(account) = self.senders.borrow_mut().get_mut(sender) {
             account.undecodable += 1;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn origin() -> Origin {
+        Origin::from_bytes([0; crate::wire::ORIGIN_LEN])
+    }
+
+    #[test]
+    fn accounts_are_found_by_sender_whatever_the_order_and_after_a_removal() {
+        let mut accounts = Accounts::default();
+        for (sender, seq) in [(7, 1), (9, 1), (7, 2), (7, 3), (11, 1), (9, 2)] {
+            accounts.entry(sender, origin()).last_seq = seq;
+        }
+        let seqs = |a: &Accounts| {
+            let mut v: Vec<_> = a.list.iter().map(|a| (a.sender, a.last_seq)).collect();
+            v.sort();
+            v
+        };
+        assert_eq!(seqs(&accounts), vec![(7, 3), (9, 2), (11, 1)]);
+        // Removing the first moves the last into its place: the others stay found.
+        accounts.remove(7);
+        assert!(accounts.get_mut(7).is_none());
+        assert_eq!(accounts.get_mut(11).map(|a| a.last_seq), Some(1));
+        assert_eq!(accounts.entry(9, origin()).last_seq, 2);
+        // A removed sender that comes back starts afresh.
+        assert_eq!(accounts.entry(7, origin()).last_seq, 0);
+        assert_eq!(seqs(&accounts), vec![(7, 0), (9, 2), (11, 1)]);
     }
 }

@@ -16,7 +16,7 @@ use std::cell::{Cell, RefCell};
 use std::fmt;
 use std::io;
 use std::os::fd::RawFd;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use iceoryx2::prelude::FileDescriptorBased;
@@ -262,6 +262,10 @@ impl std::error::Error for ReactorError {}
 /// Most sources one [`Reactor::wait`] watches.
 pub const MAX_SOURCES: usize = 64;
 
+/// Sources whose futex words a doorbell sleep keeps on the stack (more go in a `Vec`): the
+/// player waits on two, a program on one per hosted name.
+const INLINE_WORDS: usize = 4;
+
 /// While spinning, how often file descriptors without a shared-memory check are polled.
 const FD_POLL_PERIOD: Duration = Duration::from_micros(500);
 
@@ -499,15 +503,21 @@ impl Reactor {
                 ..Ready::default()
             });
         }
-        let ready = poll_pending(sources);
-        if ready != 0 {
-            return Ok(Ready {
-                mask: ready,
-                ..Ready::default()
-            });
+        // A blocking wait on doorbells looks for work once it announced its sleep (the
+        // doorbell's argument needs that look): a look here too would read every receiver's
+        // shared memory twice when nothing waits, the usual case.
+        let looks_before_sleep = self.strategy == WaitStrategy::Block && self.on_doorbells(sources);
+        if !looks_before_sleep {
+            let ready = poll_pending(sources);
+            if ready != 0 {
+                return Ok(Ready {
+                    mask: ready,
+                    ..Ready::default()
+                });
+            }
         }
         match self.strategy {
-            WaitStrategy::Block => self.block(sources, deadline),
+            WaitStrategy::Block => self.block(sources, deadline, Some(start)),
             WaitStrategy::Spin => match self.spin(sources, deadline)? {
                 Some(ready) => Ok(ready),
                 None => Ok(Ready {
@@ -523,7 +533,7 @@ impl Reactor {
                 if let Some(ready) = self.spin(sources, Some(spin_until))? {
                     return Ok(ready);
                 }
-                self.block(sources, deadline)
+                self.block(sources, deadline, None)
             }
         }
     }
@@ -584,12 +594,14 @@ impl Reactor {
         &self,
         sources: &[&dyn Source],
         deadline: Option<Instant>,
+        mut now: Option<Instant>,
     ) -> Result<Ready, ReactorError> {
         let mut slept = false;
         loop {
             let remaining = match deadline {
                 Some(d) => {
-                    let now = Instant::now();
+                    // The caller's reading of the clock for the first round, if it just made one.
+                    let now = now.take().unwrap_or_else(Instant::now);
                     if now >= d {
                         return Ok(Ready {
                             timed_out: true,
@@ -600,24 +612,28 @@ impl Reactor {
                 }
                 None => None,
             };
-            if !slept {
-                // Counted once it is sure to sleep: a deadline that passed while spinning
-                // returns above without a system call.
-                slept = true;
-                self.count(|s| s.sleeps += 1);
-            }
-            let on_doorbells =
-                self.doorbells.get() && sources.iter().all(|s| s.doorbell().is_some());
-            let ready = if on_doorbells {
-                self.count(|s| s.doorbell_sleeps += 1);
-                self.doorbell_sleep(sources, remaining)?
+            let ready = if self.on_doorbells(sources) {
+                // Counts its sleep itself, once its last look found nothing to do.
+                self.doorbell_sleep(sources, remaining, &mut slept)?
             } else {
+                if !slept {
+                    // Counted once it is sure to sleep: a deadline that passed while spinning
+                    // returns above without a system call.
+                    slept = true;
+                    self.count(|s| s.sleeps += 1);
+                }
                 self.epoll_sleep(sources, remaining)?
             };
             if ready.any() || ready.termination_requested {
                 return Ok(ready);
             }
         }
+    }
+
+    /// Whether a sleep on `sources` goes on their doorbells (all have one, and the kernel and
+    /// the senders ring them) rather than epoll.
+    fn on_doorbells(&self, sources: &[&dyn Source]) -> bool {
+        self.doorbells.get() && sources.iter().all(|s| s.doorbell().is_some())
     }
 
     /// Sleeps in epoll, the receivers' doorbells saying so (their senders notify through
@@ -656,6 +672,7 @@ impl Reactor {
         &self,
         sources: &[&dyn Source],
         timeout: Option<Duration>,
+        slept: &mut bool,
     ) -> Result<Ready, ReactorError> {
         if self.handles_signals && SignalHandler::termination_requested() {
             return Ok(Ready {
@@ -663,17 +680,35 @@ impl Reactor {
                 ..Ready::default()
             });
         }
-        let bells: Vec<&Doorbell> = sources.iter().filter_map(|s| s.doorbell()).collect();
-        for bell in &bells {
+        // Every source has a doorbell (the caller checked): each is asked for it again
+        // rather than collected, and the words go on the stack for a few sources, so that a
+        // sleep allocates nothing.
+        let bells = || sources.iter().filter_map(|s| s.doorbell());
+        for bell in bells() {
             bell.announce(doorbell::FUTEX);
         }
         doorbell::announced();
         // The words before the last look: a ring after this changes them, so the sleep below
         // returns at once (the module's argument).
-        let words: Vec<_> = bells.iter().map(|b| (b.word_ref(), b.word())).collect();
+        let mut inline = [(&doorbell::NO_WORD, 0u32); INLINE_WORDS];
+        let spilled: Vec<(&AtomicU32, u32)>;
+        let words: &[(&AtomicU32, u32)] = if sources.len() <= INLINE_WORDS {
+            let mut n = 0;
+            for (slot, bell) in inline.iter_mut().zip(bells()) {
+                *slot = (bell.word_ref(), bell.word());
+                n += 1;
+            }
+            &inline[..n]
+        } else {
+            spilled = bells().map(|b| (b.word_ref(), b.word())).collect();
+            &spilled
+        };
         let look = |listeners: bool| {
             let mut mask = 0u64;
-            for (index, (source, bell)) in sources.iter().zip(&bells).enumerate() {
+            for (index, source) in sources.iter().enumerate() {
+                let Some(bell) = source.doorbell() else {
+                    continue;
+                };
                 let news = bell.take_news();
                 let ready = if news || listeners {
                     source.signalled()
@@ -694,10 +729,15 @@ impl Reactor {
                 ..Ready::default()
             });
         }
+        if !*slept {
+            *slept = true;
+            self.count(|s| s.sleeps += 1);
+        }
+        self.count(|s| s.doorbell_sleeps += 1);
         let slice = timeout.map_or(self.slice, |t| t.min(self.slice));
-        let slept = match words.as_slice() {
+        let slept = match words {
             [(word, expected)] => doorbell::futex_wait(word, *expected, slice),
-            _ => doorbell::futex_waitv(&words, slice),
+            _ => doorbell::futex_waitv(words, slice),
         };
         wake_all(sources);
         match slept {

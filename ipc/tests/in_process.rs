@@ -50,6 +50,29 @@ fn event_round_trip_with_origin_and_sequence() {
 }
 
 #[test]
+fn a_body_sent_with_its_measured_length_arrives_and_a_wrong_length_sends_nothing() {
+    let vehicle = TestVehicle::new("auv");
+    let (player, pln) = pair(&vehicle);
+    let rx = player.event_receiver().unwrap();
+    let tx = pln.event_sender().unwrap();
+    let msg = EventMsg::new("depth", vec![Value::Float(12.5), Value::Int(3)]);
+    let len = petrel_ipc::wire::encoded_len(&msg).unwrap();
+    for wrong in [len - 1, len + 1] {
+        let err = tx.send_measured(&msg, wrong).unwrap_err();
+        assert!(matches!(err, SendError::Wire { .. }), "{err}");
+    }
+    assert_eq!(tx.stats().not_sent, 2);
+    assert_eq!(tx.stats().sent, 0);
+    let sent = tx.send_measured(&msg, len).unwrap();
+    // The wrong lengths used no sequence number: no gap at the receiver.
+    assert_eq!(sent.seq, 1);
+    let r = rx.try_recv().unwrap().unwrap();
+    assert_eq!(r.msg, msg);
+    assert_eq!(r.missed, 0);
+    assert!(rx.try_recv().unwrap().is_none());
+}
+
+#[test]
 fn no_receiver_is_reported_and_leaves_a_gap() {
     let vehicle = TestVehicle::new("auv");
     let (player, pln) = pair(&vehicle);
@@ -265,6 +288,34 @@ fn reactor_strategies_wake_on_events_and_time_out() {
         let drained = rx.drain(|r| assert!(r.is_ok())).unwrap();
         assert_eq!(drained.messages, 1, "{strategy}");
     }
+}
+
+#[test]
+fn a_blocking_wait_returns_at_once_for_samples_already_there_without_sleeping() {
+    let vehicle = TestVehicle::new("auv");
+    let player = Participant::join(&vehicle, Role::Player).unwrap();
+    let events = player.event_receiver().unwrap();
+    let reload = player.reload_receiver().unwrap();
+    assert!(events.has_doorbell() && reload.has_doorbell());
+    let pln = Participant::join(&vehicle, Role::program("PLN").unwrap()).unwrap();
+    let tx = pln.event_sender().unwrap();
+    let reactor = Reactor::without_signal_handling(WaitStrategy::Block).unwrap();
+    // The sender's arrival is news: taken by a first wait.
+    reactor
+        .wait(&[&reload, &events], Some(Duration::from_secs(5)))
+        .unwrap();
+    events.take_wakeups().unwrap();
+    let before = reactor.stats();
+    tx.send(&EventMsg::new("go", vec![])).unwrap();
+    let ready = reactor
+        .wait(&[&reload, &events], Some(Duration::from_secs(5)))
+        .unwrap();
+    assert!(ready.is_ready(1) && !ready.is_ready(0), "{ready:?}");
+    let after = reactor.stats();
+    assert_eq!(after.waits, before.waits + 1);
+    assert_eq!(after.sleeps, before.sleeps, "{after:?}");
+    assert_eq!(after.doorbell_sleeps, before.doorbell_sleeps, "{after:?}");
+    assert_eq!(events.drain(|r| assert!(r.is_ok())).unwrap().messages, 1);
 }
 
 #[test]

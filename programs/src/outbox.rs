@@ -11,6 +11,8 @@ pub(crate) struct Queued {
     pub host: usize,
     /// The event.
     pub msg: EventMsg,
+    /// Its encoded length, measured when it was emitted.
+    pub len: usize,
 }
 
 /// Events emitted while no player received them, oldest first. Holds at most `capacity`
@@ -78,6 +80,7 @@ mod tests {
 
     fn ev(n: usize) -> Queued {
         Queued {
+            len: 0,
             host: 0,
             msg: EventMsg::new(format!("e{n}"), vec![]),
         }

@@ -314,12 +314,15 @@ impl Program {
         if self.terminated {
             return Err(ProgramError::Terminated);
         }
-        let deadline = timeout.map(|t| Instant::now() + t);
+        // The deadline counts from the first look that found no call: a call already there
+        // is taken without reading the clock, and a wait reads it once.
+        let mut from_first_look: Option<Option<Instant>> = None;
         loop {
             if let Some(call) = self.try_take()? {
                 return Ok(Some(call));
             }
             let mut now = Instant::now();
+            let deadline = *from_first_look.get_or_insert_with(|| timeout.map(|t| now + t));
             if !self.outbox.is_empty() && now >= self.next_retry {
                 self.next_retry = now + self.config.retry_period;
                 self.flush()?;
@@ -515,8 +518,9 @@ impl Program {
             event: msg.name.clone(),
             error,
         };
-        match wire::encoded_len(&msg) {
-            Ok(len) if len <= EVENTS.max_body_len => {}
+        // Measured once: the send below encodes into exactly this many bytes.
+        let len = match wire::encoded_len(&msg) {
+            Ok(len) if len <= EVENTS.max_body_len => len,
             Ok(len) => {
                 return Err(unsendable(WireError::TooLarge {
                     len,
@@ -524,24 +528,24 @@ impl Program {
                 }))
             }
             Err(error) => return Err(unsendable(error)),
-        }
+        };
         self.stats.emitted += 1;
         let ready = match self.player_ready() {
             Ok(ready) => ready,
             Err(e) => {
                 // Keep the event; report the loss of an older one first, if any.
-                return Err(self.enqueue(host, msg).err().unwrap_or(e));
+                return Err(self.enqueue(host, msg, len).err().unwrap_or(e));
             }
         };
         if !ready {
             self.player_gone();
-            return self.enqueue(host, msg);
+            return self.enqueue(host, msg, len);
         }
         if let Err(e) = self.deliver_queued() {
-            return Err(self.enqueue(host, msg).err().unwrap_or(e));
+            return Err(self.enqueue(host, msg, len).err().unwrap_or(e));
         }
         if self.outbox.is_empty() {
-            match self.send_now(host, &msg) {
+            match self.send_now(host, &msg, len) {
                 Ok(true) => {
                     self.stats.delivered += 1;
                     return Ok(());
@@ -553,11 +557,11 @@ impl Program {
                 }
             }
         }
-        self.enqueue(host, msg)
+        self.enqueue(host, msg, len)
     }
 
-    fn enqueue(&mut self, host: usize, msg: EventMsg) -> Result<(), ProgramError> {
-        match self.outbox.push(Queued { host, msg }) {
+    fn enqueue(&mut self, host: usize, msg: EventMsg, len: usize) -> Result<(), ProgramError> {
+        match self.outbox.push(Queued { host, msg, len }) {
             None => Ok(()),
             Some(dropped) => {
                 self.stats.dropped += 1;
@@ -666,7 +670,7 @@ impl Program {
     fn deliver_queued(&mut self) -> Result<usize, ProgramError> {
         let mut delivered = 0;
         while let Some(item) = self.outbox.pop_front() {
-            match self.send_now(item.host, &item.msg) {
+            match self.send_now(item.host, &item.msg, item.len) {
                 Ok(true) => {
                     delivered += 1;
                     self.stats.delivered += 1;
@@ -686,13 +690,13 @@ impl Program {
         Ok(delivered)
     }
 
-    /// Sends `msg` as `host`: `Ok(true)` when the player got it, `Ok(false)` when it should be
-    /// tried again later.
-    fn send_now(&mut self, host: usize, msg: &EventMsg) -> Result<bool, ProgramError> {
+    /// Sends `msg`, whose encoded length is `len`, as `host`: `Ok(true)` when the player got
+    /// it, `Ok(false)` when it should be tried again later.
+    fn send_now(&mut self, host: usize, msg: &EventMsg, len: usize) -> Result<bool, ProgramError> {
         let Some(sender) = self.hosts[host].events.as_ref() else {
             return Ok(false);
         };
-        match sender.send(msg) {
+        match sender.send_measured(msg, len) {
             Ok(sent) => {
                 self.hosts[host].last_seq = sent.seq;
                 Ok(true)
