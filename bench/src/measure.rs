@@ -428,26 +428,36 @@ impl PetrelSide {
     }
 }
 
+/// Runs up to `n` rounds of `round` (which returns one round trip's time), recording each
+/// into `into` when given, and stops before a round that would start after `until`; returns
+/// the rounds done (every [`Side::rounds`] of this module).
+fn timed_rounds(
+    n: usize,
+    mut into: Option<&mut Latencies>,
+    until: Option<Instant>,
+    mut round: impl FnMut() -> Res<Duration>,
+) -> Res<usize> {
+    for done in 0..n {
+        if until.is_some_and(|u| Instant::now() > u) {
+            return Ok(done);
+        }
+        let d = round()?;
+        if let Some(l) = into.as_deref_mut() {
+            l.record(d);
+        }
+    }
+    Ok(n)
+}
+
 impl Side for PetrelSide {
     fn rounds(
         &mut self,
         n: usize,
-        mut into: Option<&mut Latencies>,
+        into: Option<&mut Latencies>,
         until: Option<Instant>,
     ) -> Res<usize> {
         let pinger = self.pinger.as_mut().ok_or("finished")?;
-        let mut done = 0;
-        for _ in 0..n {
-            if until.is_some_and(|u| Instant::now() > u) {
-                break;
-            }
-            let d = pinger.round()?;
-            if let Some(l) = into.as_deref_mut() {
-                l.record(d);
-            }
-            done += 1;
-        }
-        Ok(done)
+        timed_rounds(n, into, until, || pinger.round())
     }
 
     fn pause(&mut self) -> Res<()> {
@@ -549,7 +559,7 @@ impl Side for IoxPingPong {
     fn rounds(
         &mut self,
         n: usize,
-        mut into: Option<&mut Latencies>,
+        into: Option<&mut Latencies>,
         until: Option<Instant>,
     ) -> Res<usize> {
         let side = self.side.as_ref().ok_or("finished")?;
@@ -561,11 +571,7 @@ impl Side for IoxPingPong {
             ),
             None => None,
         };
-        let mut done = 0;
-        for _ in 0..n {
-            if until.is_some_and(|u| Instant::now() > u) {
-                break;
-            }
+        timed_rounds(n, into, until, || {
             let i = self.next;
             self.next += 1;
             self.buf[..8].copy_from_slice(&i.to_le_bytes());
@@ -575,12 +581,8 @@ impl Side for IoxPingPong {
                 side.notifier.notify().map_err(err("notify"))?;
             }
             roles::iox_recv(side, self.ws.as_ref(), i, t + Duration::from_secs(10))?;
-            if let Some(l) = into.as_deref_mut() {
-                l.record(t.elapsed());
-            }
-            done += 1;
-        }
-        Ok(done)
+            Ok(t.elapsed())
+        })
     }
 
     fn pause(&mut self) -> Res<()> {
@@ -660,15 +662,11 @@ impl<S: Read + Write> Side for SocketSide<S> {
     fn rounds(
         &mut self,
         n: usize,
-        mut into: Option<&mut Latencies>,
+        into: Option<&mut Latencies>,
         until: Option<Instant>,
     ) -> Res<usize> {
         let stream = self.stream.as_mut().ok_or("finished")?;
-        let mut done = 0;
-        for _ in 0..n {
-            if until.is_some_and(|u| Instant::now() > u) {
-                break;
-            }
+        timed_rounds(n, into, until, || {
             self.buf[..8].copy_from_slice(&self.next.to_le_bytes());
             self.next += 1;
             let t = Instant::now();
@@ -676,12 +674,8 @@ impl<S: Read + Write> Side for SocketSide<S> {
             stream
                 .read_exact(&mut self.buf)
                 .map_err(err("socket read"))?;
-            if let Some(l) = into.as_deref_mut() {
-                l.record(t.elapsed());
-            }
-            done += 1;
-        }
-        Ok(done)
+            Ok(t.elapsed())
+        })
     }
 
     fn pause(&mut self) -> Res<()> {
