@@ -113,6 +113,23 @@ impl Bench {
     fn position(&self) -> Position {
         self.sim.vehicle().state().position
     }
+
+    /// Engages the thrusters and has GUI follow one leg from where the vehicle is to `end`,
+    /// at transit depth.
+    fn start_leg(&mut self, mission: &Mission, end: Position) {
+        let start = self.position();
+        self.call("IDC", "engage", vec![]);
+        self.call(
+            "GUI",
+            "compute_course",
+            vec![
+                Value::FloatList(vec![start.x, start.y, end.x, end.y]),
+                Value::Float(mission.vehicle.transit_depth),
+                Value::Float(0.0),
+            ],
+        );
+        self.call("GUI", "follow_leg", vec![]);
+    }
 }
 
 /// Flies one transit leg north to `end` at transit depth with NAV stepping every
@@ -126,18 +143,7 @@ fn fly_to_the_end_and_surface(
     latency_us: u64,
 ) -> Bench {
     let mut b = Bench::new(mission);
-    let start = b.position();
-    b.call("IDC", "engage", vec![]);
-    b.call(
-        "GUI",
-        "compute_course",
-        vec![
-            Value::FloatList(vec![start.x, start.y, end.x, end.y]),
-            Value::Float(mission.vehicle.transit_depth),
-            Value::Float(0.0),
-        ],
-    );
-    b.call("GUI", "follow_leg", vec![]);
+    b.start_leg(mission, end);
     let limit = 600_000_000;
     let mut surface_at = None;
     let mut stop_at = None;
@@ -247,18 +253,7 @@ fn a_control_step_of_seconds_still_brakes_to_a_stop_at_the_route_end() {
 fn stopped_mid_route_the_vehicle_waits_where_it_is_for_its_next_route() {
     let mission = bench();
     let mut b = Bench::new(&mission);
-    let start = b.position();
-    b.call("IDC", "engage", vec![]);
-    b.call(
-        "GUI",
-        "compute_course",
-        vec![
-            Value::FloatList(vec![start.x, start.y, 0.0, 500.0]),
-            Value::Float(mission.vehicle.transit_depth),
-            Value::Float(0.0),
-        ],
-    );
-    b.call("GUI", "follow_leg", vec![]);
+    b.start_leg(&mission, geom::pos(0.0, 500.0));
     // A minute along the leg, at cruise speed and transit depth.
     while b.sim.time_us() < 60_000_000 {
         b.control_step(500_000);
