@@ -10,7 +10,7 @@ use common::TestVehicle;
 use petrel_ipc::port::EVENTS;
 use petrel_ipc::{
     CallMsg, EventMsg, Heartbeat, MarkingMsg, Participant, Reactor, RecvError, Role, SendError,
-    SetupError, Value, Vehicle, WaitStrategy,
+    SetupError, Value, Vehicle, WaitStrategy, EVENT_SENDERS_SPARE,
 };
 
 fn pair(vehicle: &Vehicle) -> (Participant, Participant) {
@@ -620,13 +620,66 @@ fn a_sender_made_before_the_player_keeps_the_defaults_and_still_delivers() {
     assert_eq!(tx.fixed_len(), None);
     // The player opens it as it is (its bound cannot be recorded any more).
     let player = Participant::join(&vehicle, Role::Player).unwrap();
-    let events = player.event_receiver_sized(40).unwrap();
+    let events = player.event_receiver_sized(40, 1).unwrap();
     assert_eq!(player.max_event_len().unwrap(), None);
     let text = EventMsg::new("log", vec![Value::Text("é".repeat(10_000))]);
     tx.send(&text).unwrap();
     assert_eq!(events.try_recv().unwrap().unwrap().msg, text);
     // A later sender of the same process reads no bound either.
     assert_eq!(gui.event_sender_sized().unwrap().fixed_len(), None);
+}
+
+#[test]
+fn the_players_events_service_takes_its_programs_and_the_spare_then_refuses_clearly() {
+    let vehicle = TestVehicle::new("fullev");
+    // A project of two programs: the player makes the service for 2 + the spare senders.
+    let player = Participant::join(&vehicle, Role::Player).unwrap();
+    let events = player.event_receiver_sized(40, 2).unwrap();
+    let max = 2 + EVENT_SENDERS_SPARE;
+    // Programs open it with their default spec (which asks for more senders than it has),
+    // sized or not; every one of the `max` delivers.
+    let programs: Vec<_> = (0..max)
+        .map(|i| Participant::join(&vehicle, Role::program(&format!("P{i}")).unwrap()).unwrap())
+        .collect();
+    let mut senders: Vec<_> = programs
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            if i % 2 == 0 {
+                p.event_sender_sized().unwrap()
+            } else {
+                p.event_sender().unwrap()
+            }
+        })
+        .collect();
+    let ping = EventMsg::new("ping", vec![Value::Int(1)]);
+    for tx in &senders {
+        tx.send(&ping).unwrap();
+    }
+    let got: Vec<_> = std::iter::from_fn(|| events.try_recv().unwrap()).collect();
+    assert_eq!(got.len(), max);
+
+    // One more is refused, saying how many the service takes and why.
+    let late = Participant::join(&vehicle, Role::program("LATE").unwrap()).unwrap();
+    let Err(error) = late.event_sender_sized() else {
+        panic!("a sender beyond the service's senders is refused");
+    };
+    assert_eq!(
+        error,
+        SetupError::SendersFull {
+            service: vehicle.events_service(),
+            max,
+        }
+    );
+    let text = error.to_string();
+    assert!(text.contains(&format!("it takes {max} senders")), "{text}");
+    assert!(text.contains("restarted"), "{text}");
+
+    // A sender gone frees its place.
+    senders.pop();
+    let tx = late.event_sender_sized().unwrap();
+    tx.send(&ping).unwrap();
+    assert_eq!(events.try_recv().unwrap().unwrap().sender, tx.sender_id());
 }
 
 #[test]

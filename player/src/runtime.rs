@@ -538,7 +538,7 @@ impl<'p> PlayerLoop<'p> {
         }
         let ports = Ports {
             events: me
-                .event_receiver_sized(event_bound(project))
+                .event_receiver_sized(event_bound(project), project.programs.len())
                 .map_err(setup)?,
             calls: project
                 .programs
