@@ -211,7 +211,39 @@ fn is_transient_event(e: &EventOpenOrCreateError) -> bool {
 
 impl Participant {
     /// Joins `vehicle` as `role`: creates the process's iceoryx2 node, named after the role.
+    ///
+    /// A program's receivers keep the connections of [`PROGRAM_SENDERS_GONE`] senders gone
+    /// with samples not yet read; other roles iceoryx2's default, 128 (a player sized from its
+    /// project joins with [`join_player`](Self::join_player)).
     pub fn join(vehicle: &Vehicle, role: Role) -> Result<Self, SetupError> {
+        let gone = match role {
+            Role::Program(_) => Some(PROGRAM_SENDERS_GONE),
+            _ => None,
+        };
+        Self::join_keeping(vehicle, role, gone)
+    }
+
+    /// Joins `vehicle` as the player of a project of `programs` programs: its receivers keep
+    /// the connections of as many senders gone with events not yet read as its events service
+    /// takes senders ([`event_senders`]), twice, 32 at least.
+    pub fn join_player(vehicle: &Vehicle, programs: usize) -> Result<Self, SetupError> {
+        let gone = event_senders(programs).saturating_mul(2).max(32);
+        Self::join_keeping(vehicle, Role::Player, Some(gone))
+    }
+
+    /// Joins with receivers that keep the connections of `gone` senders gone with samples
+    /// not yet read (iceoryx2's `subscriber_expired_connection_buffer`; `None`: its default).
+    ///
+    /// Why not the default: iceoryx2 0.10's receiver walks these slots with its live ones at
+    /// every look for a sample, and the default 128 made them most of the player's walk. What
+    /// the number bounds: a sender that leaves (a tool that emits and exits) before its samples
+    /// are read keeps a slot until they are; beyond `gone` such senders at once, iceoryx2
+    /// drops the oldest connection's unread samples (and says so in its log).
+    fn join_keeping(
+        vehicle: &Vehicle,
+        role: Role,
+        gone: Option<usize>,
+    ) -> Result<Self, SetupError> {
         role.check()?;
         let node_name = role.node_name();
         let name = NodeName::new(&node_name).map_err(|_| {
@@ -221,9 +253,17 @@ impl Participant {
             })
         })?;
         let session = vehicle.session()?;
+        let mut config = session.config().clone();
+        if let Some(gone) = gone {
+            // Never below the samples a receiver holds at once (iceoryx2 raises it to that).
+            config
+                .defaults
+                .publish_subscribe
+                .subscriber_expired_connection_buffer = gone.max(2);
+        }
         let node = NodeBuilder::new()
             .name(&name)
-            .config(session.config())
+            .config(&config)
             .create::<ipc::Service>()
             .map_err(|error| SetupError::Node {
                 node: node_name.clone(),
@@ -316,7 +356,7 @@ impl Participant {
         max_event_len: usize,
         programs: usize,
     ) -> Result<EventReceiver, SetupError> {
-        let max_publishers = programs.saturating_add(EVENT_SENDERS_SPARE);
+        let max_publishers = event_senders(programs);
         let spec = ServiceSpec {
             max_publishers,
             // Every sender's process, the receiver and the processes that only look.
@@ -712,6 +752,17 @@ impl Participant {
 /// 128 slots (the default, [`EVENTS`]) cost the player ~4,000 instructions an event,
 /// a round trip's tenth (docs/benchmarks.md, "Issue 17: the events service sized").
 pub const EVENT_SENDERS_SPARE: usize = 16;
+
+/// The senders the player's events service takes for a project of `programs` programs:
+/// one each plus [`EVENT_SENDERS_SPARE`].
+pub fn event_senders(programs: usize) -> usize {
+    programs.saturating_add(EVENT_SENDERS_SPARE)
+}
+
+/// The connections of senders gone with samples not yet read that a program's receivers keep
+/// ([`Participant::join`]): a program receives calls from 4 senders at most ([`CALLS`]), and
+/// a heartbeat or a signal lost with its sender is replaced by the next.
+pub const PROGRAM_SENDERS_GONE: usize = 16;
 
 /// The shortest fixed sample a sized sender takes: a body of 64 KiB goes in 128 pieces at most
 /// (a sixteenth of the player's buffer for one sender), and a fixed segment of 512-byte samples

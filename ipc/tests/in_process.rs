@@ -10,7 +10,7 @@ use common::TestVehicle;
 use petrel_ipc::port::EVENTS;
 use petrel_ipc::{
     CallMsg, EventMsg, Heartbeat, MarkingMsg, Participant, Reactor, RecvError, Role, SendError,
-    SetupError, Value, Vehicle, WaitStrategy, EVENT_SENDERS_SPARE,
+    SetupError, Value, Vehicle, WaitStrategy, EVENT_SENDERS_SPARE, PROGRAM_SENDERS_GONE,
 };
 
 fn pair(vehicle: &Vehicle) -> (Participant, Participant) {
@@ -680,6 +680,84 @@ fn the_players_events_service_takes_its_programs_and_the_spare_then_refuses_clea
     let tx = late.event_sender_sized().unwrap();
     tx.send(&ping).unwrap();
     assert_eq!(events.try_recv().unwrap().unwrap().sender, tx.sender_id());
+}
+
+#[test]
+fn samples_of_senders_gone_before_they_were_read_all_arrive() {
+    // The player keeps the connections of as many senders gone as its events service takes
+    // (twice, 32 at least): twenty tools that each emit one event and leave before the player
+    // reads lose nothing. (A sender gone before the receiver ever looked was never connected:
+    // iceoryx2 delivers nothing of it, whatever the buffer; the SDK's senders wait for the
+    // player's acknowledgement.)
+    let vehicle = TestVehicle::new("gone");
+    let player = Participant::join_player(&vehicle, 1).unwrap();
+    let events = player.event_receiver_sized(40, 1).unwrap();
+    for round in 0..2 {
+        let joined: Vec<_> = (0..10)
+            .map(|k| {
+                let me = Participant::join(&vehicle, Role::tool(&format!("e{round}_{k}")).unwrap())
+                    .unwrap();
+                let tx = me.event_sender_sized().unwrap();
+                (me, tx)
+            })
+            .collect();
+        // The player looks (and connects to them, reading nothing), then they emit and leave.
+        assert_eq!(events.has_pending(), round > 0);
+        for (k, (_, tx)) in joined.iter().enumerate() {
+            tx.send(&EventMsg::new(
+                "ping",
+                vec![Value::Int(round * 10 + k as i64)],
+            ))
+            .unwrap();
+        }
+        // Gone before the player reads: ten connections kept for their unread events.
+        drop(joined);
+    }
+    let got: Vec<_> = std::iter::from_fn(|| events.try_recv().unwrap())
+        .map(|r| r.msg.params[0].clone())
+        .collect();
+    let mut got: Vec<i64> = got
+        .into_iter()
+        .map(|v| match v {
+            Value::Int(i) => i,
+            other => panic!("{other:?}"),
+        })
+        .collect();
+    got.sort_unstable();
+    assert_eq!(got, (0..20).collect::<Vec<_>>());
+
+    // A program keeps PROGRAM_SENDERS_GONE: three rounds of four callers (all the calls
+    // service takes at once) that call and leave before it reads.
+    let pln = Participant::join(&vehicle, Role::program("PLN").unwrap()).unwrap();
+    let calls = pln.call_receiver().unwrap();
+    let mut sent = 0;
+    for round in 0..3 {
+        let callers: Vec<_> = (0..4)
+            .map(|k| {
+                let me = Participant::join(&vehicle, Role::tool(&format!("c{round}_{k}")).unwrap())
+                    .unwrap();
+                // Fixed samples: a growing sender's unread samples go with it (its segments
+                // are removed when it leaves, whatever the receiver keeps).
+                let tx = me.call_sender_sized("PLN", Some(64)).unwrap();
+                (me, tx)
+            })
+            .collect();
+        assert_eq!(calls.has_pending(), round > 0);
+        for (_, tx) in &callers {
+            tx.send(&CallMsg::new("go", vec![Value::Int(sent)]))
+                .unwrap();
+            sent += 1;
+        }
+        drop(callers);
+    }
+    let got = std::iter::from_fn(|| calls.try_recv().unwrap()).count();
+    assert_eq!(got, 12);
+    const {
+        assert!(
+            3 * 4 <= PROGRAM_SENDERS_GONE,
+            "the test covers what a program keeps"
+        )
+    };
 }
 
 #[test]
