@@ -577,7 +577,8 @@ pub fn ports() -> Res<()> {
         let player = Participant::join(&vehicle, Role::Player).map_err(s)?;
         step("joined the vehicle (iceoryx2 node)");
         // The bound a project of fixed-size events records (64 B); senders take 512 B at least.
-        let events = player.event_receiver_sized(64).map_err(s)?;
+        // Three programs (the three call senders below).
+        let events = player.event_receiver_sized(64, 3).map_err(s)?;
         step("events receiver (the player's, recording its project's longest event)");
         let calls = player.call_sender("P0").map_err(s)?;
         step("a call sender, a program taking text or lists (grows to 64 KiB calls)");

@@ -82,7 +82,10 @@ pub use liveness::{
     LivenessError, NodeInfo, NodeStatus, ProgramChange, ProgramStatus, ProgramWatch,
 };
 pub use naming::{NameError, Role, Vehicle};
-pub use participant::{Participant, ServiceFailure, SetupError};
+pub use participant::{
+    event_senders, Participant, ServiceFailure, SetupError, EVENT_SENDERS_SPARE,
+    PROGRAM_SENDERS_GONE,
+};
 pub use port::{
     CallReceiver, CallSender, Drained, EventReceiver, EventSender, HeartbeatPublisher,
     HeartbeatSubscriber, MarkingPublisher, MarkingSubscriber, Received, Receiver, ReceiverStats,

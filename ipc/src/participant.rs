@@ -13,7 +13,7 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::publisher::PublisherCreateError;
 use iceoryx2::port::subscriber::SubscriberCreateError;
 use iceoryx2::prelude::{
-    ipc, AllocationStrategy, AttributeVerifier, BackpressureStrategy, EventId, Node, NodeBuilder,
+    ipc, AllocationStrategy, AttributeSpecifier, BackpressureStrategy, EventId, Node, NodeBuilder,
     NodeName, PortFactory, SemanticString, ServiceName,
 };
 use iceoryx2::service::attribute::{AttributeKey, AttributeValue};
@@ -77,10 +77,6 @@ impl ServiceFailure {
             | ServiceFailure::Listener(ListenerCreateError::ExceedsMaxSupportedListeners) => {
                 "the service already has all the receivers it accepts (is a second player or program instance running? `petrel play` cleans up dead ones at start)"
             }
-            ServiceFailure::Publisher(PublisherCreateError::ExceedsMaxSupportedPublishers)
-            | ServiceFailure::Notifier(NotifierCreateError::ExceedsMaxSupportedNotifiers) => {
-                "the service already has all the senders it accepts"
-            }
             _ => "check that /dev/shm and the vehicle's directory are writable and not full",
         }
     }
@@ -107,6 +103,13 @@ pub enum SetupError {
         /// iceoryx2's reason.
         failure: ServiceFailure,
     },
+    /// The service already has every sender it was made for.
+    SendersFull {
+        /// The service.
+        service: String,
+        /// The senders it takes.
+        max: usize,
+    },
     /// Only a program receives calls, on its own service.
     NotAProgram {
         /// The participant's role.
@@ -127,6 +130,10 @@ impl fmt::Display for SetupError {
                 f,
                 "cannot set up `{service}` ({failure:?}): {}",
                 failure.hint()
+            ),
+            SetupError::SendersFull { service, max } => write!(
+                f,
+                "cannot send on `{service}`: it takes {max} senders and all are in use (a player makes the events service for its project's programs plus {EVENT_SENDERS_SPARE}: data servers, tools, restarted programs; a project reloaded with more programs needs the player restarted)"
             ),
             SetupError::NotAProgram { role } => write!(
                 f,
@@ -204,7 +211,39 @@ fn is_transient_event(e: &EventOpenOrCreateError) -> bool {
 
 impl Participant {
     /// Joins `vehicle` as `role`: creates the process's iceoryx2 node, named after the role.
+    ///
+    /// A program's receivers keep the connections of [`PROGRAM_SENDERS_GONE`] senders gone
+    /// with samples not yet read; other roles iceoryx2's default, 128 (a player sized from its
+    /// project joins with [`join_player`](Self::join_player)).
     pub fn join(vehicle: &Vehicle, role: Role) -> Result<Self, SetupError> {
+        let gone = match role {
+            Role::Program(_) => Some(PROGRAM_SENDERS_GONE),
+            _ => None,
+        };
+        Self::join_keeping(vehicle, role, gone)
+    }
+
+    /// Joins `vehicle` as the player of a project of `programs` programs: its receivers keep
+    /// the connections of as many senders gone with events not yet read as its events service
+    /// takes senders ([`event_senders`]), twice, 32 at least.
+    pub fn join_player(vehicle: &Vehicle, programs: usize) -> Result<Self, SetupError> {
+        let gone = event_senders(programs).saturating_mul(2).max(32);
+        Self::join_keeping(vehicle, Role::Player, Some(gone))
+    }
+
+    /// Joins with receivers that keep the connections of `gone` senders gone with samples
+    /// not yet read (iceoryx2's `subscriber_expired_connection_buffer`; `None`: its default).
+    ///
+    /// Why not the default: iceoryx2 0.10's receiver walks these slots with its live ones at
+    /// every look for a sample, and the default 128 made them most of the player's walk. What
+    /// the number bounds: a sender that leaves (a tool that emits and exits) before its samples
+    /// are read keeps a slot until they are; beyond `gone` such senders at once, iceoryx2
+    /// drops the oldest connection's unread samples (and says so in its log).
+    fn join_keeping(
+        vehicle: &Vehicle,
+        role: Role,
+        gone: Option<usize>,
+    ) -> Result<Self, SetupError> {
         role.check()?;
         let node_name = role.node_name();
         let name = NodeName::new(&node_name).map_err(|_| {
@@ -214,9 +253,17 @@ impl Participant {
             })
         })?;
         let session = vehicle.session()?;
+        let mut config = session.config().clone();
+        if let Some(gone) = gone {
+            // Never below the samples a receiver holds at once (iceoryx2 raises it to that).
+            config
+                .defaults
+                .publish_subscribe
+                .subscriber_expired_connection_buffer = gone.max(2);
+        }
         let node = NodeBuilder::new()
             .name(&name)
-            .config(session.config())
+            .config(&config)
             .create::<ipc::Service>()
             .map_err(|error| SetupError::Node {
                 node: node_name.clone(),
@@ -295,16 +342,32 @@ impl Participant {
         self.receiver(self.vehicle.events_service(), EVENTS, None)
     }
 
-    /// The player's receiver of events, recording in the events service, when it creates it,
-    /// `max_event_len`: the longest event (encoded [`EventMsg`](crate::EventMsg)) its project
-    /// lets a process send, from which every [`event_sender_sized`](Self::event_sender_sized)
-    /// sizes its samples. A service that already exists (a program created it first, or a
-    /// previous player) keeps what it was created with: iceoryx2 fixes a service's attributes
-    /// at its creation.
-    pub fn event_receiver_sized(&self, max_event_len: usize) -> Result<EventReceiver, SetupError> {
+    /// The player's receiver of events, sizing the events service, when it creates it, from
+    /// its project: `max_event_len`, the longest event (encoded [`EventMsg`](crate::EventMsg))
+    /// its project lets a process send, from which every
+    /// [`event_sender_sized`](Self::event_sender_sized) sizes its samples; and `programs`, the
+    /// number of programs it declares: the service takes that many senders plus
+    /// [`EVENT_SENDERS_SPARE`] (see there why it is worth sizing).
+    ///
+    /// A service that already exists (a program created it first, or a previous player) keeps
+    /// what it was created with: iceoryx2 fixes a service's attributes at its creation.
+    pub fn event_receiver_sized(
+        &self,
+        max_event_len: usize,
+        programs: usize,
+    ) -> Result<EventReceiver, SetupError> {
+        let max_publishers = event_senders(programs);
+        let spec = ServiceSpec {
+            max_publishers,
+            // Every sender's process, the receiver and the processes that only look.
+            max_nodes: EVENTS
+                .max_nodes
+                .max(max_publishers.saturating_add(EVENTS.max_nodes - EVENTS.max_publishers)),
+            ..EVENTS
+        };
         self.receiver(
             self.vehicle.events_service(),
-            EVENTS,
+            spec,
             Some(max_event_len.clamp(1, EVENTS.max_body_len)),
         )
     }
@@ -471,14 +534,22 @@ impl Participant {
     /// Opens the service, or creates it; a creator records `bound` (the longest body its
     /// project lets the senders send, [`BOUND_ATTRIBUTE`]) in the service's attributes. A
     /// service that exists is opened whatever it recorded.
+    ///
+    /// An existing service is opened whatever capacities (senders, processes) it was created
+    /// with: the player makes the events service for its project's programs
+    /// ([`event_receiver_sized`](Self::event_receiver_sized)), fewer senders than a program's
+    /// default spec asks, and a program must still open it. A port beyond the capacity is
+    /// refused when it is made, with its own error ([`SetupError::SendersFull`]).
     fn open_pubsub(
         &self,
         service: &str,
         spec: &ServiceSpec,
         bound: Option<usize>,
     ) -> Result<publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>, SetupError> {
+        use iceoryx2::service::builder::publish_subscribe::PublishSubscribeCreateError;
         let name = self.service_name(service)?;
-        let builder = || {
+        // What an opener requires of a service: the layout of its samples and its buffers.
+        let opener = || {
             self.node
                 .service_builder(&name)
                 .publish_subscribe::<[u8]>()
@@ -487,29 +558,40 @@ impl Participant {
                 .subscriber_max_buffer_size(spec.subscriber_buffer)
                 .subscriber_max_borrowed_samples(2)
                 .history_size(spec.history)
-                .max_publishers(spec.max_publishers)
                 .max_subscribers(spec.max_subscribers)
-                .max_nodes(spec.max_nodes)
         };
-        let recorded = bound.and_then(bound_verifier);
+        let recorded = bound.and_then(bound_specifier);
         let mut attempt = 0;
         loop {
-            let result = match &recorded {
-                // Created with the bound, or opened if it already has this one.
-                Some(verifier) => match builder().open_or_create_with_attributes(verifier) {
-                    // It exists with another bound, or none: open it as it is.
-                    Err(PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
-                        PublishSubscribeOpenError::IncompatibleAttributes,
-                    )) => builder().open_or_create(),
-                    other => other,
-                },
-                None => builder().open_or_create(),
+            let result = match opener().open() {
+                Err(PublishSubscribeOpenError::DoesNotExist) => {
+                    let creator = opener()
+                        .max_publishers(spec.max_publishers)
+                        .max_nodes(spec.max_nodes);
+                    match &recorded {
+                        Some(attributes) => creator.create_with_attributes(attributes),
+                        None => creator.create(),
+                    }
+                    .map_err(PublishSubscribeOpenOrCreateError::PublishSubscribeCreateError)
+                }
+                other => {
+                    other.map_err(PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError)
+                }
             };
             match result {
                 Ok(factory) => return Ok(factory),
                 Err(e) if is_transient_pubsub(&e) && attempt + 1 < OPEN_ATTEMPTS => {
                     attempt += 1;
-                    thread::sleep(OPEN_RETRY_PAUSE);
+                    // Another process created it between our open and our create: open it
+                    // at once (no pause).
+                    if !matches!(
+                        e,
+                        PublishSubscribeOpenOrCreateError::PublishSubscribeCreateError(
+                            PublishSubscribeCreateError::AlreadyExists
+                        )
+                    ) {
+                        thread::sleep(OPEN_RETRY_PAUSE);
+                    }
                 }
                 Err(e) => {
                     return Err(SetupError::Service {
@@ -521,31 +603,45 @@ impl Participant {
         }
     }
 
+    /// The event service paired with a publish-subscribe service, opened whatever capacities
+    /// it was created with (see [`open_pubsub`](Self::open_pubsub)).
     fn open_event(
         &self,
         service: &str,
         spec: &ServiceSpec,
     ) -> Result<event::PortFactory<ipc::Service>, SetupError> {
+        use iceoryx2::service::builder::event::EventCreateError;
         let name = self.service_name(service)?;
-        let mut attempt = 0;
-        loop {
-            let result = self
-                .node
+        let opener = || {
+            self.node
                 .service_builder(&name)
                 .event()
-                .max_notifiers(spec.max_publishers)
                 .max_listeners(spec.max_subscribers)
-                .max_nodes(spec.max_nodes)
                 .event_id_max_value(WAKE_MAX)
                 .notifier_created_event(EventId::new(WAKE_SENDER_JOINED))
                 .notifier_dropped_event(EventId::new(WAKE_SENDER_LEFT))
                 .notifier_dead_event(EventId::new(WAKE_SENDER_DIED))
-                .open_or_create();
+        };
+        let mut attempt = 0;
+        loop {
+            let result = match opener().open() {
+                Err(EventOpenError::DoesNotExist) => opener()
+                    .max_notifiers(spec.max_publishers)
+                    .max_nodes(spec.max_nodes)
+                    .create()
+                    .map_err(EventOpenOrCreateError::EventCreateError),
+                other => other.map_err(EventOpenOrCreateError::EventOpenError),
+            };
             match result {
                 Ok(factory) => return Ok(factory),
                 Err(e) if is_transient_event(&e) && attempt + 1 < OPEN_ATTEMPTS => {
                     attempt += 1;
-                    thread::sleep(OPEN_RETRY_PAUSE);
+                    if !matches!(
+                        e,
+                        EventOpenOrCreateError::EventCreateError(EventCreateError::AlreadyExists)
+                    ) {
+                        thread::sleep(OPEN_RETRY_PAUSE);
+                    }
                 }
                 Err(e) => {
                     return Err(SetupError::Service {
@@ -580,17 +676,25 @@ impl Participant {
         };
         let factory = self.open_pubsub(&service, &spec, None)?;
         let events = self.open_event(&service, &spec)?;
-        let publisher = create_publisher(&factory, spec.initial_slice_len, allocation)
-            .map_err(|e| failed(ServiceFailure::Publisher(e)))?;
+        let full = || SetupError::SendersFull {
+            service: service.clone(),
+            max: factory.static_config().max_publishers(),
+        };
+        let publisher = create_publisher(&factory, spec.initial_slice_len, allocation).map_err(
+            |e| match e {
+                PublisherCreateError::ExceedsMaxSupportedPublishers => full(),
+                e => failed(ServiceFailure::Publisher(e)),
+            },
+        )?;
         let fixed_len =
             matches!(allocation, AllocationStrategy::Static).then_some(spec.initial_slice_len);
         // With a group: the publisher's memory and connections are the group's before the
         // notifier (created next) tells the receivers to connect.
         self.session.share_now();
-        let notifier = events
-            .notifier_builder()
-            .create()
-            .map_err(|e| failed(ServiceFailure::Notifier(e)))?;
+        let notifier = events.notifier_builder().create().map_err(|e| match e {
+            NotifierCreateError::ExceedsMaxSupportedNotifiers => full(),
+            e => failed(ServiceFailure::Notifier(e)),
+        })?;
         self.session.share_now();
         Ok(Sender::new(
             service.clone(),
@@ -638,6 +742,28 @@ impl Participant {
     }
 }
 
+/// Senders the player's events service takes beyond one per program of its project
+/// ([`Participant::event_receiver_sized`]): the CAN data servers, operator tools (`petrel
+/// emit`, monitors), a restarted program while iceoryx2 has not yet removed its dead
+/// predecessor, programs a hot reload adds.
+///
+/// Why size it at all: iceoryx2 0.10's receiver walks every sender slot of its service to find
+/// or miss a sample, twice per event the player handles and at every turn of a spinning wait;
+/// 128 slots (the default, [`EVENTS`]) cost the player ~4,000 instructions an event,
+/// a round trip's tenth (docs/benchmarks.md, "Issue 17: the events service sized").
+pub const EVENT_SENDERS_SPARE: usize = 16;
+
+/// The senders the player's events service takes for a project of `programs` programs:
+/// one each plus [`EVENT_SENDERS_SPARE`].
+pub fn event_senders(programs: usize) -> usize {
+    programs.saturating_add(EVENT_SENDERS_SPARE)
+}
+
+/// The connections of senders gone with samples not yet read that a program's receivers keep
+/// ([`Participant::join`]): a program receives calls from 4 senders at most ([`CALLS`]), and
+/// a heartbeat or a signal lost with its sender is replaced by the next.
+pub const PROGRAM_SENDERS_GONE: usize = 16;
+
 /// The shortest fixed sample a sized sender takes: a body of 64 KiB goes in 128 pieces at most
 /// (a sixteenth of the player's buffer for one sender), and a fixed segment of 512-byte samples
 /// costs the process no more memory than a shorter one until they are written.
@@ -652,9 +778,9 @@ fn bound_key() -> Option<AttributeKey> {
     AttributeKey::new(BOUND_ATTRIBUTE.as_bytes()).ok()
 }
 
-fn bound_verifier(bound: usize) -> Option<AttributeVerifier> {
+fn bound_specifier(bound: usize) -> Option<AttributeSpecifier> {
     let value = AttributeValue::new(bound.to_string().as_bytes()).ok()?;
-    AttributeVerifier::new().require(&bound_key()?, &value).ok()
+    AttributeSpecifier::new().define(&bound_key()?, &value).ok()
 }
 
 /// The bound a service's creator recorded, if any (a value that does not read as a length is

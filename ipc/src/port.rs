@@ -98,8 +98,10 @@ pub const EVENTS: ServiceSpec = ServiceSpec {
     kind: MsgKind::Event,
     subscriber_buffer: 2_048,
     history: 0,
-    // 50 programs, the data server and operator tools at once (the scale benchmark): a
-    // sender slot costs the service a few bytes, a sender's samples are its own.
+    // For a service a process makes before the player (which makes it for its project's
+    // programs: `Participant::event_receiver_sized`): 50 programs, the data server and
+    // operator tools at once. A slot costs the service a few bytes, but a receiver's every look
+    // walks them all.
     max_publishers: 128,
     max_subscribers: 1,
     max_nodes: 160,

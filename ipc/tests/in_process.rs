@@ -10,7 +10,7 @@ use common::TestVehicle;
 use petrel_ipc::port::EVENTS;
 use petrel_ipc::{
     CallMsg, EventMsg, Heartbeat, MarkingMsg, Participant, Reactor, RecvError, Role, SendError,
-    SetupError, Value, Vehicle, WaitStrategy,
+    SetupError, Value, Vehicle, WaitStrategy, EVENT_SENDERS_SPARE, PROGRAM_SENDERS_GONE,
 };
 
 fn pair(vehicle: &Vehicle) -> (Participant, Participant) {
@@ -620,13 +620,144 @@ fn a_sender_made_before_the_player_keeps_the_defaults_and_still_delivers() {
     assert_eq!(tx.fixed_len(), None);
     // The player opens it as it is (its bound cannot be recorded any more).
     let player = Participant::join(&vehicle, Role::Player).unwrap();
-    let events = player.event_receiver_sized(40).unwrap();
+    let events = player.event_receiver_sized(40, 1).unwrap();
     assert_eq!(player.max_event_len().unwrap(), None);
     let text = EventMsg::new("log", vec![Value::Text("é".repeat(10_000))]);
     tx.send(&text).unwrap();
     assert_eq!(events.try_recv().unwrap().unwrap().msg, text);
     // A later sender of the same process reads no bound either.
     assert_eq!(gui.event_sender_sized().unwrap().fixed_len(), None);
+}
+
+#[test]
+fn the_players_events_service_takes_its_programs_and_the_spare_then_refuses_clearly() {
+    let vehicle = TestVehicle::new("fullev");
+    // A project of two programs: the player makes the service for 2 + the spare senders.
+    let player = Participant::join(&vehicle, Role::Player).unwrap();
+    let events = player.event_receiver_sized(40, 2).unwrap();
+    let max = 2 + EVENT_SENDERS_SPARE;
+    // Programs open it with their default spec (which asks for more senders than it has),
+    // sized or not; every one of the `max` delivers.
+    let programs: Vec<_> = (0..max)
+        .map(|i| Participant::join(&vehicle, Role::program(&format!("P{i}")).unwrap()).unwrap())
+        .collect();
+    let mut senders: Vec<_> = programs
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            if i % 2 == 0 {
+                p.event_sender_sized().unwrap()
+            } else {
+                p.event_sender().unwrap()
+            }
+        })
+        .collect();
+    let ping = EventMsg::new("ping", vec![Value::Int(1)]);
+    for tx in &senders {
+        tx.send(&ping).unwrap();
+    }
+    let got: Vec<_> = std::iter::from_fn(|| events.try_recv().unwrap()).collect();
+    assert_eq!(got.len(), max);
+
+    // One more is refused, saying how many the service takes and why.
+    let late = Participant::join(&vehicle, Role::program("LATE").unwrap()).unwrap();
+    let Err(error) = late.event_sender_sized() else {
+        panic!("a sender beyond the service's senders is refused");
+    };
+    assert_eq!(
+        error,
+        SetupError::SendersFull {
+            service: vehicle.events_service(),
+            max,
+        }
+    );
+    let text = error.to_string();
+    assert!(text.contains(&format!("it takes {max} senders")), "{text}");
+    assert!(text.contains("restarted"), "{text}");
+
+    // A sender gone frees its place.
+    senders.pop();
+    let tx = late.event_sender_sized().unwrap();
+    tx.send(&ping).unwrap();
+    assert_eq!(events.try_recv().unwrap().unwrap().sender, tx.sender_id());
+}
+
+#[test]
+fn samples_of_senders_gone_before_they_were_read_all_arrive() {
+    // The player keeps the connections of as many senders gone as its events service takes
+    // (twice, 32 at least): twenty tools that each emit one event and leave before the player
+    // reads lose nothing. (A sender gone before the receiver ever looked was never connected:
+    // iceoryx2 delivers nothing of it, whatever the buffer; the SDK's senders wait for the
+    // player's acknowledgement.)
+    let vehicle = TestVehicle::new("gone");
+    let player = Participant::join_player(&vehicle, 1).unwrap();
+    let events = player.event_receiver_sized(40, 1).unwrap();
+    for round in 0..2 {
+        let joined: Vec<_> = (0..10)
+            .map(|k| {
+                let me = Participant::join(&vehicle, Role::tool(&format!("e{round}_{k}")).unwrap())
+                    .unwrap();
+                let tx = me.event_sender_sized().unwrap();
+                (me, tx)
+            })
+            .collect();
+        // The player looks (and connects to them, reading nothing), then they emit and leave.
+        assert_eq!(events.has_pending(), round > 0);
+        for (k, (_, tx)) in joined.iter().enumerate() {
+            tx.send(&EventMsg::new(
+                "ping",
+                vec![Value::Int(round * 10 + k as i64)],
+            ))
+            .unwrap();
+        }
+        // Gone before the player reads: ten connections kept for their unread events.
+        drop(joined);
+    }
+    let got: Vec<_> = std::iter::from_fn(|| events.try_recv().unwrap())
+        .map(|r| r.msg.params[0].clone())
+        .collect();
+    let mut got: Vec<i64> = got
+        .into_iter()
+        .map(|v| match v {
+            Value::Int(i) => i,
+            other => panic!("{other:?}"),
+        })
+        .collect();
+    got.sort_unstable();
+    assert_eq!(got, (0..20).collect::<Vec<_>>());
+
+    // A program keeps PROGRAM_SENDERS_GONE: three rounds of four callers (all the calls
+    // service takes at once) that call and leave before it reads.
+    let pln = Participant::join(&vehicle, Role::program("PLN").unwrap()).unwrap();
+    let calls = pln.call_receiver().unwrap();
+    let mut sent = 0;
+    for round in 0..3 {
+        let callers: Vec<_> = (0..4)
+            .map(|k| {
+                let me = Participant::join(&vehicle, Role::tool(&format!("c{round}_{k}")).unwrap())
+                    .unwrap();
+                // Fixed samples: a growing sender's unread samples go with it (its segments
+                // are removed when it leaves, whatever the receiver keeps).
+                let tx = me.call_sender_sized("PLN", Some(64)).unwrap();
+                (me, tx)
+            })
+            .collect();
+        assert_eq!(calls.has_pending(), round > 0);
+        for (_, tx) in &callers {
+            tx.send(&CallMsg::new("go", vec![Value::Int(sent)]))
+                .unwrap();
+            sent += 1;
+        }
+        drop(callers);
+    }
+    let got = std::iter::from_fn(|| calls.try_recv().unwrap()).count();
+    assert_eq!(got, 12);
+    const {
+        assert!(
+            3 * 4 <= PROGRAM_SENDERS_GONE,
+            "the test covers what a program keeps"
+        )
+    };
 }
 
 #[test]

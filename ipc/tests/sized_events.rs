@@ -28,7 +28,7 @@ fn sized_event_senders_carry_their_bound_send_longer_events_in_pieces_and_save_m
         ],
     );
     let bound = encoded_len(&worst).unwrap();
-    let events = player.event_receiver_sized(bound).unwrap();
+    let events = player.event_receiver_sized(bound, 1).unwrap();
 
     let pln = Participant::join(&vehicle, Role::program("PLN").unwrap()).unwrap();
     assert_eq!(pln.max_event_len().unwrap(), Some(bound));

@@ -527,7 +527,7 @@ impl<'p> PlayerLoop<'p> {
         let version = resumed.as_ref().and_then(|r| r.3.clone());
 
         let setup = |e: petrel_ipc::SetupError| PlayError::Setup(e.to_string());
-        let me = Participant::join(&vehicle, Role::Player).map_err(setup)?;
+        let me = Participant::join_player(&vehicle, project.programs.len()).map_err(setup)?;
         // The largest status this project can have, and the fullest ledger, always fit.
         let heartbeat_max = Heartbeat::max_encoded_len(status_bound(project));
         if heartbeat_max > petrel_ipc::wire::MAX_BODY_LEN {
@@ -538,7 +538,7 @@ impl<'p> PlayerLoop<'p> {
         }
         let ports = Ports {
             events: me
-                .event_receiver_sized(event_bound(project))
+                .event_receiver_sized(event_bound(project), project.programs.len())
                 .map_err(setup)?,
             calls: project
                 .programs
