@@ -35,7 +35,7 @@
 //! **Knowing the receivers.** A sender does not list iceoryx2's subscribers at every send: it
 //! rings the doorbells it found last time, and lists again when the service's change counter
 //! moved (`/dev/shm/<session prefix>rx_<service hash>`, one page, bumped by every receiver once
-//! its doorbell is made and once it is dropped). [`Bells`] gives the argument that a receiver
+//! its doorbell is made and once it is dropped). `Bells` gives the argument that a receiver
 //! that joins is rung from the first send after its bump, before it can sleep on its doorbell.
 
 use std::cell::Cell;

@@ -15,7 +15,9 @@
 //! **Waking the receiver.** After a delivery a sender rings the receivers' doorbells
 //! ([`crate::doorbell`]): one asleep on its futex word is woken, an awake one is left alone,
 //! and one asleep on its listener (or without a doorbell) is notified through the paired event
-//! service ([`SenderStats::notified`]).
+//! service ([`SenderStats::notified`]). A sender keeps the doorbells it found and lists
+//! iceoryx2's subscribers again only when the receivers may have changed (see
+//! [`crate::doorbell`], "Knowing the receivers").
 //!
 //! Ports of `ipc::Service` are single-threaded (not `Send`): create them on the thread that uses
 //! them. Their methods take `&self`, so a [`Reactor`](crate::reactor::Reactor) can watch
