@@ -31,15 +31,21 @@
 //! removed the dead node itself, when another process created a node or opened a service),
 //! and the vehicle's last process removes every file of the session prefix. A sender that cannot open a receiver's doorbell
 //! (not there yet, another Petrel) notifies through iceoryx2.
+//!
+//! **Knowing the receivers.** A sender does not list iceoryx2's subscribers at every send: it
+//! rings the doorbells it found last time, and lists again when the service's change counter
+//! moved (`/dev/shm/<session prefix>rx_<service hash>`, one page, bumped by every receiver once
+//! its doorbell is made and once it is dropped). `Bells` gives the argument that a receiver
+//! that joins is rung from the first send after its bump, before it can sleep on its doorbell.
 
 use std::cell::Cell;
 use std::fs::{self, File, OpenOptions};
 use std::io;
 use std::os::fd::AsRawFd;
-use std::os::unix::fs::OpenOptionsExt;
+use std::os::unix::fs::{MetadataExt, OpenOptionsExt};
 use std::path::PathBuf;
 use std::ptr::NonNull;
-use std::sync::atomic::{fence, AtomicU32, Ordering};
+use std::sync::atomic::{fence, AtomicU32, AtomicU64, Ordering};
 use std::time::Duration;
 
 use crate::access::SHM_DIR;
@@ -453,7 +459,8 @@ fn futex_wake(word: &AtomicU32) {
 /// process, or iceoryx2 on its own when a node or service is created), and, when a node died
 /// (`died`) or a doorbell was removed, rings the news on every other doorbell of the session
 /// so that futex sleepers look at the "sender died" notifications iceoryx2 left on their
-/// listeners. Returns the number of files removed.
+/// listeners, and bumps every change counter of the session ([`Changes`]). Returns the
+/// number of files removed.
 pub(crate) fn after_cleanup(
     prefix: &str,
     nodes: impl FnOnce() -> Option<Vec<u128>>,
@@ -463,10 +470,16 @@ pub(crate) fn after_cleanup(
         return 0;
     };
     let ours = format!("{prefix}db_");
+    let counters = changes_name(prefix, "");
     let mut found = Vec::new();
+    let mut changes = Vec::new();
     for entry in entries.flatten() {
         let name = entry.file_name();
         let Some(name) = name.to_str() else { continue };
+        if name.starts_with(&counters) {
+            changes.push(entry.path());
+            continue;
+        }
         let Some(rest) = name.strip_prefix(&ours) else {
             continue;
         };
@@ -497,30 +510,245 @@ pub(crate) fn after_cleanup(
                 bell.ring_news();
             }
         }
+        // Senders list their receivers again: those of a dead node are forgotten at once.
+        for path in changes {
+            if let Ok(counter) = Changes::open_path(&path, None) {
+                counter.bump();
+            }
+        }
     }
     removed
 }
 
+/// The name of the change counter of the receivers of the service whose iceoryx2 hash is
+/// `service` (not `db_`: [`after_cleanup`] takes every `db_` file for a doorbell).
+fn changes_name(prefix: &str, service: &str) -> String {
+    format!("{prefix}rx_{service}")
+}
+
+/// The shared page of a change counter.
+#[repr(C)]
+struct ChangesPage {
+    /// Bumped by a receiver once its doorbell exists (or could not be made), and once it is
+    /// gone.
+    changes: AtomicU64,
+}
+
+/// The change counter of the receivers of one service: a page of its own in shared memory,
+/// mapped by the service's senders and receivers alike, so that a sender lists the receivers
+/// again only when the set may have changed (see the module's argument).
+///
+/// Created by whoever comes first (open or create, then sized: a file being sized by another
+/// process is sized again to the same length, which keeps its contents), never removed while
+/// the vehicle lives (one per service), removed with every file of the session prefix by the
+/// vehicle's last process.
+#[derive(Debug)]
+pub(crate) struct Changes {
+    page: NonNull<ChangesPage>,
+}
+
+impl Changes {
+    /// Opens (or creates) the change counter of service `service` (iceoryx2's hash of it, a
+    /// file name) of a session shared with group `group` (`None`: this user's alone).
+    pub(crate) fn open(prefix: &str, service: &str, group: Option<u32>) -> io::Result<Self> {
+        let path = PathBuf::from(SHM_DIR).join(changes_name(prefix, service));
+        Self::open_path(&path, Some(group))
+    }
+
+    /// Opens the counter at `path`; with `create`, creates it if it is not there, for a
+    /// session shared with the group it holds.
+    ///
+    /// Only a file of this user, or of the session's group, is taken: a name squatted by
+    /// someone else (the session prefix shows in a listing of /dev/shm) is refused, and
+    /// senders then list the receivers at every send, as without a counter.
+    fn open_path(path: &std::path::Path, create: Option<Option<u32>>) -> io::Result<Self> {
+        let mut options = OpenOptions::new();
+        options
+            .read(true)
+            .write(true)
+            .custom_flags(libc::O_NOFOLLOW | libc::O_CLOEXEC);
+        let group = create.flatten();
+        if create.is_some() {
+            options
+                .create(true)
+                .mode(if group.is_some() { 0o660 } else { 0o600 });
+        }
+        let file = options.open(path)?;
+        let meta = file.metadata()?;
+        // SAFETY: geteuid has no preconditions and cannot fail.
+        let me = unsafe { libc::geteuid() };
+        let ours = meta.uid() == me;
+        if !(ours || group.is_some_and(|g| meta.gid() == g)) {
+            return Err(io::Error::new(
+                io::ErrorKind::PermissionDenied,
+                "change counter of another user",
+            ));
+        }
+        if let Some(g) = group.filter(|&g| ours && meta.gid() != g) {
+            // The group's members take it at once (the session's sharing would later).
+            // SAFETY: a valid descriptor; -1 keeps the owner.
+            unsafe { libc::fchown(file.as_raw_fd(), u32::MAX, g) };
+        }
+        // A page of zeroes the first time; the same length (contents kept) if another process
+        // sized it meanwhile.
+        if meta.len() < PAGE as u64 {
+            file.set_len(PAGE as u64)?;
+        }
+        Ok(Changes {
+            page: map(&file)?.cast(),
+        })
+    }
+
+    fn page(&self) -> &ChangesPage {
+        // SAFETY: `page` points to a live shared mapping of a page (mapped in `open`, unmapped
+        // only in `drop`), whose only field is an atomic.
+        unsafe { self.page.as_ref() }
+    }
+
+    /// The counter now. A sender reads it after its delivery's fence, before it decides
+    /// whether to list the receivers.
+    pub(crate) fn get(&self) -> u64 {
+        self.page().changes.load(Ordering::SeqCst)
+    }
+
+    /// Says the receivers changed: a receiver that joined (its subscriber is in iceoryx2's
+    /// list and its doorbell made), or left (both gone).
+    pub(crate) fn bump(&self) {
+        self.page().changes.fetch_add(1, Ordering::SeqCst);
+    }
+}
+
+impl Drop for Changes {
+    fn drop(&mut self) {
+        // SAFETY: the mapping was made in `map` with this address and length and is not used
+        // after this point.
+        unsafe {
+            libc::munmap(self.page.as_ptr().cast(), PAGE);
+        }
+    }
+}
+
+/// A receiver's membership of its service's change counter: bumped when the receiver is made
+/// (its doorbell exists) and when it is dropped (declared after the subscriber and the
+/// doorbell, so that both are gone by then).
+#[derive(Debug)]
+pub(crate) struct Joined(Changes);
+
+impl Joined {
+    /// Bumps `changes`: this receiver joined.
+    pub(crate) fn new(changes: Changes) -> Self {
+        changes.bump();
+        Joined(changes)
+    }
+}
+
+impl Drop for Joined {
+    fn drop(&mut self) {
+        self.0.bump();
+    }
+}
+
+/// The monotonic clock, coarse (a read of the kernel's page, no system call): a sender's
+/// safety-net listing needs milliseconds, not nanoseconds.
+fn coarse_now() -> Duration {
+    let mut now = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `now` is a valid timespec to write.
+    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC_COARSE, &mut now) };
+    Duration::new(now.tv_sec as u64, now.tv_nsec as u32)
+}
+
 /// The doorbells of the receivers of one service, as a sender knows them.
+///
+/// **Listing only when needed.** The list of iceoryx2's subscribers is a snapshot (an
+/// allocation and about a thousand instructions): a sender keeps what it listed and the
+/// service's change counter ([`Changes`]) it read before, and rings the doorbells it knows.
+/// It lists again when the counter moved, when more receivers got a sample than it knows (a
+/// receiver that does not bump the counter, of another build or whose counter page could not
+/// be opened), for news, and at least every [`DOORBELL_SLICE`](crate::reactor::DOORBELL_SLICE)
+/// (such a receiver that replaced another one; a receiver whose process died is removed by
+/// iceoryx2 without a bump, and ringing its doorbell meanwhile is harmless). Without a counter
+/// it lists at every ring.
+///
+/// A receiver bumps the counter after its subscriber is in iceoryx2's list and its doorbell
+/// is made, and before it can sleep on the doorbell. A sender reads the counter after its
+/// delivery's `SeqCst` fence. If the read does not see the bump, the sender's fence comes
+/// before the bump, and so before the receiver's fence of any sleep: that sleep's last look
+/// finds the sample. If it sees the bump, the listing that follows finds the receiver and its
+/// doorbell, and rings it as before.
 #[derive(Debug, Default)]
 pub(crate) struct Bells {
     /// Subscriber id, the round it was last listed in, and its doorbell (`None`: not found,
-    /// notify through iceoryx2; opening is tried again at the next ring).
+    /// notify through iceoryx2; opening is tried again at the next listing).
     known: Vec<(u128, u64, Option<Doorbell>)>,
     round: u64,
+    /// The service's change counter (`None`: it could not be opened; list at every ring).
+    changes: Option<Changes>,
+    /// The counter as read before the last listing (`None`: never listed).
+    seen: Option<u64>,
+    /// When the last listing was made ([`coarse_now`]).
+    listed_at: Duration,
+    /// The longest time between two listings.
+    period: Duration,
 }
 
 impl Bells {
-    /// Rings the doorbell of every receiver `list` names (it calls its argument with the node
-    /// id and the subscriber id of each), opening those not known yet and forgetting those no
-    /// longer named. With `news`, rings the news instead. Returns whether some receiver must be
-    /// notified through iceoryx2. The caller fenced after its delivery.
+    /// The doorbells of a service whose change counter is `changes`.
+    pub(crate) fn new(changes: Option<Changes>) -> Self {
+        Bells {
+            changes,
+            period: crate::reactor::DOORBELL_SLICE,
+            ..Bells::default()
+        }
+    }
+
+    /// Sets the longest time between two listings.
+    pub(crate) fn set_period(&mut self, period: Duration) {
+        self.period = period;
+    }
+
+    /// The receivers the last listing found, when it can be trusted to be recent (a counter
+    /// that says whether they changed); `None` otherwise.
+    pub(crate) fn listed(&self) -> Option<usize> {
+        match (&self.changes, self.seen) {
+            (Some(_), Some(_)) => Some(self.known.len()),
+            _ => None,
+        }
+    }
+
+    /// Rings the doorbell of every receiver of the service (`delivered` of them got the
+    /// sample): those known, or, when the set may have changed (see [`Bells`]), those `list`
+    /// names (it calls its argument with the node id and the subscriber id of each), opening
+    /// those not known yet or whose doorbell could not be opened, and forgetting those no
+    /// longer named. With `news`, lists and rings the news instead. Returns whether some
+    /// receiver must be notified through iceoryx2. The caller fenced after its delivery.
     pub(crate) fn ring(
         &mut self,
         prefix: &str,
         news: bool,
+        delivered: usize,
         list: impl FnOnce(&mut dyn FnMut(u128, u128)),
     ) -> bool {
+        let changes = self.changes.as_ref().map(Changes::get);
+        if !news
+            && changes.is_some()
+            && changes == self.seen
+            && delivered <= self.known.len()
+            && coarse_now().saturating_sub(self.listed_at) < self.period
+        {
+            let mut notify = false;
+            for (_, _, bell) in &self.known {
+                match bell {
+                    Some(bell) => notify |= bell.ring(),
+                    None => notify = true,
+                }
+            }
+            return notify;
+        }
+        self.seen = changes;
+        self.listed_at = coarse_now();
         self.round = self.round.wrapping_add(1);
         let round = self.round;
         let mut notify = false;
@@ -663,6 +891,127 @@ mod tests {
             Doorbell::open(&prefix, 21, n as u128 - 1).unwrap().ring();
             assert_eq!(futex_waitv(&words, Duration::from_secs(30)), Slept::Woken);
         }
+    }
+
+    /// Rings `bells` for a service whose subscribers are `ids`; counts the listings.
+    fn ring_listed(
+        bells: &mut Bells,
+        prefix: &str,
+        news: bool,
+        delivered: usize,
+        ids: &[(u128, u128)],
+        lists: &mut usize,
+    ) -> bool {
+        bells.ring(prefix, news, delivered, |f| {
+            *lists += 1;
+            for &(node, subscriber) in ids {
+                f(node, subscriber);
+            }
+        })
+    }
+
+    #[test]
+    fn a_sender_lists_again_only_when_the_receivers_may_have_changed() {
+        let prefix = prefix() + "l_";
+        let counter_path = PathBuf::from(SHM_DIR).join(changes_name(&prefix, "svc"));
+        let first = Doorbell::create(&prefix, 31, 1).unwrap();
+        first.set_awake();
+        // The receivers' view of the counter, and the sender's.
+        let receivers = Changes::open(&prefix, "svc", None).unwrap();
+        let mut bells = Bells::new(Some(Changes::open(&prefix, "svc", None).unwrap()));
+        let mut lists = 0;
+        let one = [(31, 1)];
+        assert!(!ring_listed(
+            &mut bells, &prefix, false, 1, &one, &mut lists
+        ));
+        assert_eq!((lists, bells.listed()), (1, Some(1)));
+        for _ in 0..3 {
+            assert!(!ring_listed(
+                &mut bells, &prefix, false, 1, &one, &mut lists
+            ));
+        }
+        assert_eq!(lists, 1, "nothing changed: no listing");
+        // The known doorbell is still read at every ring: asleep on its listener, notify.
+        first.announce(EPOLL);
+        assert!(ring_listed(&mut bells, &prefix, false, 1, &one, &mut lists));
+        first.set_awake();
+        assert_eq!(lists, 1);
+        // A receiver joined: listed at the next ring; its doorbell not there yet.
+        let two = [(31, 1), (31, 2)];
+        receivers.bump();
+        assert!(ring_listed(&mut bells, &prefix, false, 2, &two, &mut lists));
+        assert_eq!((lists, bells.listed()), (2, Some(2)));
+        // Made later, without a bump: still notified through iceoryx2 until listed again,
+        // then opened (a failed open is tried again at every listing).
+        let second = Doorbell::create(&prefix, 31, 2).unwrap();
+        second.set_awake();
+        assert!(ring_listed(&mut bells, &prefix, false, 2, &two, &mut lists));
+        assert_eq!(lists, 2);
+        receivers.bump();
+        assert!(!ring_listed(
+            &mut bells, &prefix, false, 2, &two, &mut lists
+        ));
+        assert_eq!(lists, 3);
+        // More deliveries than known receivers (one that does not bump): listed.
+        let three = [(31, 1), (31, 2), (32, 3)];
+        assert!(ring_listed(
+            &mut bells, &prefix, false, 3, &three, &mut lists
+        ));
+        assert_eq!((lists, bells.listed()), (4, Some(3)));
+        // News are rung on a fresh listing.
+        ring_listed(&mut bells, &prefix, true, 0, &one, &mut lists);
+        assert_eq!((lists, bells.listed()), (5, Some(1)));
+        assert!(first.take_news());
+        // Without a counter: a listing at every ring, and no count to trust.
+        let mut blind = Bells::new(None);
+        for n in 1..=2 {
+            assert!(!ring_listed(
+                &mut blind, &prefix, false, 1, &one, &mut lists
+            ));
+            assert_eq!(lists, 5 + n);
+        }
+        assert_eq!(blind.listed(), None);
+        drop((receivers, bells, blind));
+        fs::remove_file(&counter_path).unwrap();
+    }
+
+    #[test]
+    fn a_change_counter_of_another_user_is_refused() {
+        let prefix = prefix() + "s_";
+        let path = PathBuf::from(SHM_DIR).join(changes_name(&prefix, "svc"));
+        fs::write(&path, [0u8; PAGE]).unwrap();
+        // Squatted by someone else (nobody): only root can make the file theirs.
+        let given = std::os::unix::fs::chown(&path, Some(65_534), Some(65_534)).is_ok();
+        let opened = Changes::open(&prefix, "svc", None);
+        let in_group = Changes::open(&prefix, "svc", Some(65_534));
+        fs::remove_file(&path).unwrap();
+        if given {
+            assert!(opened.is_err(), "a squatted counter was taken");
+            assert!(
+                in_group.is_ok(),
+                "the session's group's counter was refused"
+            );
+        } else {
+            assert!(opened.is_ok());
+        }
+    }
+
+    #[test]
+    fn cleanup_bumps_the_change_counters() {
+        let prefix = prefix() + "k_";
+        let counter = Changes::open(&prefix, "svc", None).unwrap();
+        let alive = Doorbell::create(&prefix, 41, 1).unwrap();
+        let gone = Doorbell::create(&prefix, 42, 1).unwrap();
+        std::mem::forget(gone);
+        let before = counter.get();
+        assert_eq!(after_cleanup(&prefix, || Some(vec![41]), false), 1);
+        assert_ne!(counter.get(), before, "senders must list again");
+        assert!(alive.take_news());
+        // The counter is not taken for a doorbell, nor removed.
+        let path = PathBuf::from(SHM_DIR).join(changes_name(&prefix, "svc"));
+        assert!(path.exists());
+        drop(counter);
+        fs::remove_file(&path).unwrap();
     }
 
     #[test]

@@ -15,7 +15,9 @@
 //! **Waking the receiver.** After a delivery a sender rings the receivers' doorbells
 //! ([`crate::doorbell`]): one asleep on its futex word is woken, an awake one is left alone,
 //! and one asleep on its listener (or without a doorbell) is notified through the paired event
-//! service ([`SenderStats::notified`]).
+//! service ([`SenderStats::notified`]). A sender keeps the doorbells it found and lists
+//! iceoryx2's subscribers again only when the receivers may have changed (see
+//! [`crate::doorbell`], "Knowing the receivers").
 //!
 //! Ports of `ipc::Service` are single-threaded (not `Send`): create them on the thread that uses
 //! them. Their methods take `&self`, so a [`Reactor`](crate::reactor::Reactor) can watch
@@ -38,7 +40,7 @@ use iceoryx2::prelude::{ipc, EventId, PortFactory};
 use iceoryx2::service::port_factory::publish_subscribe;
 
 use crate::access::Session;
-use crate::doorbell::{self, Bells, Doorbell};
+use crate::doorbell::{self, Bells, Changes, Doorbell, Joined};
 use crate::wire::{self, Message, MsgHeader, MsgKind, Origin, WireError, WIRE_VERSION};
 
 /// Event id a sender notifies after delivering a sample.
@@ -425,6 +427,21 @@ fn own_node_id(
     node
 }
 
+/// The change counter of the service's receivers ([`Changes`]), made for the session's group
+/// when it is shared, or `None` when it cannot be opened: senders then list the receivers at
+/// every send.
+fn changes(
+    factory: &publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>,
+    session: &Session,
+) -> Option<Changes> {
+    Changes::open(
+        session.shm_prefix(),
+        factory.service_hash().as_str(),
+        session.group(),
+    )
+    .ok()
+}
+
 fn fold_id(id: u128) -> u64 {
     (id as u64) ^ ((id >> 64) as u64)
 }
@@ -442,6 +459,7 @@ impl<M: Message> Sender<M> {
         session: Arc<Session>,
     ) -> Self {
         let sender_id = fold_id(publisher.id().value());
+        let bells = Bells::new(changes(&factory, &session));
         let sender = Sender {
             service,
             spec,
@@ -451,7 +469,7 @@ impl<M: Message> Sender<M> {
             fixed_len,
             notifier: ManuallyDrop::new(notifier),
             factory,
-            bells: RefCell::new(Bells::default()),
+            bells: RefCell::new(bells),
             next_seq: Cell::new(1),
             stats: Cell::new(SenderStats::default()),
             _kind: PhantomData,
@@ -459,17 +477,17 @@ impl<M: Message> Sender<M> {
         };
         // iceoryx2 told the receivers' listeners that this sender joined (its notifier was
         // created): a receiver asleep on its doorbell must look.
-        sender.ring_bells(true);
+        sender.ring_bells(true, 0);
         sender
     }
 
-    /// Rings the doorbells of the service's receivers (the news, or a delivery); returns
-    /// whether some receiver must be notified through iceoryx2.
-    fn ring_bells(&self, news: bool) -> bool {
+    /// Rings the doorbells of the service's receivers (the news, or a delivery to `delivered`
+    /// of them); returns whether some receiver must be notified through iceoryx2.
+    fn ring_bells(&self, news: bool, delivered: usize) -> bool {
         let config = self.factory.dynamic_config();
         self.bells
             .borrow_mut()
-            .ring(self._session.shm_prefix(), news, |f| {
+            .ring(self._session.shm_prefix(), news, delivered, |f| {
                 config.list_subscribers(|d| {
                     f(d.node_id.value(), d.subscriber_id.value());
                     iceoryx2::prelude::CallbackProgression::Continue
@@ -511,6 +529,14 @@ impl<M: Message> Sender<M> {
     /// The counters of this sender.
     pub fn stats(&self) -> SenderStats {
         self.stats.get()
+    }
+
+    /// Sets how often at least this sender lists the service's receivers again when their
+    /// change counter did not move ([`DOORBELL_SLICE`](crate::reactor::DOORBELL_SLICE) by
+    /// default): the safety net for a receiver that does not bump the counter (of another
+    /// build; see [`crate::doorbell`]). A test that must see the counter at work sets an hour.
+    pub fn set_listing_period(&self, period: Duration) {
+        self.bells.borrow_mut().set_period(period);
     }
 
     /// Receivers connected to the service now.
@@ -708,7 +734,7 @@ impl<M: Message> Sender<M> {
             // Every receiver that sleeps on its doorbell is rung; the awake ones are left
             // alone; those asleep on their listener (or without a doorbell) are notified.
             doorbell::delivered();
-            if self.ring_bells(false) {
+            if self.ring_bells(false, delivered) {
                 self.update(|s| s.notified += 1);
                 let woke = self
                     .notifier
@@ -718,7 +744,13 @@ impl<M: Message> Sender<M> {
                 }
             }
         }
-        let receivers = self.receivers();
+        // The receivers the last listing found, refreshed by `ring_bells` when they changed:
+        // enough to tell that everyone got the sample. Fewer deliveries are checked against
+        // iceoryx2's count, so that a stale listing never makes a refusal.
+        let receivers = match self.bells.borrow().listed() {
+            Some(listed) if delivered > 0 && delivered >= listed => delivered,
+            _ => self.receivers(),
+        };
         if delivered >= receivers && delivered > 0 {
             self.update(|s| {
                 s.sent += 1;
@@ -758,7 +790,7 @@ impl<M: Message> Drop for Sender<M> {
         // The notifier's drop told the listeners this sender left, the publisher being gone
         // already (as a receiver that looks at the live senders expects): now the receivers
         // asleep on their doorbell must look.
-        self.ring_bells(true);
+        self.ring_bells(true, 0);
     }
 }
 
@@ -1009,6 +1041,9 @@ pub struct Receiver<M: Message> {
     /// Set once the listener was handed out: someone may wait on it outside a reactor, so
     /// senders must always notify.
     doorbell_off: Cell<bool>,
+    /// Bumps the service's change counter once more when dropped, after the subscriber and
+    /// the doorbell (fields drop in order): senders forget this receiver.
+    _joined: Option<Joined>,
     _kind: PhantomData<fn() -> M>,
     /// The process's membership of the vehicle, kept while the port lives.
     _session: Arc<Session>,
@@ -1050,8 +1085,11 @@ impl<M: Message> Receiver<M> {
         let doorbell = own_node_id(&factory, subscriber.id().value()).and_then(|node| {
             Doorbell::create(session.shm_prefix(), node, subscriber.id().value()).ok()
         });
+        // Now that the subscriber is listed and its doorbell made: senders list again.
+        let joined = changes(&factory, &session).map(Joined::new);
         Receiver {
             doorbell,
+            _joined: joined,
             doorbell_off: Cell::new(false),
             service,
             spec,
