@@ -100,14 +100,13 @@ struct Reader<'a> {
 impl<'a> Reader<'a> {
     /// bincode's `claim_bytes_read`: fails once the claims exceed the limit.
     fn claim(&mut self, n: usize) -> Result<(), DecodeError> {
-        self.claimed = self
-            .claimed
-            .checked_add(n)
-            .ok_or(DecodeError::LimitExceeded)?;
-        if self.claimed > MAX_BODY_LEN {
-            Err(DecodeError::LimitExceeded)
-        } else {
-            Ok(())
+        // A match rather than `ok_or`, which would build (and drop) an error every time.
+        match self.claimed.checked_add(n) {
+            Some(claimed) if claimed <= MAX_BODY_LEN => {
+                self.claimed = claimed;
+                Ok(())
+            }
+            _ => Err(DecodeError::LimitExceeded),
         }
     }
 
