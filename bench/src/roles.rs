@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 
 use petrel_ipc::iceoryx2::prelude::*;
 use petrel_ipc::{Participant, Reactor, Role, Value, Vehicle, WaitStrategy};
-use petrel_programs::{PlayerCheck, Program, ProgramConfig};
+use petrel_programs::{Call, PlayerCheck, Program, ProgramConfig};
 
 use crate::stats::Latencies;
 
@@ -176,6 +176,8 @@ pub struct Pinger {
     name: String,
     event: String,
     next: usize,
+    /// The call each round receives into: after the first, a round's call allocates nothing.
+    call: Call,
 }
 
 impl Pinger {
@@ -197,6 +199,7 @@ impl Pinger {
             name: cfg.program.clone(),
             event: cfg.event.clone(),
             next: 0,
+            call: Call::default(),
         })
     }
 
@@ -209,13 +212,14 @@ impl Pinger {
             .emit(self.event.clone(), round_payload(i))
             .map_err(|e| format!("{}: emit: {e}", self.name))?;
         loop {
-            match self.program.recv(Some(Duration::from_secs(20))) {
-                Ok(Some(call)) => {
+            let call = &mut self.call;
+            match self.program.recv_into(call, Some(Duration::from_secs(20))) {
+                Ok(true) => {
                     if call.function == "ping" && call.args.first() == Some(&Value::Int(i as i64)) {
                         return Ok(start.elapsed());
                     }
                 }
-                Ok(None) => return Err(format!("{}: no call for round {i}", self.name)),
+                Ok(false) => return Err(format!("{}: no call for round {i}", self.name)),
                 Err(e) => return Err(format!("{}: {e}", self.name)),
             }
         }

@@ -810,6 +810,19 @@ pub struct Received<M> {
     pub missed: u64,
 }
 
+impl Received<()> {
+    /// What the header said, with the message decoded from the body.
+    fn with<T>(self, msg: T) -> Received<T> {
+        Received {
+            msg,
+            origin: self.origin,
+            sender: self.sender,
+            seq: self.seq,
+            missed: self.missed,
+        }
+    }
+}
+
 /// Counters of a receiver, all senders together.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct ReceiverStats {
@@ -1265,6 +1278,18 @@ impl<M: Message> Receiver<M> {
     /// `Ok(None)` when the buffer is empty. A sample whose body does not decode is taken, counted
     /// and reported as [`RecvError::Undecodable`]; the next call goes on with the next sample.
     pub fn try_recv(&self) -> Result<Option<Received<M>>, RecvError> {
+        self.take_with(|taken, body| wire::decode::<M>(body).map(|msg| taken.with(msg)))
+    }
+
+    /// Takes the next sample as [`try_recv`](Self::try_recv) does (headers checked, every
+    /// sender accounted for, pieces joined) and hands its body, with what its header says, to
+    /// `on_body`, whose [`WireError`] makes it an undecodable sample. The receivers that decode
+    /// in place ([`Receiver::try_recv_into`], [`Receiver::drain_in_place`]) read the body
+    /// where it lies, in the sample.
+    fn take_with<T>(
+        &self,
+        on_body: impl FnOnce(Received<()>, &[u8]) -> Result<T, WireError>,
+    ) -> Result<Option<T>, RecvError> {
         loop {
             let sample = match self.subscriber.receive() {
                 Ok(Some(sample)) => sample,
@@ -1299,29 +1324,25 @@ impl<M: Message> Receiver<M> {
                     error,
                 }
             };
-            let received = |body: &[u8], missed| {
-                wire::decode::<M>(body)
-                    .map(|msg| {
-                        Some(Received {
-                            msg,
-                            origin,
-                            sender: header.sender,
-                            seq: header.seq,
-                            missed,
-                        })
-                    })
-                    .map_err(undecodable)
+            let taken = |missed| Received {
+                msg: (),
+                origin,
+                sender: header.sender,
+                seq: header.seq,
+                missed,
             };
             if header.fragment == 0 {
                 self.drop_pieces(header.sender);
-                return received(sample.payload(), missed);
+                return on_body(taken(missed), sample.payload())
+                    .map(Some)
+                    .map_err(undecodable);
             }
             let Some(joined) = self.join_piece(&header, missed, sample.payload()) else {
                 // More pieces to come (or a piece whose body this receiver cannot have).
                 continue;
             };
             let (missed, body) = joined.map_err(&undecodable)?;
-            return received(&body, missed);
+            return on_body(taken(missed), &body).map(Some).map_err(undecodable);
         }
     }
 
@@ -1378,26 +1399,36 @@ impl<M: Message> Receiver<M> {
         &self,
         mut f: impl FnMut(Result<Received<M>, RecvError>),
     ) -> Result<Drained, RecvError> {
+        self.drain_by(|| match self.try_recv() {
+            Ok(Some(received)) => {
+                f(Ok(received));
+                Took::Message
+            }
+            Ok(None) => Took::Empty,
+            Err(error) => {
+                let took = Took::error(&error);
+                f(Err(error));
+                took
+            }
+        })
+    }
+
+    /// The loop of a drain: consumes the wake-ups, then calls `take` until the buffer is empty
+    /// or a transport error ended it, counting what it handed over.
+    fn drain_by(&self, mut take: impl FnMut() -> Took) -> Result<Drained, RecvError> {
         let wakeups = self.take_wakeups()?;
         let mut drained = Drained {
             wakeups,
             ..Drained::default()
         };
         loop {
-            match self.try_recv() {
-                Ok(Some(received)) => {
-                    drained.messages += 1;
-                    f(Ok(received));
-                }
-                Ok(None) => break,
-                Err(error @ RecvError::Transport { .. }) => {
+            match take() {
+                Took::Message => drained.messages += 1,
+                Took::Empty => break,
+                Took::Error => drained.errors += 1,
+                Took::Ended => {
                     drained.errors += 1;
-                    f(Err(error));
                     break;
-                }
-                Err(error) => {
-                    drained.errors += 1;
-                    f(Err(error));
                 }
             }
         }
@@ -1431,6 +1462,78 @@ impl<M: Message> Receiver<M> {
         if let Some(account) = self.senders.borrow_mut().get_mut(sender) {
             account.undecodable += 1;
         }
+    }
+}
+
+/// What one step of a drain handed over.
+enum Took {
+    /// A message.
+    Message,
+    /// Nothing: the buffer is empty.
+    Empty,
+    /// An error; draining goes on.
+    Error,
+    /// A transport error, which ends the drain.
+    Ended,
+}
+
+impl Took {
+    fn error(error: &RecvError) -> Took {
+        if matches!(error, RecvError::Transport { .. }) {
+            Took::Ended
+        } else {
+            Took::Error
+        }
+    }
+}
+
+impl Receiver<wire::CallMsg> {
+    /// [`try_recv`](Self::try_recv) without building a [`CallMsg`](wire::CallMsg): the call's
+    /// function goes into `function` and its arguments into `args`, reusing their buffers (a
+    /// text or a list of floats in the same position of `args` reuses its own; see
+    /// [`wire::decode_call_into`]). Returns what the header says (`msg` is `()`).
+    ///
+    /// Takes, accounts for and refuses exactly the samples `try_recv` does, with the same
+    /// errors. `function` and `args` are left as they were by `Ok(None)` and by an error before
+    /// the body (a transport error, a foreign sample); after [`RecvError::Undecodable`] they hold
+    /// valid values but not a call.
+    pub fn try_recv_into(
+        &self,
+        function: &mut String,
+        args: &mut Vec<wire::Value>,
+    ) -> Result<Option<Received<()>>, RecvError> {
+        self.take_with(|taken, body| wire::decode_call_into(body, function, args).map(|()| taken))
+    }
+}
+
+impl Receiver<wire::EventMsg> {
+    /// [`drain`](Self::drain) without building an [`EventMsg`](wire::EventMsg) per event: `f`
+    /// gets each event's name borrowed from its sample (as `msg`) and its parameters in
+    /// `params`, where they were decoded (see [`wire::decode_event_in_place`]); it may take
+    /// them out (`params.drain(..)`) or leave them, and `params` keeps its capacity from one
+    /// event to the next. Errors are handed over as `drain` hands them (with `params` as it
+    /// is: not an event's).
+    pub fn drain_in_place(
+        &self,
+        params: &mut Vec<wire::Value>,
+        mut f: impl FnMut(Result<Received<&str>, RecvError>, &mut Vec<wire::Value>),
+    ) -> Result<Drained, RecvError> {
+        self.drain_by(|| {
+            let taken = self.take_with(|taken, body| {
+                let name = wire::decode_event_in_place(body, params)?;
+                f(Ok(taken.with(name)), params);
+                Ok(())
+            });
+            match taken {
+                Ok(Some(())) => Took::Message,
+                Ok(None) => Took::Empty,
+                Err(error) => {
+                    let took = Took::error(&error);
+                    f(Err(error), params);
+                    took
+                }
+            }
+        })
     }
 }
 

@@ -34,7 +34,10 @@
 //! size writer), the sender loans a slice of exactly that length and [`encode_into`] writes it
 //! in place. [`decode`] reads a body from the received slice; a body that does not decode is a
 //! [`WireError`], never a panic, and decoding never allocates more than [`MAX_BODY_LEN`] bytes
-//! whatever the lengths a corrupt body claims.
+//! whatever the lengths a corrupt body claims. The two bodies of every round trip also decode
+//! in place ([`in_place`]): [`decode_event_in_place`] lends an event's name from the received
+//! bytes and writes its parameters into the caller's vector, [`decode_call_into`] writes a call
+//! into the caller's buffers; they accept and refuse exactly what [`decode`] does.
 
 use std::fmt;
 
@@ -43,6 +46,9 @@ use bincode::enc::write::SizeWriter;
 use bincode::enc::EncoderImpl;
 use bincode::{Decode, Encode};
 use iceoryx2::prelude::ZeroCopySend;
+
+pub mod in_place;
+pub use in_place::{decode_call_into, decode_event_in_place};
 
 /// Version of the wire format. It is written in every header, and it is part of the header's
 /// iceoryx2 type name, so a process built with another wire version cannot even open the

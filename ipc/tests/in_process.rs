@@ -144,6 +144,95 @@ fn undecodable_bodies_are_typed_errors() {
 }
 
 #[test]
+fn events_drained_in_place_are_those_drain_gives_with_the_same_accounts() {
+    let vehicle = TestVehicle::new("auv");
+    let (player, pln) = pair(&vehicle);
+    let rx = player.event_receiver().unwrap();
+    let tx = pln.event_sender().unwrap();
+    let sent = [
+        EventMsg::new(
+            "pong_0",
+            vec![Value::Int(1), Value::FloatList(vec![0.5; 6])],
+        ),
+        EventMsg::new(
+            "label",
+            vec![Value::Text("héllo".into()), Value::Bool(true)],
+        ),
+        EventMsg::new(
+            "pong_0",
+            vec![Value::Int(2), Value::FloatList(vec![1.5; 6])],
+        ),
+    ];
+    tx.send(&sent[0]).unwrap();
+    tx.send_encoded(&[0xFF, 0xFF, 0xFF]).unwrap();
+    tx.send(&sent[1]).unwrap();
+    tx.send(&sent[2]).unwrap();
+    let mut params = Vec::with_capacity(8);
+    let capacity = params.capacity();
+    let mut got = Vec::new();
+    let mut errors = Vec::new();
+    let drained = rx
+        .drain_in_place(&mut params, |r, params| match r {
+            Ok(r) => got.push((
+                EventMsg::new(r.msg, params.clone()),
+                r.seq,
+                r.missed,
+                r.origin.as_str().to_owned(),
+            )),
+            Err(e) => errors.push(e),
+        })
+        .unwrap();
+    assert_eq!((drained.messages, drained.errors), (3, 1));
+    assert_eq!(
+        got,
+        vec![
+            (sent[0].clone(), 1, 0, "program/PLN".to_owned()),
+            (sent[1].clone(), 3, 0, "program/PLN".to_owned()),
+            (sent[2].clone(), 4, 0, "program/PLN".to_owned()),
+        ]
+    );
+    assert!(
+        matches!(&errors[..], [RecvError::Undecodable { seq: 2, .. }]),
+        "{errors:?}"
+    );
+    assert_eq!(params.capacity(), capacity);
+    assert_eq!(rx.stats().undecodable, 1);
+    assert_eq!(rx.stats().received, 4);
+    assert_eq!(rx.senders()[0].undecodable, 1);
+}
+
+#[test]
+fn a_call_received_into_buffers_is_the_call_and_leaves_them_alone_when_none_waits() {
+    let vehicle = TestVehicle::new("auv");
+    let (player, pln) = pair(&vehicle);
+    let calls = pln.call_receiver().unwrap();
+    let to_pln = player.call_sender("PLN").unwrap();
+    let (mut function, mut args) = (String::from("old"), vec![Value::Int(7)]);
+    assert!(calls
+        .try_recv_into(&mut function, &mut args)
+        .unwrap()
+        .is_none());
+    assert_eq!(
+        (function.as_str(), &args[..]),
+        ("old", &[Value::Int(7)][..])
+    );
+    let ping = CallMsg::new("ping", vec![Value::Int(3), Value::FloatList(vec![2.0; 6])]);
+    to_pln.send(&ping).unwrap();
+    to_pln.send_encoded(&[0x01]).unwrap();
+    let r = calls
+        .try_recv_into(&mut function, &mut args)
+        .unwrap()
+        .unwrap();
+    assert_eq!((r.seq, r.missed, r.origin.as_str()), (1, 0, "player"));
+    assert_eq!(CallMsg::new(function.clone(), args.clone()), ping);
+    match calls.try_recv_into(&mut function, &mut args) {
+        Err(RecvError::Undecodable { seq: 2, .. }) => {}
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(calls.stats().undecodable, 1);
+}
+
+#[test]
 fn too_large_is_refused_before_sending() {
     let vehicle = TestVehicle::new("auv");
     let (player, pln) = pair(&vehicle);

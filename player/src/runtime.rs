@@ -446,6 +446,8 @@ pub struct PlayerLoop<'p> {
     report: PlayReport,
     /// What was taken from each sender, refused and settled: the heartbeat's acknowledgements.
     ledger: Ledger,
+    /// Where each event's parameters are decoded, before they move into an engine's buffer.
+    decoded: Vec<Value>,
     /// When the loop started, and the mission time it started at (after a resume).
     t0: Instant,
     base: Micros,
@@ -665,6 +667,7 @@ impl<'p> PlayerLoop<'p> {
             },
             report,
             ledger: Ledger::new(),
+            decoded: Vec::new(),
             t0,
             base,
             previous: vec![0u64; words],
@@ -950,19 +953,24 @@ impl<'p> PlayerLoop<'p> {
         let report = &mut self.report;
         let ledger = &mut self.ledger;
         let bad_message = self.builtins.bad_message;
-        let drained = self.ports.events.drain(|r| {
+        // Each event is decoded where it lies: its name read from the sample, its parameters
+        // into `decoded` (kept from one drain to the next), then moved into one of the
+        // engine's buffers. No event is built, and no name copied.
+        let decoded = &mut self.decoded;
+        let drained = self.ports.events.drain_in_place(decoded, |r, decoded| {
             report.messages += 1;
             match r {
                 Ok(rcv) => {
                     let (sender, who, seq, missed) = (rcv.sender, rcv.origin, rcv.seq, rcv.missed);
                     let origin = who.as_str();
                     let time = engine.now();
-                    if let Some(reason) = builtin_refusal(&rcv.msg.name, origin) {
+                    let name = rcv.msg;
+                    if let Some(reason) = builtin_refusal(name, origin) {
                         report.bad_messages += 1;
                         warn!(from = %origin, seq = rcv.seq, %reason, "event refused");
                         journal.append(&Entry::Refused {
                             time,
-                            what: rcv.msg.name.clone(),
+                            what: name.to_owned(),
                             reason: reason.clone(),
                             origin: origin.to_string(),
                         });
@@ -975,8 +983,7 @@ impl<'p> PlayerLoop<'p> {
                         return;
                     }
                     let mut params = engine.param_buffer();
-                    params.extend(rcv.msg.params);
-                    let name = &rcv.msg.name;
+                    params.append(decoded);
                     // Journaled from the parameters the engine keeps, before it queues the
                     // event: no copy of the event on the way to its call.
                     let submitted = engine.submit_named_with(name, params, |params| {
@@ -990,7 +997,7 @@ impl<'p> PlayerLoop<'p> {
                             ledger.refused(sender, who, seq, missed, &refusal.to_string(), false);
                             journal.append(&Entry::Refused {
                                 time,
-                                what: rcv.msg.name.clone(),
+                                what: name.to_owned(),
                                 reason: refusal.to_string(),
                                 origin: origin.to_string(),
                             });

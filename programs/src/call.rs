@@ -12,7 +12,10 @@ use crate::error::ProgramError;
 /// trust its peer: the typed accessors ([`float`](Self::float), [`text`](Self::text)...) return
 /// an [`ArgError`] naming the function, the position and the types when an argument is missing
 /// or of another type.
-#[derive(Debug, Clone, PartialEq)]
+///
+/// `Call::default()` is an empty call, for [`Program::recv_into`](crate::Program::recv_into) to
+/// receive calls into.
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct Call {
     /// The program the call was addressed to (one of the names the process connected as).
     pub program: String,

@@ -11,6 +11,11 @@
 //! - [`Program`] joins a vehicle as one or several programs ([`Program::connect`],
 //!   [`Program::connect_many`]), hands over calls one at a time ([`Program::recv`]) and sends
 //!   events ([`Program::emit`], [`Program::emit_as`]).
+//! - Which receive: [`Program::recv`] returns each call as a new [`Call`], the simplest to
+//!   use and keep; [`Program::recv_into`] writes it into a `Call` the program keeps, reusing
+//!   its buffers (names, arguments, a text's or a `[float]`'s), so that a call costs no
+//!   allocation: for a program on the latency-critical path (a controller answering calls
+//!   thousands of times a second). Both wait, deliver queued events and fail alike.
 //! - [`Call`] is a call, with typed accessors for its arguments ([`Call::float`],
 //!   [`Call::text`], [`Call::floats`]...) whose errors ([`ArgError`]) name the function, the
 //!   position and the types.

@@ -310,7 +310,51 @@ impl Program {
     /// cannot be decoded is skipped and reported as [`ProgramError::BadCall`]: log it and call
     /// `recv` again. Once SIGINT or SIGTERM was received, it returns
     /// [`ProgramError::Terminated`] (every time).
+    ///
+    /// Each call is a new [`Call`] (its names and arguments allocated); a program that answers
+    /// calls at a high rate and minds its latency receives them with
+    /// [`recv_into`](Self::recv_into) instead, into one `Call` it keeps.
     pub fn recv(&mut self, timeout: Option<Duration>) -> Result<Option<Call>, ProgramError> {
+        let mut call = Call::default();
+        Ok(self.recv_into(&mut call, timeout)?.then_some(call))
+    }
+
+    /// [`recv`](Self::recv) into `call`, reusing its buffers: `Ok(true)` when a call arrived
+    /// (written into `call`), `Ok(false)` when the timeout passed, and `recv`'s errors.
+    ///
+    /// `call`'s program name, function name and argument list keep their capacity, and an
+    /// argument that is a text or a list of floats where the previous call had one in the same
+    /// position reuses its buffer: once `call` has held a call of each kind the program gets, a
+    /// call costs no allocation. Everything else is `recv`'s, to the error. `call` is left as
+    /// it was by `Ok(false)` and by every error but [`ProgramError::BadCall`] for an undecodable
+    /// call, after which it holds valid values but not a call.
+    ///
+    /// ```no_run
+    /// use petrel_programs::{Call, Program, ProgramError, Value};
+    ///
+    /// # fn main() -> Result<(), ProgramError> {
+    /// let mut program = Program::connect("redermor", "NAV")?;
+    /// let mut call = Call::default();
+    /// loop {
+    ///     match program.recv_into(&mut call, None) {
+    ///         Ok(true) if call.function == "track" => {
+    ///             let position = call.floats(0)?;
+    ///             program.emit("tracked", vec![Value::Float(position[0])])?;
+    ///         }
+    ///         Ok(true) => eprintln!("{}", call.unknown_function()),
+    ///         Ok(false) => {}
+    ///         Err(e) if e.is_termination() || e.is_fatal() => break,
+    ///         Err(e) => eprintln!("{e}"),
+    ///     }
+    /// }
+    /// # Ok(())
+    /// # }
+    /// ```
+    pub fn recv_into(
+        &mut self,
+        call: &mut Call,
+        timeout: Option<Duration>,
+    ) -> Result<bool, ProgramError> {
         if self.terminated {
             return Err(ProgramError::Terminated);
         }
@@ -318,8 +362,8 @@ impl Program {
         // is taken without reading the clock, and a wait reads it once.
         let mut from_first_look: Option<Option<Instant>> = None;
         loop {
-            if let Some(call) = self.try_take()? {
-                return Ok(Some(call));
+            if self.try_take_into(call)? {
+                return Ok(true);
             }
             let mut now = Instant::now();
             let deadline = *from_first_look.get_or_insert_with(|| timeout.map(|t| now + t));
@@ -329,7 +373,7 @@ impl Program {
                 now = Instant::now();
             }
             let mut wait = match deadline {
-                Some(d) if now >= d => return Ok(None),
+                Some(d) if now >= d => return Ok(false),
                 Some(d) => Some(d - now),
                 None => None,
             };
@@ -368,21 +412,19 @@ impl Program {
         }
     }
 
-    /// Takes a waiting call without waiting, the hosted programs in turn.
-    fn try_take(&mut self) -> Result<Option<Call>, ProgramError> {
+    /// Takes a waiting call into `call` without waiting, the hosted programs in turn.
+    fn try_take_into(&mut self, call: &mut Call) -> Result<bool, ProgramError> {
         let n = self.hosts.len();
         for k in 0..n {
             let i = (self.next_host + k) % n;
             let host = &self.hosts[i];
-            match host.calls.try_recv() {
-                Ok(Some(received)) => {
+            match host.calls.try_recv_into(&mut call.function, &mut call.args) {
+                Ok(Some(_)) => {
                     self.next_host = (i + 1) % n;
                     self.stats.calls += 1;
-                    return Ok(Some(Call {
-                        program: host.name.clone(),
-                        function: received.msg.function,
-                        args: received.msg.args,
-                    }));
+                    call.program.clear();
+                    call.program.push_str(&host.name);
+                    return Ok(true);
                 }
                 Ok(None) => {}
                 Err(error) => {
@@ -400,7 +442,7 @@ impl Program {
                 }
             }
         }
-        Ok(None)
+        Ok(false)
     }
 
     /// Calls `program.function(args)`, as a net's `call` does: the CAN data server's

@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use common::{FakePlayer, TestVehicle};
 use petrel_ipc::{Role, Value};
-use petrel_programs::{PlayerCheck, Program, ProgramConfig, ProgramError};
+use petrel_programs::{Call, PlayerCheck, Program, ProgramConfig, ProgramError};
 
 fn config(capacity: usize) -> ProgramConfig {
     ProgramConfig {
@@ -95,6 +95,46 @@ fn the_outbox_keeps_the_newest_events_and_reports_the_dropped_ones() {
     calls.sort();
     assert_eq!(calls, ["GUI.climb(300.0)", "PLD.use_payload(\"lidar\")"]);
     assert_eq!(program.recv(Some(Duration::from_millis(10))).unwrap(), None);
+}
+
+#[test]
+fn calls_received_into_one_call_are_recv_s_calls_and_reuse_its_buffers() {
+    let v = TestVehicle::new();
+    let mut program = Program::connect_with(&v.vehicle, &["GUI", "PLD"], config(4)).unwrap();
+    let mut player = FakePlayer::join(&v.vehicle);
+    let mut call = Call::default();
+    // Nothing waits: the call is left as it was.
+    assert!(!program
+        .recv_into(&mut call, Some(Duration::from_millis(10)))
+        .unwrap());
+    assert_eq!(call, Call::default());
+    let track = |i: i64| vec![Value::Int(i), Value::FloatList(vec![i as f64; 6])];
+    player.call("GUI", "track", track(1));
+    assert!(program
+        .recv_into(&mut call, Some(Duration::from_secs(5)))
+        .unwrap());
+    assert_eq!(call, Call::new("GUI", "track", track(1)));
+    let list = call.floats(1).unwrap().as_ptr();
+    // The next call of the same shape lands in the same buffers; another program's is tagged
+    // with its name.
+    player.call("PLD", "track", track(2));
+    assert!(program
+        .recv_into(&mut call, Some(Duration::from_secs(5)))
+        .unwrap());
+    assert_eq!(call, Call::new("PLD", "track", track(2)));
+    assert_eq!(call.floats(1).unwrap().as_ptr(), list);
+    // An undecodable call is recv's error, counted alike.
+    player.sender("GUI").send_encoded(&[0x01]).unwrap();
+    match program.recv_into(&mut call, Some(Duration::from_secs(5))) {
+        Err(ProgramError::BadCall { program, .. }) => assert_eq!(program, "GUI"),
+        other => panic!("{other:?}"),
+    }
+    assert_eq!((program.stats().calls, program.stats().bad_calls), (2, 1));
+    player.call("GUI", "climb", vec![Value::Float(300.0)]);
+    assert!(program
+        .recv_into(&mut call, Some(Duration::from_secs(5)))
+        .unwrap());
+    assert_eq!(call.to_string(), "GUI.climb(300.0)");
 }
 
 #[test]
