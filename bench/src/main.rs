@@ -280,6 +280,27 @@ fn loadavg() -> String {
         .unwrap_or_else(|_| "?".to_owned())
 }
 
+/// What the report says of the machine's other work, from the load averages read at the start
+/// (before the bench's own processes) and at the end (with them).
+fn machine_note(load_start: &str, load_end: &str) -> String {
+    let busy = load_start
+        .split_whitespace()
+        .next()
+        .and_then(|l| l.parse::<f64>().ok())
+        .is_none_or(|l| l >= 1.0);
+    let what = if busy {
+        "**Other work was running on the machine when this started**"
+    } else {
+        "The machine was otherwise idle when this started"
+    };
+    format!(
+        "{what} (load average {load_start} at the start, {load_end} at the end, the bench's own \
+         processes included): absolute figures move by tens of percent between runs, and the \
+         tails (p99.9, max) carry other processes' scheduling; the ratios within one run are what \
+         count."
+    )
+}
+
 fn cpu_model() -> String {
     std::fs::read_to_string("/proc/cpuinfo")
         .ok()
@@ -393,20 +414,19 @@ fn run(a: RunArgs) -> roles::Res<()> {
     } else {
         "release build"
     };
-    r.header =
-        format!(
-        "{} ({}, {:.0} s), {build}. Machine: {} CPUs ({}), {}. **The machine is shared with other \
-         builds and helpers while this runs** (load average {} at the start, {} at the end): \
-         absolute figures move by tens of percent between runs, and the tails (p99.9, max) carry \
-         other processes' scheduling; the ratios within one run are what count.",
+    r.header = format!(
+        "{} ({}, {:.0} s), {build}. Machine: {} CPUs ({}), {}. {}",
         sh("date", &["-u", "+%Y-%m-%d %H:%M UTC"]),
-        if a.short { "`scripts/bench.sh --short`" } else { "`scripts/bench.sh`" },
+        if a.short {
+            "`scripts/bench.sh --short`"
+        } else {
+            "`scripts/bench.sh`"
+        },
         started.elapsed().as_secs_f64(),
         measure::cpus(),
         cpu_model(),
         sh("uname", &["-sr"]),
-        load_start,
-        loadavg()
+        machine_note(&load_start, &loadavg()),
     );
     let svg_rel = "docs/bench";
     let md = r.markdown(&s, svg_rel);
@@ -576,4 +596,21 @@ fn vcan_in_vm(s: &Settings, repo: &std::path::Path) -> Result<Vec<report::Series
             (name, r)
         })
         .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::machine_note;
+
+    #[test]
+    fn the_report_says_whether_other_work_ran_from_the_load_at_the_start() {
+        assert!(machine_note("0.42 1.10 1.30", "2.10 1.20 1.30")
+            .starts_with("The machine was otherwise idle"));
+        assert!(machine_note("1.70 1.10 1.30", "3.10 1.20 1.30")
+            .starts_with("**Other work was running"));
+        // Unreadable: not called idle.
+        assert!(machine_note("?", "?").starts_with("**Other work was running"));
+        assert!(machine_note("0.42 1.10 1.30", "2.10 1.20 1.30")
+            .contains("load average 0.42 1.10 1.30 at the start, 2.10 1.20 1.30 at the end"));
+    }
 }

@@ -330,8 +330,8 @@ impl Participant {
         }
     }
 
-    /// The longest event the events service was created for ([`event_receiver_sized`]
-    /// (Self::event_receiver_sized)), if the process that created it recorded one.
+    /// The longest event the events service was created for
+    /// ([`event_receiver_sized`](Self::event_receiver_sized)), if the process that created it recorded one.
     pub fn max_event_len(&self) -> Result<Option<usize>, SetupError> {
         let factory = self.open_pubsub(&self.vehicle.events_service(), &EVENTS, None)?;
         Ok(bound_of(&factory))
