@@ -280,24 +280,53 @@ fn loadavg() -> String {
         .unwrap_or_else(|_| "?".to_owned())
 }
 
-/// What the report says of the machine's other work, from the load averages read at the start
-/// (before the bench's own processes) and at the end (with them).
-fn machine_note(load_start: &str, load_end: &str) -> String {
-    let busy = load_start
-        .split_whitespace()
-        .next()
-        .and_then(|l| l.parse::<f64>().ok())
-        .is_none_or(|l| l >= 1.0);
-    let what = if busy {
-        "**Other work was running on the machine when this started**"
-    } else {
-        "The machine was otherwise idle when this started"
+/// The share of the CPUs' time spent busy over `over` (from `/proc/stat`'s first line), or
+/// `None` when it cannot be read.
+fn cpu_busy(over: Duration) -> Option<f64> {
+    let ticks = || -> Option<(u64, u64)> {
+        let stat = std::fs::read_to_string("/proc/stat").ok()?;
+        let fields: Vec<u64> = stat
+            .lines()
+            .next()?
+            .split_whitespace()
+            .skip(1)
+            .map(|f| f.parse().ok())
+            .collect::<Option<_>>()?;
+        // user nice system idle iowait irq softirq steal (guest time is inside user).
+        let idle = fields.get(3)? + fields.get(4).unwrap_or(&0);
+        let total: u64 = fields.iter().take(8).sum();
+        Some((idle, total))
+    };
+    let (idle0, total0) = ticks()?;
+    std::thread::sleep(over);
+    let (idle1, total1) = ticks()?;
+    let total = total1.checked_sub(total0).filter(|&t| t > 0)?;
+    let idle = idle1.saturating_sub(idle0).min(total);
+    Some(1.0 - idle as f64 / total as f64)
+}
+
+/// What the report says of the machine's other work: from how busy its CPUs were just before
+/// the bench started (`busy`, 0 to 1), and the load averages at the start and at the end (the
+/// bench's own processes included).
+fn machine_note(busy: Option<f64>, load_start: &str, load_end: &str) -> String {
+    let what = match busy {
+        Some(b) if b < 0.25 => format!(
+            "The machine was otherwise idle when this started (its CPUs {:.0} % busy in the \
+             second before)",
+            b * 100.0
+        ),
+        Some(b) => format!(
+            "**Other work was running on the machine when this started** (its CPUs {:.0} % busy \
+             in the second before)",
+            b * 100.0
+        ),
+        None => "**Whether other work ran is not known** (/proc/stat unreadable)".to_owned(),
     };
     format!(
-        "{what} (load average {load_start} at the start, {load_end} at the end, the bench's own \
-         processes included): absolute figures move by tens of percent between runs, and the \
-         tails (p99.9, max) carry other processes' scheduling; the ratios within one run are what \
-         count."
+        "{what}; load average {load_start} at the start, {load_end} at the end, the bench's own \
+         processes included. Absolute figures move by tens of percent between runs, and the \
+         tails (p99.9, max) carry other processes' scheduling; the ratios within one run are \
+         what count."
     )
 }
 
@@ -345,6 +374,7 @@ fn run(a: RunArgs) -> roles::Res<()> {
         }
     }
     let started = std::time::Instant::now();
+    let busy_start = cpu_busy(Duration::from_secs(1));
     let load_start = loadavg();
     let mut r = Report {
         scale_wait: "block".to_owned(),
@@ -426,7 +456,7 @@ fn run(a: RunArgs) -> roles::Res<()> {
         measure::cpus(),
         cpu_model(),
         sh("uname", &["-sr"]),
-        machine_note(&load_start, &loadavg()),
+        machine_note(busy_start, &load_start, &loadavg()),
     );
     let svg_rel = "docs/bench";
     let md = r.markdown(&s, svg_rel);
@@ -600,17 +630,29 @@ fn vcan_in_vm(s: &Settings, repo: &std::path::Path) -> Result<Vec<report::Series
 
 #[cfg(test)]
 mod tests {
-    use super::machine_note;
+    use super::{cpu_busy, machine_note};
+    use std::time::Duration;
 
     #[test]
-    fn the_report_says_whether_other_work_ran_from_the_load_at_the_start() {
-        assert!(machine_note("0.42 1.10 1.30", "2.10 1.20 1.30")
-            .starts_with("The machine was otherwise idle"));
-        assert!(machine_note("1.70 1.10 1.30", "3.10 1.20 1.30")
-            .starts_with("**Other work was running"));
-        // Unreadable: not called idle.
-        assert!(machine_note("?", "?").starts_with("**Other work was running"));
-        assert!(machine_note("0.42 1.10 1.30", "2.10 1.20 1.30")
-            .contains("load average 0.42 1.10 1.30 at the start, 2.10 1.20 1.30 at the end"));
+    fn the_report_says_whether_other_work_ran_from_the_cpus_at_the_start() {
+        let load = ("0.42 1.10 1.30", "2.10 1.20 1.30");
+        let idle = machine_note(Some(0.03), load.0, load.1);
+        assert!(idle.starts_with("The machine was otherwise idle"), "{idle}");
+        assert!(idle.contains("3 % busy"), "{idle}");
+        assert!(
+            idle.contains("load average 0.42 1.10 1.30 at the start, 2.10 1.20 1.30 at the end"),
+            "{idle}"
+        );
+        let busy = machine_note(Some(0.6), load.0, load.1);
+        assert!(busy.starts_with("**Other work was running"), "{busy}");
+        assert!(busy.contains("60 % busy"), "{busy}");
+        // Unknown: not called idle.
+        assert!(machine_note(None, "?", "?").starts_with("**Whether other work ran is not known"));
+    }
+
+    #[test]
+    fn this_machines_cpus_read_as_a_share() {
+        let busy = cpu_busy(Duration::from_millis(50)).expect("/proc/stat");
+        assert!((0.0..=1.0).contains(&busy), "{busy}");
     }
 }

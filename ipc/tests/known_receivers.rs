@@ -144,14 +144,20 @@ fn child() {
 // ---------------------------------------------------------------------------------------------
 // Parent side
 
+/// The player's marking publisher, which lists the monitors again only when the change
+/// counter tells it to (its safety-net period an hour).
+fn counting_publisher(vehicle: &Vehicle) -> (Participant, MarkingPublisher) {
+    let player = Participant::join(vehicle, Role::Player).unwrap();
+    let publisher = player.marking_publisher().unwrap();
+    publisher.set_listing_period(Duration::from_secs(3_600));
+    (player, publisher)
+}
+
 /// The publisher of the player, and a first monitor it has delivered to (and so listed).
 fn publisher_with_a_listed_monitor(
     vehicle: &Vehicle,
 ) -> (Participant, MarkingPublisher, mpsc::Receiver<u64>) {
-    let player = Participant::join(vehicle, Role::Player).unwrap();
-    let publisher = player.marking_publisher().unwrap();
-    // Only the change counter tells the sender to list again.
-    publisher.set_listing_period(Duration::from_secs(3_600));
+    let (player, publisher) = counting_publisher(vehicle);
     let (first, _) = sleeping_monitor(vehicle, 1);
     publisher.send(&delta(0)).unwrap();
     expect_step(&first, 0);
@@ -161,9 +167,7 @@ fn publisher_with_a_listed_monitor(
 #[test]
 fn a_monitor_that_joins_after_a_send_is_woken_by_the_next_one() {
     let vehicle = TestVehicle::new("auv");
-    let player = Participant::join(&vehicle, Role::Player).unwrap();
-    let publisher = player.marking_publisher().unwrap();
-    publisher.set_listing_period(Duration::from_secs(3_600));
+    let (_player, publisher) = counting_publisher(&vehicle);
     // Sent to nobody, then to one monitor: the sender has listed the receivers.
     assert!(matches!(
         publisher.send(&delta(0)),
@@ -224,9 +228,7 @@ fn a_monitor_dropped_and_replaced_in_this_process_is_rung() {
 #[test]
 fn a_monitor_replaced_by_one_of_another_process_is_rung() {
     let vehicle = TestVehicle::new("auv");
-    let player = Participant::join(&vehicle, Role::Player).unwrap();
-    let publisher = player.marking_publisher().unwrap();
-    publisher.set_listing_period(Duration::from_secs(3_600));
+    let (_player, publisher) = counting_publisher(&vehicle);
     for step in 0..3 {
         let before = doorbells(&vehicle);
         let child = ChildProcess::spawn(&vehicle, "monitor", "1");
@@ -244,9 +246,7 @@ fn a_monitor_replaced_by_one_of_another_process_is_rung() {
 #[test]
 fn a_killed_monitor_neither_fails_nor_stalls_the_sends() {
     let vehicle = TestVehicle::new("auv");
-    let player = Participant::join(&vehicle, Role::Player).unwrap();
-    let publisher = player.marking_publisher().unwrap();
-    publisher.set_listing_period(Duration::from_secs(3_600));
+    let (_player, publisher) = counting_publisher(&vehicle);
     let before = doorbells(&vehicle);
     let mut child = ChildProcess::spawn(&vehicle, "monitor", "1000000");
     assert_eq!(child.report("READY", DEADLINE), "");
@@ -288,10 +288,8 @@ fn a_killed_monitor_neither_fails_nor_stalls_the_sends() {
 #[test]
 fn refusals_are_counted_when_a_listed_monitor_is_full() {
     let vehicle = TestVehicle::new("auv");
-    let player = Participant::join(&vehicle, Role::Player).unwrap();
+    let (_player, publisher) = counting_publisher(&vehicle);
     let monitor = Participant::join(&vehicle, Role::tool("monitor").unwrap()).unwrap();
-    let publisher = player.marking_publisher().unwrap();
-    publisher.set_listing_period(Duration::from_secs(3_600));
     let fast = monitor.marking_subscriber().unwrap();
     let slow = monitor.marking_subscriber().unwrap();
     let buffer = publisher.spec().subscriber_buffer as u64;
