@@ -261,7 +261,7 @@ pub fn all(s: &crate::measure::Settings) -> Vec<Res<Footprint>> {
     }
     // The same program once a player runs: the player created the events service and
     // recorded its project's longest event there, so the program's sender is sized from it
-    // (alone, above, the program created the service and keeps the growing default).
+    // (alone, above, the program created the service: 512-byte samples).
     if let (Some(echo), Some(petrel)) = (&s.echo, &s.petrel) {
         let v = vehicle_name("fpp");
         let j = jdir(&v);

@@ -298,8 +298,9 @@ impl Participant {
 
     /// A sender of events to the player, with the service's default samples: they grow by
     /// powers of two from 512 bytes up to [`EVENTS`]`.max_body_len`, which costs this process
-    /// about 2 KiB per sample, 4 MB in all (see [`EVENTS`]). A program wants
-    /// [`event_sender_sized`](Self::event_sender_sized).
+    /// about 2 KiB per sample, 4 MB in all (see [`EVENTS`]), and its events not yet read are
+    /// lost if it leaves before the player reads them (iceoryx2 removes its segments). A
+    /// program wants [`event_sender_sized`](Self::event_sender_sized).
     pub fn event_sender(&self) -> Result<EventSender, SetupError> {
         self.sender(self.vehicle.events_service(), EVENTS)
     }
@@ -314,20 +315,21 @@ impl Participant {
     /// the bound saves memory, it never refuses an event.
     ///
     /// When the service has no bound (this process created it, before the player started),
-    /// the sender is the default one of [`event_sender`](Self::event_sender).
+    /// the samples are [`MIN_FIXED_LEN`] long. Never the growing samples of
+    /// [`event_sender`](Self::event_sender): iceoryx2 removes a growing sender's segments
+    /// when it leaves, and with them the events the player had not read yet; a fixed
+    /// segment's samples stay readable.
     pub fn event_sender_sized(&self) -> Result<EventSender, SetupError> {
         let service = self.vehicle.events_service();
         let factory = self.open_pubsub(&service, &EVENTS, None)?;
-        match bound_of(&factory) {
-            Some(bound) => {
-                let spec = ServiceSpec {
-                    initial_slice_len: bound.clamp(MIN_FIXED_LEN, EVENTS.max_body_len),
-                    ..EVENTS
-                };
-                self.sender_with(service, spec, AllocationStrategy::Static)
-            }
-            None => self.sender(service, EVENTS),
-        }
+        let len = bound_of(&factory).map_or(MIN_FIXED_LEN, |bound| {
+            bound.clamp(MIN_FIXED_LEN, EVENTS.max_body_len)
+        });
+        let spec = ServiceSpec {
+            initial_slice_len: len,
+            ..EVENTS
+        };
+        self.sender_with(service, spec, AllocationStrategy::Static)
     }
 
     /// The longest event the events service was created for

@@ -10,7 +10,8 @@ use common::TestVehicle;
 use petrel_ipc::port::EVENTS;
 use petrel_ipc::{
     CallMsg, EventMsg, Heartbeat, MarkingMsg, Participant, Reactor, RecvError, Role, SendError,
-    SetupError, Value, Vehicle, WaitStrategy, EVENT_SENDERS_SPARE, PROGRAM_SENDERS_GONE,
+    SetupError, Value, Vehicle, WaitStrategy, EVENT_SENDERS_SPARE, MIN_FIXED_LEN,
+    PROGRAM_SENDERS_GONE,
 };
 
 fn pair(vehicle: &Vehicle) -> (Participant, Participant) {
@@ -701,21 +702,35 @@ fn a_lazily_consuming_receiver_neither_misses_a_wakeup_nor_wakes_for_old_ones() 
 }
 
 #[test]
-fn a_sender_made_before_the_player_keeps_the_defaults_and_still_delivers() {
+fn a_sender_made_before_the_player_has_fixed_samples_and_loses_nothing_when_it_leaves() {
     let vehicle = TestVehicle::new("early");
     // The program comes first: it creates the events service, with no bound.
     let gui = Participant::join(&vehicle, Role::program("GUI").unwrap()).unwrap();
     let tx = gui.event_sender_sized().unwrap();
-    assert_eq!(tx.fixed_len(), None);
+    assert_eq!(tx.fixed_len(), Some(MIN_FIXED_LEN));
     // The player opens it as it is (its bound cannot be recorded any more).
     let player = Participant::join(&vehicle, Role::Player).unwrap();
     let events = player.event_receiver_sized(40, 1).unwrap();
     assert_eq!(player.max_event_len().unwrap(), None);
+    // A long event goes in pieces.
     let text = EventMsg::new("log", vec![Value::Text("é".repeat(10_000))]);
     tx.send(&text).unwrap();
     assert_eq!(events.try_recv().unwrap().unwrap().msg, text);
-    // A later sender of the same process reads no bound either.
-    assert_eq!(gui.event_sender_sized().unwrap().fixed_len(), None);
+    // A later sender of the same process reads no bound either, and its events outlive it:
+    // sent, then gone before the player reads (a growing sender's would go with it).
+    let late = gui.event_sender_sized().unwrap();
+    assert_eq!(late.fixed_len(), Some(MIN_FIXED_LEN));
+    assert!(!events.has_pending());
+    let last = EventMsg::new("bye", vec![Value::Int(7)]);
+    late.send(&last).unwrap();
+    late.send(&text).unwrap();
+    drop(late);
+    drop(tx);
+    drop(gui);
+    let got: Vec<_> = std::iter::from_fn(|| events.try_recv().unwrap())
+        .map(|r| r.msg)
+        .collect();
+    assert_eq!(got, vec![last, text]);
 }
 
 #[test]

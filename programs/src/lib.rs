@@ -28,9 +28,10 @@
 //! - Memory: a program's events sender is sized from the project the player runs (the player
 //!   records its longest event in the events service when it creates it): one fixed segment of
 //!   samples, about 4 MB less than the growing default; a longer event still goes, in pieces.
-//!   A program started before the player creates the service itself, with no bound, and keeps
-//!   the default sender (until it loses the player and connects again); under `petrel up` the
-//!   player starts first.
+//!   A program started before the player creates the service itself, with no bound: its
+//!   samples are 512 bytes, longer events go in pieces (never the growing default, whose
+//!   unread events would go with the program if it left before the player read them); under
+//!   `petrel up` the player starts first.
 //!
 //! The examples hold a minimal program (`echo`) and the simulated UAV of the ProCoSA mission
 //! (`uav_gui` playing GUI and PLD, `uav_dec` playing DEC).

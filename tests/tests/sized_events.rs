@@ -2,7 +2,7 @@
 //! event of its project in the events service and a program's sender sizes its samples from
 //! it. An event longer than that (a long text) still reaches the player whole, after a reload
 //! whose events got longer too; a program started before the player (the service created
-//! without a bound) keeps the defaults and works the same.
+//! without a bound) sends 512-byte samples and works the same.
 
 use petrel_tests::{example_bin, journal_json, petrel_bin, unique_vehicle, Player, Processes};
 use petrel_tests::{TempProject, Workdir};
