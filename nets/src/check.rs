@@ -1,4 +1,5 @@
-//! Name resolution and type checking: from the written [`Project`] to a [`CompiledProject`].
+//! Name resolution and type checking: from the written [`Project`] to a
+//! [`CompiledProject`](crate::compiled::CompiledProject).
 //!
 //! Every problem is reported (the checker never stops at the first), each with the place it was
 //! written and what to do. A compiled project is returned only when there is no error, so the
@@ -9,8 +10,8 @@
 //! 1. the manifest's names (globals, events, programs, timers) and the nets' declarations;
 //! 2. the **roots**: the nets nobody declares as a child, each one net, or the instances the
 //!    manifest makes of it;
-//! 3. each net's **body, checked once** (a template's too), into a [`Template`] whose references
-//!    to other nets are left symbolic ([`NetRef`]), so that an error in a template is reported
+//! 3. each net's **body, checked once** (a template's too), into a `Template` whose references
+//!    to other nets are left symbolic (`NetRef`), so that an error in a template is reported
 //!    once however many instances it has;
 //! 4. the **instances**, expanded from the roots down the `children` lines in pre-order (the
 //!    project order), each a [`c::Net`] with its references resolved and its fixed parameters

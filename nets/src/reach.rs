@@ -69,7 +69,7 @@ pub struct ExploreOptions {
     /// needs them to prove a net unbounded.
     pub keep_traces: bool,
     /// Decide deadlocks alone, firing in each marking only the enabled transitions of a stubborn
-    /// set (partial-order reduction, see [`crate::stubborn`]'s conditions): every dead marking
+    /// set (partial-order reduction, see the `stubborn` module's conditions): every dead marking
     /// is still reached, usually through far fewer markings. The report's sizes are then the
     /// reduced graph's, its bounds are not decided ([`PtReport::reduced`]), and its trace to a
     /// deadlock is a witness, not necessarily the shortest.

@@ -69,7 +69,7 @@ fn decode_limited<const LIMIT: usize>(
 }
 
 /// Decodes one record's body into an [`Entry`], with a bincode limit of
-/// [`CLAIM_PER_BYTE`] times the body's length (rounded up to a power of two, at least 4 KiB):
+/// `CLAIM_PER_BYTE` times the body's length (rounded up to a power of two, at least 4 KiB):
 /// every byte of the body must belong to the entry. bincode's limit is a constant of its
 /// configuration type, so the limit is picked from a fixed ladder of powers of two.
 pub fn decode_entry(body: &[u8]) -> Result<Entry, String> {
@@ -285,8 +285,8 @@ impl std::str::FromStr for FlushPolicy {
 
 /// Appends entries to a journal directory.
 ///
-/// Entries are encoded into a queue of complete records, and written from it ([`flush`]
-/// (Self::flush), which each [`append`](Self::append) does according to the policy) at the
+/// Entries are encoded into a queue of complete records, and written from it
+/// ([`flush`](Self::flush), which each [`append`](Self::append) does according to the policy) at the
 /// segment's last good record boundary. A write that fails (a full disk) is cut back to that
 /// boundary, so a partial record never stays in the file, and the records stay queued: the next
 /// flush writes them again. Nothing queued is lost while the writer lives.

@@ -9,7 +9,7 @@
 //!   redermor-program --role PLN (programs::Pln)      redermor-program --role EVT (programs::Evt)
 //! ```
 //!
-//! - [`bench`]: the bus's messages (missions/redermor/redermor.dbc) to and from the domain's
+//! - [`bench`](mod@bench): the bus's messages (missions/redermor/redermor.dbc) to and from the domain's
 //!   readings and commands, and the bench clock (the simulator may run faster than the wall).
 //! - [`plant`]: the Redermor simulator as a [`petrel_can_bridge::sim::Plant`].
 //! - [`programs`]: what each program does with its calls (missions/redermor/INTERFACE.md),

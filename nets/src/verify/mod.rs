@@ -6,12 +6,12 @@
 //! - [`env`]: the environment: which events may come, with which parameters (the classes guards
 //!   tell apart), addressed to which net; programs' declared answers and internal events come
 //!   only when asked for.
-//! - [`explore`]: breadth first over the stable states; what one step shows (refused firings,
+//! - `explore`: breadth first over the stable states; what one step shows (refused firings,
 //!   loops of immediate transitions, conflicts).
-//! - [`analysis`]: what the whole graph shows: dead markings, invariants, progress (an end stays
+//! - `analysis`: what the whole graph shows: dead markings, invariants, progress (an end stays
 //!   reachable), stuck nets and resource cycles, starvation, loops.
-//! - [`minimize`]: the events of a trace that matter.
-//! - [`render`]: the report for people, for tools, and as diagnostics on the project's text.
+//! - `minimize`: the events of a trace that matter.
+//! - `render`: the report for people, for tools, and as diagnostics on the project's text.
 //!
 //! docs/verification.md says exactly what is checked; docs/semantics.md what is explored.
 
