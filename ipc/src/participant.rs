@@ -58,11 +58,10 @@ impl ServiceFailure {
             ServiceFailure::PubSub(PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
                 O::IncompatibleTypes | O::IncompatibleOverflowBehavior | O::VersionMismatch,
             )) => "a process built from another version of Petrel uses this service; rebuild every process of the vehicle together",
+            // (An opener asks for no number of senders or processes: `open_pubsub`.)
             ServiceFailure::PubSub(PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
                 O::DoesNotSupportRequestedMinBufferSize
-                | O::DoesNotSupportRequestedAmountOfPublishers
-                | O::DoesNotSupportRequestedAmountOfSubscribers
-                | O::DoesNotSupportRequestedAmountOfNodes,
+                | O::DoesNotSupportRequestedAmountOfSubscribers,
             )) => "a process built with other service settings created this service; rebuild every process of the vehicle together",
             ServiceFailure::PubSub(PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
                 O::ExceedsMaxNumberOfNodes,
@@ -178,35 +177,70 @@ pub struct Participant {
 const OPEN_ATTEMPTS: usize = 50;
 const OPEN_RETRY_PAUSE: Duration = Duration::from_millis(10);
 
-fn is_transient_pubsub(e: &PublishSubscribeOpenOrCreateError) -> bool {
-    use iceoryx2::service::builder::publish_subscribe::PublishSubscribeCreateError as C;
-    use PublishSubscribeOpenError as O;
-    matches!(
-        e,
-        PublishSubscribeOpenOrCreateError::SystemInFlux
-            | PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
-                O::IsMarkedForDestruction | O::HangsInCreation | O::DoesNotExist
-            )
-            | PublishSubscribeOpenOrCreateError::PublishSubscribeCreateError(
-                C::AlreadyExists | C::IsBeingCreatedByAnotherInstance
-            )
-    )
+/// Whether, and when, a failed opening of a service is tried again.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Retry {
+    /// Not: the failure is the answer.
+    No,
+    /// At once: another process created the service between our open and our create.
+    AtOnce,
+    /// After [`OPEN_RETRY_PAUSE`]: another process is creating or removing it.
+    AfterPause,
 }
 
-fn is_transient_event(e: &EventOpenOrCreateError) -> bool {
+fn pubsub_retry(e: &PublishSubscribeOpenOrCreateError) -> Retry {
+    use iceoryx2::service::builder::publish_subscribe::PublishSubscribeCreateError as C;
+    use PublishSubscribeOpenError as O;
+    match e {
+        PublishSubscribeOpenOrCreateError::PublishSubscribeCreateError(C::AlreadyExists) => {
+            Retry::AtOnce
+        }
+        PublishSubscribeOpenOrCreateError::SystemInFlux
+        | PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+            O::IsMarkedForDestruction | O::HangsInCreation | O::DoesNotExist,
+        )
+        | PublishSubscribeOpenOrCreateError::PublishSubscribeCreateError(
+            C::IsBeingCreatedByAnotherInstance,
+        ) => Retry::AfterPause,
+        _ => Retry::No,
+    }
+}
+
+fn event_retry(e: &EventOpenOrCreateError) -> Retry {
     use iceoryx2::service::builder::event::EventCreateError as C;
-    matches!(
-        e,
+    match e {
+        EventOpenOrCreateError::EventCreateError(C::AlreadyExists) => Retry::AtOnce,
         EventOpenOrCreateError::SystemInFlux
-            | EventOpenOrCreateError::EventOpenError(
-                EventOpenError::IsMarkedForDestruction
-                    | EventOpenError::HangsInCreation
-                    | EventOpenError::DoesNotExist
-            )
-            | EventOpenOrCreateError::EventCreateError(
-                C::AlreadyExists | C::IsBeingCreatedByAnotherInstance
-            )
-    )
+        | EventOpenOrCreateError::EventOpenError(
+            EventOpenError::IsMarkedForDestruction
+            | EventOpenError::HangsInCreation
+            | EventOpenError::DoesNotExist,
+        )
+        | EventOpenOrCreateError::EventCreateError(C::IsBeingCreatedByAnotherInstance) => {
+            Retry::AfterPause
+        }
+        _ => Retry::No,
+    }
+}
+
+/// `attempt` until it succeeds, `retry` says its failure is the answer, or [`OPEN_ATTEMPTS`]
+/// attempts were made.
+fn retrying<T, E>(
+    mut attempt: impl FnMut() -> Result<T, E>,
+    retry: impl Fn(&E) -> Retry,
+) -> Result<T, E> {
+    let mut attempts = 1;
+    loop {
+        match attempt() {
+            Err(e) if attempts < OPEN_ATTEMPTS && retry(&e) != Retry::No => {
+                attempts += 1;
+                if retry(&e) == Retry::AfterPause {
+                    thread::sleep(OPEN_RETRY_PAUSE);
+                }
+            }
+            result => return result,
+        }
+    }
 }
 
 impl Participant {
@@ -548,7 +582,6 @@ impl Participant {
         spec: &ServiceSpec,
         bound: Option<usize>,
     ) -> Result<publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>, SetupError> {
-        use iceoryx2::service::builder::publish_subscribe::PublishSubscribeCreateError;
         let name = self.service_name(service)?;
         // What an opener requires of a service: the layout of its samples and its buffers.
         let opener = || {
@@ -563,9 +596,8 @@ impl Participant {
                 .max_subscribers(spec.max_subscribers)
         };
         let recorded = bound.and_then(bound_specifier);
-        let mut attempt = 0;
-        loop {
-            let result = match opener().open() {
+        retrying(
+            || match opener().open() {
                 Err(PublishSubscribeOpenError::DoesNotExist) => {
                     let creator = opener()
                         .max_publishers(spec.max_publishers)
@@ -579,30 +611,13 @@ impl Participant {
                 other => {
                     other.map_err(PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError)
                 }
-            };
-            match result {
-                Ok(factory) => return Ok(factory),
-                Err(e) if is_transient_pubsub(&e) && attempt + 1 < OPEN_ATTEMPTS => {
-                    attempt += 1;
-                    // Another process created it between our open and our create: open it
-                    // at once (no pause).
-                    if !matches!(
-                        e,
-                        PublishSubscribeOpenOrCreateError::PublishSubscribeCreateError(
-                            PublishSubscribeCreateError::AlreadyExists
-                        )
-                    ) {
-                        thread::sleep(OPEN_RETRY_PAUSE);
-                    }
-                }
-                Err(e) => {
-                    return Err(SetupError::Service {
-                        service: service.to_owned(),
-                        failure: ServiceFailure::PubSub(e),
-                    })
-                }
-            }
-        }
+            },
+            pubsub_retry,
+        )
+        .map_err(|e| SetupError::Service {
+            service: service.to_owned(),
+            failure: ServiceFailure::PubSub(e),
+        })
     }
 
     /// The event service paired with a publish-subscribe service, opened whatever capacities
@@ -612,7 +627,6 @@ impl Participant {
         service: &str,
         spec: &ServiceSpec,
     ) -> Result<event::PortFactory<ipc::Service>, SetupError> {
-        use iceoryx2::service::builder::event::EventCreateError;
         let name = self.service_name(service)?;
         let opener = || {
             self.node
@@ -624,35 +638,21 @@ impl Participant {
                 .notifier_dropped_event(EventId::new(WAKE_SENDER_LEFT))
                 .notifier_dead_event(EventId::new(WAKE_SENDER_DIED))
         };
-        let mut attempt = 0;
-        loop {
-            let result = match opener().open() {
+        retrying(
+            || match opener().open() {
                 Err(EventOpenError::DoesNotExist) => opener()
                     .max_notifiers(spec.max_publishers)
                     .max_nodes(spec.max_nodes)
                     .create()
                     .map_err(EventOpenOrCreateError::EventCreateError),
                 other => other.map_err(EventOpenOrCreateError::EventOpenError),
-            };
-            match result {
-                Ok(factory) => return Ok(factory),
-                Err(e) if is_transient_event(&e) && attempt + 1 < OPEN_ATTEMPTS => {
-                    attempt += 1;
-                    if !matches!(
-                        e,
-                        EventOpenOrCreateError::EventCreateError(EventCreateError::AlreadyExists)
-                    ) {
-                        thread::sleep(OPEN_RETRY_PAUSE);
-                    }
-                }
-                Err(e) => {
-                    return Err(SetupError::Service {
-                        service: service.to_owned(),
-                        failure: ServiceFailure::Event(e),
-                    })
-                }
-            }
-        }
+            },
+            event_retry,
+        )
+        .map_err(|e| SetupError::Service {
+            service: service.to_owned(),
+            failure: ServiceFailure::Event(e),
+        })
     }
 
     fn sender<M: Message>(

@@ -144,6 +144,24 @@ fn child() {
 // ---------------------------------------------------------------------------------------------
 // Parent side
 
+/// Each of `steps` sent to the one monitor `monitor` listens as, delivered to it, then the
+/// monitor (which takes that many) leaves.
+fn deliver_then_gone(
+    publisher: &MarkingPublisher,
+    monitor: &mpsc::Receiver<u64>,
+    steps: impl IntoIterator<Item = u64>,
+) {
+    for step in steps {
+        let sent = publisher.send(&delta(step)).unwrap();
+        assert_eq!(sent.delivered, 1);
+        expect_step(monitor, step);
+    }
+    assert_eq!(
+        monitor.recv_timeout(DEADLINE),
+        Err(mpsc::RecvTimeoutError::Disconnected)
+    );
+}
+
 /// The player's marking publisher, which lists the monitors again only when the change
 /// counter tells it to (its safety-net period an hour).
 fn counting_publisher(vehicle: &Vehicle) -> (Participant, MarkingPublisher) {
@@ -214,13 +232,7 @@ fn a_monitor_dropped_and_replaced_in_this_process_is_rung() {
     }
     for step in 1..4 {
         let (next, _) = sleeping_monitor(&vehicle, 1);
-        let sent = publisher.send(&delta(step)).unwrap();
-        assert_eq!(sent.delivered, 1);
-        expect_step(&next, step);
-        assert_eq!(
-            next.recv_timeout(DEADLINE),
-            Err(mpsc::RecvTimeoutError::Disconnected)
-        );
+        deliver_then_gone(&publisher, &next, [step]);
     }
     assert_eq!(publisher.stats().notified, 0);
 }
@@ -272,15 +284,7 @@ fn a_killed_monitor_neither_fails_nor_stalls_the_sends() {
     assert!(report.failed.is_empty(), "{report:?}");
     // The dead monitor is forgotten: a new one gets everything, and nothing is refused.
     let (next, _) = sleeping_monitor(&vehicle, 2);
-    for step in [500, 501] {
-        let sent = publisher.send(&delta(step)).unwrap();
-        assert_eq!(sent.delivered, 1);
-        expect_step(&next, step);
-    }
-    assert_eq!(
-        next.recv_timeout(DEADLINE),
-        Err(mpsc::RecvTimeoutError::Disconnected)
-    );
+    deliver_then_gone(&publisher, &next, [500, 501]);
 }
 
 /// A monitor whose buffer is full is refused, counted, and the others still get everything,
