@@ -81,6 +81,8 @@ struct Entry {
     taken_us: u64,
     /// When a copy was last sent (the judging clock); `None`: due now.
     sent_us: Option<u64>,
+    /// Whether a copy was ever sent (the next ones are retransmissions).
+    sent_before: bool,
     /// Its number, on the stream to the incarnation `.0` of the destination.
     number: Option<(u64, u64)>,
 }
@@ -144,6 +146,7 @@ impl Outgoing {
             msg,
             taken_us: now_us,
             sent_us: None,
+            sent_before: false,
             number: None,
         });
         Ok(())
@@ -201,9 +204,10 @@ impl Outgoing {
                 seq: n,
                 floor,
             });
-            due.again.push(e.sent_us.is_some());
+            due.again.push(e.sent_before);
             due.copies.push(copy);
             e.sent_us = Some(now_us);
+            e.sent_before = true;
         }
         due
     }

@@ -179,7 +179,9 @@ fn events_sent_during_an_outage_arrive_in_order_after_the_restored_event() {
     // Back at 6 s (within retention - detection): B hears A, and sends everything again.
     let beacon = a.beacon(6 * S);
     b.hear(&[beacon], 6 * S, None);
-    let copies = b.puts(6 * S);
+    let due = b.core.due(6 * S);
+    assert!(due.iter().all(|(_, again)| *again), "each a retransmission");
+    let copies: Vec<LinkMsg> = due.into_iter().map(|(m, _)| m).collect();
     assert_eq!(copies.len(), 3);
     a.changes.clear();
     let beacon = b.beacon(6 * S);

@@ -793,8 +793,8 @@ fn verdict(send: Child) -> (Option<i32>, String) {
 /// the computers cut for 15 s, then B's gateway stopped (SIGSTOP) for 12 s, with a call of the
 /// player's to ECHO in flight each time and operator events sent on B. Nothing goes silently:
 /// the calls are given up past the link's retention bound (10 s here) and the nets get
-/// `call_failed` (ECHO never gets them, even the copy that waited in the stopped gateway's
-/// socket); the event sent as the cable went is refused to its sender with the reason; those
+/// `call_failed` (ECHO never gets them, not even after the stopped gateway runs again); the
+/// event sent as the cable went is refused to its sender with the reason; those
 /// sent later arrive in order, after `link_restored("B")`; the journal and the counters say so.
 #[test]
 fn past_the_lease_every_call_and_event_is_delivered_in_order_or_failed_to_its_sender() {
@@ -883,8 +883,9 @@ fn past_the_lease_every_call_and_event_is_delivered_in_order_or_failed_to_its_se
         place(s, "LINK", "up") && s["programs"]["ECHO"] == "alive"
     });
 
-    // 2. B's gateway stopped for 12 s: the player's call to ECHO waits in its socket, note(4)
-    // in its events buffer.
+    // 2. B's gateway stopped for 12 s, with the player's call to ECHO sent to it (zenoh drops
+    // it when its lease ends; a copy that waited in a buffer would be too late to be taken:
+    // gateway/tests/carried.rs), and note(4) waiting in its events buffer.
     let losses = losses_of(&a.status(&dir, &vehicle).unwrap_or_default());
     let stopped = Stopped::new(procs.0[2].id());
     let stop = Instant::now();
