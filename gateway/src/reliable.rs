@@ -251,8 +251,9 @@ impl Outgoing {
     }
 
     /// `to`'s gateway (incarnation `incarnation`) took the stream up to `ack.taken`: those
-    /// leave the buffer. Returns the ones it took (acknowledged) and those it refused (failed,
-    /// with its reason).
+    /// leave the buffer (wherever they are in it: one too old to be sent again may wait before
+    /// them to be given up). Returns the ones it took (acknowledged) and those it refused
+    /// (failed, with its reason).
     pub fn acknowledged(
         &mut self,
         to: &str,
@@ -263,14 +264,16 @@ impl Outgoing {
         let Some(out) = self.to.get_mut(to) else {
             return (taken, failures);
         };
-        while let Some(e) = out.entries.front() {
-            match e.number {
-                Some((inc, n)) if inc == incarnation && n <= ack.taken => {}
-                _ => break,
-            }
-            let e = out.entries.pop_front().expect("front");
+        let mut kept = VecDeque::with_capacity(out.entries.len());
+        for e in out.entries.drain(..) {
+            let n = match e.number {
+                Some((inc, n)) if inc == incarnation && n <= ack.taken => n,
+                _ => {
+                    kept.push_back(e);
+                    continue;
+                }
+            };
             out.bytes -= e.msg.body.len();
-            let n = e.number.map_or(0, |(_, n)| n);
             match ack.refused.iter().find(|(seq, _)| *seq == n) {
                 Some((_, why)) => failures.push(Failure {
                     to: to.to_owned(),
@@ -280,6 +283,7 @@ impl Outgoing {
                 None => taken.push(e.msg),
             }
         }
+        out.entries = kept;
         (taken, failures)
     }
 

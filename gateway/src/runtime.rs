@@ -374,6 +374,26 @@ pub fn run(settings: Settings) -> Result<serde_json::Value, GatewayError> {
 /// Local messages for the link: origin, ipc header, kind, body.
 type Out = Vec<(String, (u64, u64), LinkKind, Vec<u8>)>;
 
+/// Local messages that could not be taken: kind, why.
+type Failed = Vec<(&'static str, String)>;
+
+/// The calls waiting in the receiver of stand-in `node`, for the link.
+fn take_calls(
+    node: &str,
+    m: &Mirror,
+    core: &mut Core,
+    ids: &OwnIds,
+    out: &mut Out,
+    failed: &mut Failed,
+) {
+    if let (Some(r), Some(program)) = (&m.calls_in, node.strip_prefix("program/")) {
+        let kind = LinkKind::Call {
+            program: program.to_owned(),
+        };
+        take(r, &kind, core, ids, out, failed, &|_| {});
+    }
+}
+
 /// Drains `r`: the messages of `kind` that leave this computer go to `out` (after `edit`),
 /// those that cannot be read or encoded to `failed`.
 fn take<M: Message>(
@@ -382,7 +402,7 @@ fn take<M: Message>(
     core: &mut Core,
     ids: &OwnIds,
     out: &mut Out,
-    failed: &mut Vec<(&'static str, String)>,
+    failed: &mut Failed,
     edit: &dyn Fn(&mut M),
 ) {
     let drained = r.drain(|r: Result<Received<M>, petrel_ipc::RecvError>| match r {
@@ -568,24 +588,8 @@ impl Gateway {
         self.put("gateway", (0, 0), LinkKind::Beacon { alive }, Vec::new());
     }
 
-    /// The calls waiting in the receiver of stand-in `node`, for the link.
-    fn take_calls(&mut self, node: &str, m: &Mirror) {
-        let (Some(r), Some(program)) = (&m.calls_in, node.strip_prefix("program/")) else {
-            return;
-        };
-        let kind = LinkKind::Call {
-            program: program.to_owned(),
-        };
-        let (mut out, mut failed) = (Vec::new(), Vec::new());
-        take(
-            r,
-            &kind,
-            &mut self.core,
-            &self.ids,
-            &mut out,
-            &mut failed,
-            &|_| {},
-        );
+    /// Counts what could not be taken, and forwards what was.
+    fn forward_all(&mut self, out: Out, failed: Failed) {
         for (kind, why) in failed {
             self.core.counters.refuse_to_link(kind, why);
         }
@@ -596,7 +600,7 @@ impl Gateway {
 
     fn take_local(&mut self) {
         let mut out: Out = Vec::new();
-        let mut failed: Vec<(&'static str, String)> = Vec::new();
+        let mut failed: Failed = Vec::new();
         if let Some(r) = &self.own.events_in {
             take(
                 r,
@@ -659,30 +663,12 @@ impl Gateway {
             );
         }
         for (node, m) in &self.mirrors {
-            if let (Some(r), Some(program)) = (&m.calls_in, node.strip_prefix("program/")) {
-                let kind = LinkKind::Call {
-                    program: program.to_owned(),
-                };
-                take(
-                    r,
-                    &kind,
-                    &mut self.core,
-                    &self.ids,
-                    &mut out,
-                    &mut failed,
-                    &|_| {},
-                );
-            }
-        }
-        for (kind, why) in failed {
-            self.core.counters.refuse_to_link(kind, why);
+            take_calls(node, m, &mut self.core, &self.ids, &mut out, &mut failed);
         }
         if let Some(seq) = own_taken.get() {
             self.core.player_took(seq);
         }
-        for (origin, header, kind, body) in out {
-            self.forward(&origin, header, kind, body);
-        }
+        self.forward_all(out, failed);
     }
 
     fn take_link(&mut self, bytes: &[u8], changes: &mut Vec<PeerChange>) {
@@ -913,7 +899,9 @@ impl Gateway {
             if let Some(m) = self.mirrors.remove(&node) {
                 // Calls the player sent it before it left are carried like the others (their
                 // destination tells, or the link gives them up): none dropped with the port.
-                self.take_calls(&node, &m);
+                let (mut out, mut failed) = (Vec::new(), Vec::new());
+                take_calls(&node, &m, &mut self.core, &self.ids, &mut out, &mut failed);
+                self.forward_all(out, failed);
             }
         }
         for node in wanted.keys() {

@@ -426,3 +426,32 @@ fn the_receiver_skips_what_its_sender_gave_up() {
     assert_eq!(a.hear(&again, 10 * S, None), [Route::Deliver]);
     assert_eq!(bodies(&a), [2]);
 }
+
+#[test]
+fn an_acknowledged_message_leaves_the_buffer_even_behind_one_too_old_to_send() {
+    let (mut a, mut b) = (Side::new("A", 1), Side::new("B", 2));
+    meet(&mut a, &mut b, 0);
+    a.at(2 * S);
+    b.at(2 * S);
+    // Taken while A is lost: never sent, and too old to be sent once A is back at 11.2 s.
+    b.event(1, 2 * S);
+    a.at(11 * S + S / 5);
+    b.at(11 * S + S / 5);
+    meet(&mut a, &mut b, 11 * S + S / 5);
+    b.event(2, 11 * S + S / 5);
+    let copies = b.puts(11 * S + S / 5);
+    assert_eq!(copies.len(), 1, "only the second");
+    a.hear(&copies, 11 * S + S / 5, None);
+    a.core.link_event_sent("B", None);
+    a.release();
+    assert_eq!(bodies(&a), [2]);
+    let acks = a.puts(11 * S + S / 5);
+    b.hear(&acks, 11 * S + S / 5, None);
+    assert_eq!(b.core.buffered("A"), 1, "the second left, acknowledged");
+    assert_eq!(b.counts("event").carried, 1);
+    // The link goes again: the first is given up at 12 s, and nothing else ever.
+    b.at(25 * S);
+    let f = b.core.take_failures();
+    assert_eq!(f.len(), 1, "{f:?}");
+    assert_eq!(f[0].msg.body, [1]);
+}
