@@ -157,14 +157,15 @@ const PRELUDE_TYPES: &[&str] = &[
 /// The names the generated code uses in each role's scope (keep in step with the templates of
 /// `gen.rs`; the corpus test of tests/tests/gen.rs tries every identifier of the generated
 /// files in every role):
-/// - a parameter meets the handler's `out`, the functions and the constant of
-///   `src/interface.rs`;
+/// - a parameter meets the handler's `out`, the function its default body calls, and the
+///   constant of `src/interface.rs` (a parameter named after a constant is a pattern that
+///   refutes);
 /// - a handler meets the trait's own method `tick`;
 /// - an event helper meets the helpers `Events` has for every program;
 /// - the state struct meets the names `src/handlers.rs` and `src/main.rs` import.
 fn generated(role: Role) -> &'static [&'static str] {
     match role {
-        Role::Param => &["out", "unhandled", "dispatch", "run", "PROGRAMS"],
+        Role::Param => &["out", "unhandled", "PROGRAMS"],
         Role::Handler => &["tick"],
         Role::Event => &["from", "send_as", "emit"],
         Role::State => &["Events", "Handlers", "ProgramError", "ExitCode"],
