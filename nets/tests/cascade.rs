@@ -43,6 +43,18 @@ fn run(c: &CompiledProject) -> Report {
     verify(c, VerifyOptions::default()).expect("verifies")
 }
 
+/// Without the partial-order reduction.
+fn run_full(c: &CompiledProject) -> Report {
+    verify(
+        c,
+        VerifyOptions {
+            no_reduction: true,
+            ..Default::default()
+        },
+    )
+    .expect("verifies")
+}
+
 const HEALTH: &str = "
 net MONITOR {
     place idle = 1
@@ -311,14 +323,7 @@ fn reduced_and_full_explorations_find_the_same_loops() {
             transition down on step: c1 -> c0
         }",
     );
-    let full = verify(
-        &c,
-        VerifyOptions {
-            no_reduction: true,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let full = run_full(&c);
     let reduced = run(&c);
     assert!(reduced.partial, "the reduction applies");
     assert_eq!(full.cascades.len(), 1);
@@ -381,14 +386,7 @@ fn generated_loops_are_found_the_same_reduced_and_in_full() {
             v.sort();
             v
         };
-        let full = verify(
-            &c,
-            VerifyOptions {
-                no_reduction: true,
-                ..Default::default()
-            },
-        )
-        .unwrap();
+        let full = run_full(&c);
         let reduced = run(&c);
         assert_eq!(key(&reduced), key(&full), "round {round}:\n{nets}");
         looping += usize::from(!full.cascades.is_empty());

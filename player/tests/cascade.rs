@@ -57,6 +57,15 @@ struct Seen {
     livelocks: Vec<Vec<Value>>,
 }
 
+impl Seen {
+    fn new(p: &CompiledProject) -> Seen {
+        Seen {
+            livelock: p.event_id("livelock").expect("a built-in event"),
+            ..Seen::default()
+        }
+    }
+}
+
 impl Sink for Seen {
     fn taken(&mut self, event: u32, params: &[Value]) {
         if event == self.livelock {
@@ -84,10 +93,7 @@ fn run<'p>(p: &'p CompiledProject, bound: Option<u32>, events: &[&str]) -> (Engi
     if let Some(b) = bound {
         e.set_cascade_bound(b);
     }
-    let mut seen = Seen {
-        livelock: p.event_id("livelock").unwrap(),
-        ..Seen::default()
-    };
+    let mut seen = Seen::new(p);
     e.start(0, &mut seen);
     for ev in events {
         e.submit_named(ev, vec![]).unwrap();
@@ -243,10 +249,7 @@ fn outside_events_are_kept_at_the_bound_and_the_mission_goes_on() {
     ));
     let mut e = Engine::new(&p);
     e.set_cascade_bound(20);
-    let mut seen = Seen {
-        livelock: p.event_id("livelock").unwrap(),
-        ..Seen::default()
-    };
+    let mut seen = Seen::new(&p);
     e.start(0, &mut seen);
     e.submit_named("health_check", vec![]).unwrap();
     // The outside health_check, then 19 steps on emitted ones.

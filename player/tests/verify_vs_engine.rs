@@ -54,11 +54,9 @@ fn tuples(types: &[Type]) -> Vec<Vec<Value>> {
     out
 }
 
-/// Every stable state the engine reaches, one event at a time from each.
-fn brute_force(p: &CompiledProject) -> HashSet<Vec<u64>> {
-    let mut start = Engine::new(p);
-    start.start(0, &mut NullSink);
-    let s0 = start.state().to_vec();
+/// Per event, the nets it may be addressed to: none (every net), and each net an `emit ... to`
+/// names.
+fn emit_targets(p: &CompiledProject) -> Vec<Vec<Option<NetId>>> {
     let mut targets: Vec<Vec<Option<NetId>>> = vec![vec![None]; p.events.len()];
     for net in &p.nets {
         for t in &net.transitions {
@@ -76,6 +74,15 @@ fn brute_force(p: &CompiledProject) -> HashSet<Vec<u64>> {
             }
         }
     }
+    targets
+}
+
+/// Every stable state the engine reaches, one event at a time from each.
+fn brute_force(p: &CompiledProject) -> HashSet<Vec<u64>> {
+    let mut start = Engine::new(p);
+    start.start(0, &mut NullSink);
+    let s0 = start.state().to_vec();
+    let targets = emit_targets(p);
     let mut seen = HashSet::from([s0.clone()]);
     let mut queue = VecDeque::from([s0]);
     while let Some(s) = queue.pop_front() {
@@ -499,23 +506,7 @@ s0 = { category = "safety" }
             continue;
         }
         let states = brute_force(&p);
-        let mut targets: Vec<Vec<Option<NetId>>> = vec![vec![None]; p.events.len()];
-        for net in &p.nets {
-            for t in &net.transitions {
-                for a in &t.actions {
-                    if let Action::Emit {
-                        event,
-                        target: Some(n),
-                        ..
-                    } = a
-                    {
-                        if !targets[*event as usize].contains(&Some(*n)) {
-                            targets[*event as usize].push(Some(*n));
-                        }
-                    }
-                }
-            }
-        }
+        let targets = emit_targets(&p);
         let mut stops = engine_stops(&p, bound, None, None);
         for s in &states {
             for (e, list) in targets.iter().enumerate().take(4) {
