@@ -398,3 +398,17 @@ fn generated_loops_are_found_the_same_reduced_and_in_full() {
         "{looping} loop, {partial} reduced"
     );
 }
+
+#[test]
+fn a_reload_is_refused_on_a_cascade_that_never_settles() {
+    let r = run(&compile(r#"["MONITOR"]"#, false, HEALTH));
+    let f = petrel_nets::reload::refusing_finding(&r).expect("a refusing finding");
+    assert!(
+        f.what.starts_with(
+            "livelock: events produced at one instant do not settle (health_check; MONITOR.check)"
+        ),
+        "{}",
+        f.what
+    );
+    assert_eq!(f.trace, ["start_mission"]);
+}

@@ -805,7 +805,7 @@ impl<'p> Engine<'p> {
             origin,
         } = q.pop_front()?;
         if origin != Origin::Outside {
-            self.cascade.queued -= 1;
+            self.cascade.queued = self.cascade.queued.saturating_sub(1);
             self.cascade.steps += 1;
             if let Origin::Emitted(net, t) = origin {
                 self.cascade.emitter = Some((net, t));

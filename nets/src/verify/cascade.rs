@@ -339,11 +339,14 @@ impl Search<'_> {
             // The start's produced events: every outcome of the guards it cannot decide.
             let mut prefixes = vec![Vec::new()];
             while let Some(prefix) = prefixes.pop() {
-                if let Some(next) = self.step(None, &prefix) {
+                let next = self.step(None, &prefix);
+                // The questions this step asked (the search below asks its own).
+                let used = self.rec.oracle.used;
+                if let Some(next) = next {
                     self.start = None;
                     self.explore_from(next.config);
                 }
-                super::env::Oracle::next_prefixes(&prefix, self.rec.oracle.used, &mut prefixes);
+                super::env::Oracle::next_prefixes(&prefix, used, &mut prefixes);
                 if prefixes.len() > super::env::MAX_GUARD_RUNS {
                     break;
                 }
@@ -388,11 +391,12 @@ impl Search<'_> {
                         known: vec![true; d.params.len()],
                     };
                     let next = self.first_step(first, item, &prefix);
+                    let used = self.rec.oracle.used;
                     if let Some(next) = next {
                         self.start = Some((i, d.label.clone()));
                         self.explore_from(next.config);
                     }
-                    super::env::Oracle::next_prefixes(&prefix, self.rec.oracle.used, &mut prefixes);
+                    super::env::Oracle::next_prefixes(&prefix, used, &mut prefixes);
                     if runs >= super::env::MAX_GUARD_RUNS || !self.complete {
                         break;
                     }
