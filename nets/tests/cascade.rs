@@ -412,3 +412,39 @@ fn a_reload_is_refused_on_a_cascade_that_never_settles() {
     );
     assert_eq!(f.trace, ["start_mission"]);
 }
+
+#[test]
+fn a_search_that_runs_out_of_its_budget_says_so() {
+    // One stable state, but queues of 1 to 256 `step`s: more configurations than 100.
+    let c = compile(
+        r#"["A"]"#,
+        false,
+        "net A {
+            place a = 1
+            transition twice on step: a -> a { emit step  emit step }
+        }",
+    );
+    let r = verify(
+        &c,
+        VerifyOptions {
+            max_states: Some(100),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert!(r.cascades_incomplete);
+    assert!(render_human("loops", &r)
+        .contains("(not checked in full: stopped after 101 configurations)"));
+    let manifest = MANIFEST
+        .replace("START", r#"["A"]"#)
+        .replace("INTERNAL", "");
+    let (project, _, _, _) = from_sources(
+        &manifest,
+        &[(
+            "a.pn",
+            "net A { place a = 1 transition twice on step: a -> a { emit step  emit step } }",
+        )],
+    );
+    let d = diagnostics(&project, &r);
+    assert!(d.iter().any(|x| x.code == "W0607"), "{d:?}");
+}

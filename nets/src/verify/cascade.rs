@@ -30,11 +30,13 @@ use std::collections::VecDeque;
 /// Queues longer than this are not remembered: followed along one path to their end.
 pub(super) const MEMO_QUEUE: usize = 256;
 
-/// Configurations remembered at most; beyond, the search stops and says so.
-const BUDGET: usize = 1_000_000;
+/// Configurations remembered at most (or the exploration's `--max-states`, when lower);
+/// beyond, the search stops and says so.
+pub(super) const BUDGET: u64 = 1_000_000;
 
-/// Steps of the paths followed without memory, at most, over the whole search.
-const LINEAR_BUDGET: u64 = 50_000_000;
+/// Steps of the paths followed without memory, at most, over the whole search: this many per
+/// configuration of the budget, and at least enough for a few paths to the bound.
+const LINEAR_PER_CONFIGURATION: u64 = 50;
 
 /// What the search found: the loops and the cascades that reach the bound, and whether it went
 /// through every configuration.
@@ -224,6 +226,9 @@ struct Search<'a> {
     stack: Vec<u32>,
     counter: u32,
     linear_steps: u64,
+    /// The budgets: configurations, and steps followed without memory.
+    budget: u64,
+    linear_budget: u64,
     complete: bool,
     findings: Vec<(Vec<u32>, Vec<String>, CascadeFinding)>,
     /// The current start: the graph state and the label of the event delivered there (`None`:
@@ -287,7 +292,8 @@ fn produce_graph(p: &CompiledProject, sem: &Semantics) -> Vec<bool> {
 
 /// The zero-time cascades of the explored graph `g`: from each of its states, each delivery
 /// the environment may make there; and from the start's own produced events (`initial`: the
-/// graph starts with the project's start, not a reload's state).
+/// graph starts with the project's start, not a reload's state), within `budget`
+/// configurations.
 pub(super) fn cascades(
     p: &CompiledProject,
     sem: &Semantics,
@@ -295,6 +301,7 @@ pub(super) fn cascades(
     g: &Graph,
     guards: Vec<Option<Guard>>,
     initial: bool,
+    budget: u64,
 ) -> Cascades {
     let leads = produce_graph(p, sem);
     let mut search = Search {
@@ -316,6 +323,8 @@ pub(super) fn cascades(
         stack: Vec::new(),
         counter: 0,
         linear_steps: 0,
+        budget,
+        linear_budget: (budget * LINEAR_PER_CONFIGURATION).max(4 * u64::from(sem.cascade_bound)),
         complete: true,
         findings: Vec::new(),
         start: None,
@@ -576,7 +585,7 @@ impl Search<'_> {
             succ: Vec::new(),
         });
         self.pending.push(Some(config));
-        if self.nodes.len() > BUDGET {
+        if self.nodes.len() as u64 > self.budget {
             self.complete = false;
         }
         k
@@ -692,7 +701,7 @@ impl Search<'_> {
                 return;
             }
             self.linear_steps += 1;
-            if self.linear_steps > LINEAR_BUDGET {
+            if self.linear_steps > self.linear_budget {
                 self.complete = false;
                 return;
             }

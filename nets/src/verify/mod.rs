@@ -862,6 +862,9 @@ fn verify_inner(
         &g,
         explore::rule_guards(p, &sem),
         start.is_none(),
+        opts.max_states
+            .unwrap_or(cascade::BUDGET)
+            .min(cascade::BUDGET),
     );
     report.cascades = cascades.findings;
     report.cascade_bound = sem.cascade_bound;

@@ -631,6 +631,20 @@ fn diagnostics_with(
                 .help("nothing in the loop waits for time or for an outside event: let a timer (`start T after D`, then `on` its event) or an outside event drive it, or give it a place it empties on the way"),
         ));
     }
+    if r.cascades_incomplete {
+        d.push(at(
+            None,
+            Diagnostic::warning(
+                "W0607",
+                Default::default(),
+                format!(
+                    "the search for cascades of events produced at one instant stopped after {} configurations: a loop may be missed",
+                    r.cascade_configurations
+                ),
+            )
+            .help("its budget is --max-states (at most 1,000,000): raise it, or verify one net with --net"),
+        ));
+    }
     if let Some(f) = &r.no_progress {
         let without = if f.excluded.is_empty() {
             String::new()
