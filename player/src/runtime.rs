@@ -231,6 +231,15 @@ impl Sink for RuntimeSink<'_, '_> {
         self.record.livelock();
     }
 
+    fn cascade_stopped(&mut self, steps: u32, dropped: u64) {
+        warn!(
+            steps,
+            dropped,
+            "events produced at one instant did not settle: cascade stopped, produced events dropped, raising livelock"
+        );
+        self.record.cascade_stopped(steps, dropped);
+    }
+
     fn invariant_violated(&mut self, name: &str) {
         error!(
             invariant = name,
