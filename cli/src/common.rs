@@ -1,10 +1,10 @@
 //! What every command shares: how a command ends, where its output goes, and the one way a
 //! project is loaded and checked.
 
+use petrel_diag::report::{Diagnostic, Diagnostics, Severity};
+use petrel_diag::source::SourceMap;
 use petrel_nets::compiled::CompiledProject;
-use petrel_nets::diag::{Diagnostic, Diagnostics, Severity};
 use petrel_nets::project::{self, LoadError, LoadedProject};
-use petrel_nets::source::SourceMap;
 use petrel_nets::verify;
 use std::path::Path;
 

@@ -3,9 +3,9 @@
 use crate::common::{
     check_project, interactive, out, report, require_clean, write_output, Format, Outcome, Scope,
 };
-use petrel_nets::diag::Diagnostics;
+use petrel_diag::report::Diagnostics;
+use petrel_diag::source::SourceMap;
 use petrel_nets::project;
-use petrel_nets::source::SourceMap;
 use petrel_nets::verify;
 use std::path::{Path, PathBuf};
 

@@ -6,12 +6,12 @@
 //! Exit codes: 0 explored, 1 exploration stopped (state limit, unbounded net...), 2 bad usage or
 //! unreadable PNML.
 
-use petrel_nets::diag::Diagnostics;
+use petrel_diag::report::Diagnostics;
+use petrel_diag::source::FileId;
 use petrel_nets::pnml::parse_pnml;
 use petrel_nets::reach::{
     error_to_json, explore, render_error, render_human, to_json, ExploreOptions,
 };
-use petrel_nets::source::FileId;
 use std::process::ExitCode;
 
 fn main() -> ExitCode {

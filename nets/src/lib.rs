@@ -6,23 +6,18 @@
 
 pub mod check;
 pub mod compiled;
-pub mod diag;
 pub mod dot;
-pub mod duration;
 pub mod fmt;
 pub mod formula;
 pub mod instances;
 pub mod manifest;
 pub mod model;
-pub mod names;
-pub mod paths;
 pub mod pnml;
 pub mod project;
 pub mod pt;
 pub mod reach;
 pub mod reload;
 pub mod semantics;
-pub mod source;
 mod stubborn;
 pub mod syntax;
 pub mod verify;

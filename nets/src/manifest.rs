@@ -23,9 +23,9 @@
 //! TOML structure errors stop reading (the TOML parser reports one at a time); everything
 //! written inside strings (names, types, categories) is checked here and reported all at once.
 
-use crate::diag::{Diagnostic, Diagnostics};
 use crate::model::*;
-use crate::source::{FileId, Span};
+use petrel_diag::report::{Diagnostic, Diagnostics};
+use petrel_diag::source::{FileId, Span};
 use serde::de::{Deserialize, Deserializer, MapAccess, Visitor};
 use std::fmt::Write as _;
 use toml::Spanned;
@@ -334,7 +334,7 @@ pub fn parse_manifest(file: FileId, text: &str, diags: &mut Diagnostics) -> Opti
             path: f.get_ref().clone(),
             span: r.span(f.span()),
         };
-        if let Err(why) = crate::paths::check_relative(&file.path) {
+        if let Err(why) = petrel_diag::paths::check_relative(&file.path) {
             r.diags.push(outside_project(&file, &why));
         }
         m.files.push(file);
@@ -655,7 +655,7 @@ pub(crate) fn bound_end(
 }
 
 /// E0109: a net file path of the manifest that would leave the project directory.
-pub(crate) fn outside_project(f: &FileRef, why: &crate::paths::PathProblem) -> Diagnostic {
+pub(crate) fn outside_project(f: &FileRef, why: &petrel_diag::paths::PathProblem) -> Diagnostic {
     Diagnostic::error(
         "E0109",
         f.span,
@@ -857,7 +857,7 @@ pub fn format_manifest(m: &Manifest) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::source::SourceFile;
+    use petrel_diag::source::SourceFile;
 
     const TEXT: &str = r#"
 [project]

@@ -6,7 +6,8 @@
 //! player. Equality ignores spans, so a model read from text equals the same model read back from
 //! PNML.
 
-use crate::source::Span;
+use petrel_diag::duration::TimeUnit;
+use petrel_diag::source::Span;
 use std::fmt;
 
 /// A name as written, with where it was written.
@@ -416,8 +417,6 @@ impl Expr {
         }
     }
 }
-
-pub use crate::duration::TimeUnit;
 
 /// How long a timer runs.
 #[derive(Clone, Debug, PartialEq)]

@@ -4,7 +4,7 @@
 //! apart from PNML because the explorer does not care where a net came from (a test builds one by
 //! hand).
 
-use crate::source::Span;
+use petrel_diag::source::Span;
 
 /// A place/transition net read from PNML: the structure and the initial marking, nothing else.
 #[derive(Clone, Debug, PartialEq)]

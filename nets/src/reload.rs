@@ -96,7 +96,7 @@ impl Mapping {
         }
         let file: File = toml::from_str(text).map_err(|e| {
             let at = e.span().map_or(0, |s| s.start);
-            let src = crate::source::SourceFile::new("", text);
+            let src = petrel_diag::source::SourceFile::new("", text);
             let lc = src.line_col(at);
             MappingError {
                 line: lc.line,

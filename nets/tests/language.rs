@@ -2,9 +2,9 @@
 //! shortest trace, conflicts between guarded transitions, guards it cannot decide, and the
 //! warnings a project says are intended.
 
+use petrel_diag::report::Diagnostics;
 use petrel_nets::check::{apply_allows, AllowPass};
 use petrel_nets::compiled::CompiledProject;
-use petrel_nets::diag::Diagnostics;
 use petrel_nets::model::Project;
 use petrel_nets::project::from_sources;
 use petrel_nets::verify::{self, verify, VerifyOptions};

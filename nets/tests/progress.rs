@@ -34,7 +34,7 @@ fn inline(manifest: &str, nets: &str) -> CompiledProject {
 }
 
 /// The diagnostics of `r` as JSON: code, file, line, column, message of each.
-fn located(loaded: &LoadedProject, d: &petrel_nets::diag::Diagnostics) -> Vec<serde_json::Value> {
+fn located(loaded: &LoadedProject, d: &petrel_diag::report::Diagnostics) -> Vec<serde_json::Value> {
     d.to_json(&loaded.sources)["diagnostics"]
         .as_array()
         .cloned()

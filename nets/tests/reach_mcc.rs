@@ -2,13 +2,13 @@
 //! plain reference explorer on random nets, and on small hand-made nets whose witnesses are
 //! known (unsafe places, deadlocks, weights, state limits, unbounded nets).
 
-use petrel_nets::diag::Diagnostics;
+use petrel_diag::report::Diagnostics;
+use petrel_diag::source::{FileId, Span};
 use petrel_nets::pnml::{parse_pnml, PtArc, PtNet, PtNode, PtPlace, PtTransition};
 use petrel_nets::reach::{
     error_to_json, explore, render_error, render_human, to_json, ExploreError, ExploreOptions,
     PtReport, Representation, Trace,
 };
-use petrel_nets::source::{FileId, Span};
 use std::collections::{HashMap, VecDeque};
 use std::path::PathBuf;
 

@@ -1,9 +1,9 @@
 //! Timed verification (issue 18, "Time"): timers with literal durations expire in the order
 //! their durations impose, outside events stay free, and the untimed analysis stays an option.
 
+use petrel_diag::source::SourceMap;
 use petrel_nets::compiled::CompiledProject;
 use petrel_nets::project::{from_sources, load_and_check};
-use petrel_nets::source::SourceMap;
 use petrel_nets::verify::{verify, BoundFinding, BoundStatus, Report, VerifyOptions};
 use std::path::Path;
 

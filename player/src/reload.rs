@@ -37,7 +37,7 @@ pub fn load_candidate(dir: &Path, expected: &str, mapping: &str) -> Result<Candi
     let Some(project) = compiled else {
         let mut reasons: Vec<String> = diagnostics
             .iter()
-            .filter(|d| d.severity == petrel_nets::diag::Severity::Error)
+            .filter(|d| d.severity == petrel_diag::report::Severity::Error)
             .take(20)
             .map(|d| {
                 let at = d.span.map(|s| {
@@ -79,7 +79,7 @@ pub fn keep(journal: &Path, hash: &str, files: &[(String, String)]) -> std::io::
     }
     std::fs::create_dir_all(&tmp)?;
     for (path, text) in files {
-        let to = petrel_nets::paths::confine(&tmp, path).map_err(|why| {
+        let to = petrel_diag::paths::confine(&tmp, path).map_err(|why| {
             std::io::Error::new(
                 std::io::ErrorKind::InvalidInput,
                 format!("`{path}` would leave the kept copy: {why}"),

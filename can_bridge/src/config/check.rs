@@ -1,12 +1,12 @@
 //! Reading and checking the text of `can.toml` against the DBC and the project (codes E07xx).
 
+use petrel_diag::duration::parse_duration_us;
+use petrel_diag::names::{self, Candidates};
+use petrel_diag::report::{Diagnostic, Diagnostics};
+use petrel_diag::source::{FileId, Span};
 use petrel_nets::compiled::{CompiledProject, Value};
-use petrel_nets::diag::{Diagnostic, Diagnostics};
-use petrel_nets::duration::parse_duration_us;
 use petrel_nets::manifest::Ordered;
 use petrel_nets::model::Type;
-use petrel_nets::names::{self, Candidates};
-use petrel_nets::source::{FileId, Span};
 use serde::Deserialize;
 use toml::Spanned;
 

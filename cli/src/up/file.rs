@@ -6,11 +6,11 @@
 //! every problem is reported at once, at its file, line and column. Nothing here starts a
 //! process: [`super::run`] does, from the [`VehicleFile`] this module builds.
 
+use petrel_diag::report::{Diagnostic, Diagnostics};
+use petrel_diag::source::{FileId, SourceMap, Span};
 use petrel_nets::compiled::CompiledProject;
 use petrel_nets::compiled::Value;
-use petrel_nets::diag::{Diagnostic, Diagnostics};
 use petrel_nets::manifest::{toml_error, Ordered};
-use petrel_nets::source::{FileId, SourceMap, Span};
 use serde::Deserialize;
 use std::path::Path;
 use std::time::Duration;
@@ -331,7 +331,7 @@ fn is_process_name(s: &str) -> bool {
 /// The closest of `candidates` to `name`, as a hint.
 fn suggest<'a>(name: &str, candidates: impl Iterator<Item = &'a str>) -> String {
     let best = candidates
-        .map(|c| (petrel_nets::names::distance(name, c), c))
+        .map(|c| (petrel_diag::names::distance(name, c), c))
         .min();
     match best {
         Some((d, c)) if d <= 2.max(name.len() / 3) => format!("did you mean `{c}`? "),
@@ -435,7 +435,7 @@ impl Checker<'_> {
             );
         }
         if let Some(cred) = &l.credentials {
-            if let Err(e) = petrel_nets::paths::check_relative(cred.get_ref()) {
+            if let Err(e) = petrel_diag::paths::check_relative(cred.get_ref()) {
                 self.error(
                     "E0812",
                     self.span(cred),
@@ -469,7 +469,7 @@ impl Checker<'_> {
     }
 
     fn duration(&mut self, d: &Spanned<String>, what: &str) -> Option<Duration> {
-        match petrel_nets::duration::parse_duration_us(d.get_ref()) {
+        match petrel_diag::duration::parse_duration_us(d.get_ref()) {
             Some(us) => Some(Duration::from_micros(us)),
             None => {
                 self.error(

@@ -345,7 +345,7 @@ fn plan(a: UpArgs) -> Result<Plan, Outcome> {
     let vehicle_file = match &a.file {
         None => checked.vehicle,
         Some(path) => {
-            let mut d = petrel_nets::diag::Diagnostics::new();
+            let mut d = petrel_diag::report::Diagnostics::new();
             let can_program = checked
                 .can
                 .as_ref()
@@ -370,7 +370,7 @@ fn plan(a: UpArgs) -> Result<Plan, Outcome> {
     };
     let mut sends = file.sends.clone();
     if let Some(path) = &a.scenario {
-        let mut d = petrel_nets::diag::Diagnostics::new();
+        let mut d = petrel_diag::report::Diagnostics::new();
         let read = file::load_scenario(path, &c, &file, &mut sources, &mut d)
             .map_err(|e| Outcome::Usage(format!("cannot read {}: {e}", path.display())))?;
         crate::common::report(&d, &sources);

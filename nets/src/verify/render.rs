@@ -484,13 +484,19 @@ pub fn to_json(r: &Report) -> serde_json::Value {
 /// a mission that cannot finish and stuck nets; warnings for conflicts, starvation, transitions
 /// that never fire, nets never activated and events nobody waits for. Each is located at the
 /// transition, net, place or declaration concerned (an instance's at its template's text).
-pub fn diagnostics(project: &crate::model::Project, r: &Report) -> crate::diag::Diagnostics {
+pub fn diagnostics(
+    project: &crate::model::Project,
+    r: &Report,
+) -> petrel_diag::report::Diagnostics {
     diagnostics_with(project, r, false)
 }
 
 /// [`diagnostics`] with every finding apart (`petrel verify --all`): one diagnostic per dead
 /// marking.
-pub fn diagnostics_all(project: &crate::model::Project, r: &Report) -> crate::diag::Diagnostics {
+pub fn diagnostics_all(
+    project: &crate::model::Project,
+    r: &Report,
+) -> petrel_diag::report::Diagnostics {
     diagnostics_with(project, r, true)
 }
 
@@ -498,9 +504,9 @@ fn diagnostics_with(
     project: &crate::model::Project,
     r: &Report,
     all: bool,
-) -> crate::diag::Diagnostics {
-    use crate::diag::{Diagnostic, Diagnostics};
-    use crate::source::Span;
+) -> petrel_diag::report::Diagnostics {
+    use petrel_diag::report::{Diagnostic, Diagnostics};
+    use petrel_diag::source::Span;
     let mut d = Diagnostics::new();
     let at = |span: Option<Span>, diag: Diagnostic| Diagnostic { span, ..diag };
     // An instance's findings point at its template's text.
