@@ -11,3 +11,4 @@ pub mod names;
 pub mod paths;
 pub mod report;
 pub mod source;
+pub mod toml;

@@ -8,9 +8,9 @@
 
 use petrel_diag::report::{Diagnostic, Diagnostics};
 use petrel_diag::source::{FileId, SourceMap, Span};
+use petrel_diag::toml::Ordered;
 use petrel_nets::compiled::CompiledProject;
 use petrel_nets::compiled::Value;
-use petrel_nets::manifest::{toml_error, Ordered};
 use serde::Deserialize;
 use std::path::Path;
 use std::time::Duration;
@@ -594,18 +594,14 @@ pub fn check_file(
     can_program: Option<&str>,
     diags: &mut Diagnostics,
 ) -> Option<VehicleFile> {
-    let raw: RawFile = match toml::from_str(text) {
-        Ok(r) => r,
-        Err(e) => {
-            let (span, msg) = toml_error(file, &e);
-            diags.push(
-                Diagnostic::error("E0801", span, format!("vehicle.toml is not valid: {msg}"))
-                    .label(msg)
-                    .help("vehicle.toml has an optional [vehicle] table (name, logs, stop_grace), [computers.NAME] tables, [[process]] entries and [[send]] entries; see docs/vehicle.md"),
-            );
-            return None;
-        }
-    };
+    let raw: RawFile = petrel_diag::toml::parse(
+        file,
+        text,
+        "E0801",
+        "vehicle.toml",
+        "vehicle.toml has an optional [vehicle] table (name, logs, stop_grace), [computers.NAME] tables, [[process]] entries and [[send]] entries; see docs/vehicle.md",
+        diags,
+    )?;
     let mut c = Checker {
         file,
         diags,
@@ -1249,17 +1245,15 @@ pub fn load_scenario(
 ) -> std::io::Result<Option<Vec<SendSpec>>> {
     let text = std::fs::read_to_string(path)?;
     let file = sources.add(path.display().to_string(), text.clone());
-    let raw: RawScenario = match toml::from_str(&text) {
-        Ok(r) => r,
-        Err(e) => {
-            let (span, msg) = toml_error(file, &e);
-            diags.push(
-                Diagnostic::error("E0801", span, format!("the scenario is not valid: {msg}"))
-                    .label(msg)
-                    .help("a scenario file holds [[send]] entries (at, event, and optionally computer); see docs/vehicle.md"),
-            );
-            return Ok(None);
-        }
+    let Some(raw) = petrel_diag::toml::parse::<RawScenario>(
+        file,
+        &text,
+        "E0801",
+        "the scenario",
+        "a scenario file holds [[send]] entries (at, event, and optionally computer); see docs/vehicle.md",
+        diags,
+    ) else {
+        return Ok(None);
     };
     let mut c = Checker {
         file,
