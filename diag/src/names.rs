@@ -1,6 +1,6 @@
 //! "Did you mean" hints, shared by every checker of a project's files (the nets and manifest
-//! here, `can.toml` in the CAN data server), so that a misspelt name gets the same help wherever
-//! it is written.
+//! in petrel-nets, `can.toml` in the CAN data server, `vehicle.toml` in the CLI), so that a
+//! misspelt name gets the same help wherever it is written.
 
 /// How a hint speaks of the names a misspelt one was looked for among: the user can fix a
 /// declared name in the project, but not the names a DBC or a fixed list gives.

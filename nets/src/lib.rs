@@ -1,8 +1,8 @@
 //! The Petrel net language: the model of a mission project, its parser, checker and formatter,
 //! and its PNML and DOT interchange.
 //!
-//! Pure library: it reads files and nothing else. Every other Petrel crate builds on it, and it
-//! builds on none of them.
+//! Pure library: it reads files and nothing else. It builds on `petrel-value` (the typed values)
+//! and `petrel-diag` (spans and diagnostics) only.
 
 pub mod check;
 pub mod compiled;
