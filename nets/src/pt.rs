@@ -1,8 +1,8 @@
 //! Place/transition nets: the structure and initial marking of a PNML net, and nothing else.
 //!
-//! [`crate::pnml::parse_pnml`] builds them from PNML; [`crate::reach`] explores them. They live
-//! apart from PNML because the explorer does not care where a net came from (a test builds one by
-//! hand).
+//! [`crate::pnml::parse_pnml`] builds them from PNML; `petrel_verify::reach` explores them.
+//! They live apart from PNML because the explorer does not care where a net came from (a test
+//! builds one by hand).
 
 use petrel_diag::source::Span;
 

@@ -10,7 +10,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 fn mcc_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/mcc")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../verify/tests/data/mcc")
 }
 
 /// One row of answers.csv, by column name.

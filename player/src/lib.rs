@@ -10,7 +10,8 @@
 //! - [`journal`], [`replay`]: the flight recorder and its replay (`--resume` too).
 //! - [`shadow`]: the ground-station copy that follows a vehicle's steps.
 //! - [`reload`]: a new version of the project read, checked and kept beside the journal
-//!   (`petrel reload`; the mapping and verification are `petrel_nets::reload`'s).
+//!   (`petrel reload`; the mapping is `petrel_nets::reload`'s, the verification
+//!   `petrel_verify::reload`'s).
 //!
 //! The command line is the `petrel-cli` crate (binary `petrel`).
 

@@ -1,6 +1,7 @@
 //! The player's side of a reload (docs/reload.md): reading and checking the new version from
 //! its directory, keeping its files beside the journal, reading them back for replay and
-//! `--resume`. The mapping and the verification are [`petrel_nets::reload`]'s.
+//! `--resume`. The mapping is [`petrel_nets::reload`]'s, the verification
+//! [`petrel_verify::reload`]'s.
 
 use petrel_nets::compiled::CompiledProject;
 use petrel_nets::reload::{source_digest, Mapping};

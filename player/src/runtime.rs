@@ -489,7 +489,7 @@ struct PendingReload {
     received: Instant,
     candidate: crate::reload::Candidate,
     summary: Vec<String>,
-    verdict: std::thread::JoinHandle<Result<u64, petrel_nets::reload::Finding>>,
+    verdict: std::thread::JoinHandle<Result<u64, petrel_verify::reload::Finding>>,
 }
 
 /// The most stable states a reload's verification explores before it refuses the reload.
@@ -1175,7 +1175,7 @@ impl<'p> PlayerLoop<'p> {
         let verdict = std::thread::Builder::new()
             .name("reload-verify".into())
             .spawn(move || {
-                petrel_nets::reload::verify_mapped(&project, &state, Some(RELOAD_MAX_STATES))
+                petrel_verify::reload::verify_mapped(&project, &state, Some(RELOAD_MAX_STATES))
             });
         match verdict {
             Ok(verdict) => {
@@ -1208,7 +1208,7 @@ impl<'p> PlayerLoop<'p> {
         }
         let Some(p) = self.pending.take() else { return };
         let verdict = p.verdict.join().unwrap_or_else(|_| {
-            Err(petrel_nets::reload::Finding {
+            Err(petrel_verify::reload::Finding {
                 what: "the verification failed (its thread panicked): a bug in Petrel".into(),
                 trace: Vec::new(),
             })

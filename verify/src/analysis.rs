@@ -13,8 +13,8 @@ use super::{
     DeadFinding, InvariantFinding, LoopFinding, ProgressFinding, StarvationFinding, StuckFinding,
     Trace,
 };
-use crate::compiled::{CompiledProject, EventId, NetId, PlaceRef};
-use crate::semantics::Layout;
+use petrel_nets::compiled::{CompiledProject, EventId, NetId, PlaceRef};
+use petrel_nets::semantics::Layout;
 use std::collections::{HashMap, HashSet, VecDeque};
 
 /// Whether every place of marking `f` is marked in `s` (its nets active).

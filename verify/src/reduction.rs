@@ -20,9 +20,9 @@
 use super::env::Delivery;
 use super::explore::Graph;
 use super::minimize::Minimizer;
-use crate::compiled::{Action, CompiledProject, NetId, PlaceRef, StateFormula};
-use crate::model::Category;
-use crate::semantics::{Layout, State};
+use petrel_nets::compiled::{Action, CompiledProject, NetId, PlaceRef, StateFormula};
+use petrel_nets::model::Category;
+use petrel_nets::semantics::{Layout, State};
 use std::collections::HashMap;
 
 /// The component of each net, and of each delivery.

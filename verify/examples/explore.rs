@@ -1,6 +1,6 @@
 //! Explores a P/T net read from PNML and prints the report as JSON (or for humans with
 //! `--human`): the stand-in for `petrel verify FILE.pnml --format json` used by
-//! `scripts/bench-verify.sh` until the CLI calls [`petrel_nets::reach`] itself.
+//! `scripts/bench-verify.sh` until the CLI calls [`petrel_verify::reach`] itself.
 //!
 //! Usage: `explore FILE.pnml [--human] [--no-traces] [--deadlocks] [--max-states N] [--progress]`.
 //! Exit codes: 0 explored, 1 exploration stopped (state limit, unbounded net...), 2 bad usage or
@@ -9,7 +9,7 @@
 use petrel_diag::report::Diagnostics;
 use petrel_diag::source::FileId;
 use petrel_nets::pnml::parse_pnml;
-use petrel_nets::reach::{
+use petrel_verify::reach::{
     error_to_json, explore, render_error, render_human, to_json, ExploreOptions,
 };
 use std::process::ExitCode;

@@ -5,7 +5,7 @@
 use petrel_diag::report::Diagnostics;
 use petrel_diag::source::{FileId, Span};
 use petrel_nets::pnml::{parse_pnml, PtArc, PtNet, PtNode, PtPlace, PtTransition};
-use petrel_nets::reach::{
+use petrel_verify::reach::{
     error_to_json, explore, render_error, render_human, to_json, ExploreError, ExploreOptions,
     PtReport, Representation, Trace,
 };

@@ -44,11 +44,13 @@
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
-use crate::pt::{PtNet, PtNode};
-use crate::stubborn::Stubborn;
+mod stubborn;
+
+use petrel_nets::pt::{PtNet, PtNode};
 use std::fmt;
 use std::fmt::Write as _;
 use std::time::Instant;
+use stubborn::Stubborn;
 
 // ---------------------------------------------------------------------------------------------
 // Public API
@@ -248,7 +250,7 @@ pub enum ExploreError {
         store_bytes: u64,
     },
     /// The net is malformed (an arc joining two places, an index out of range...): only
-    /// possible for a [`PtNet`] built by hand, since [`crate::pnml::parse_pnml`] builds none.
+    /// possible for a [`PtNet`] built by hand, since [`petrel_nets::pnml::parse_pnml`] builds none.
     InvalidNet {
         /// What is wrong.
         message: String,

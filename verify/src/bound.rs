@@ -26,8 +26,8 @@ use super::env::Env;
 use super::explore::{run_step, Edges, Graph, Recorder};
 use super::timed::{TimerOps, Timing, INF};
 use super::{BoundFinding, BoundStatus, Trace};
-use crate::compiled::{Bound, CompiledProject, Occurrence};
-use crate::semantics::{Scratch, Semantics};
+use petrel_nets::compiled::{Bound, CompiledProject, Occurrence};
+use petrel_nets::semantics::{Scratch, Semantics};
 use std::collections::HashMap;
 use std::fmt::Write as _;
 

@@ -13,11 +13,11 @@ use super::env::{
 use super::store::{FxMap, Packed, StateStore};
 use super::timed::{TimerOps, Timing};
 use super::{ConflictFinding, LivelockFinding, Trace, UnsafeFinding, VerifyError, VerifyOptions};
-use crate::compiled::{
+use petrel_nets::compiled::{
     Arg, CompiledProject, EventId, FunctionId, Guard, NetId, ProgramId, TimerDuration, TimerId,
 };
-use crate::model::Category;
-use crate::semantics::{Effects, Layout, Scratch, Semantics, State};
+use petrel_nets::model::Category;
+use petrel_nets::semantics::{Effects, Layout, Scratch, Semantics, State};
 use petrel_value::Value;
 use std::collections::HashSet;
 use std::ops::Range;

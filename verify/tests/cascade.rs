@@ -6,7 +6,7 @@
 
 use petrel_nets::compiled::CompiledProject;
 use petrel_nets::project::from_sources;
-use petrel_nets::verify::{diagnostics, render_human, verify, Report, VerifyOptions};
+use petrel_verify::{diagnostics, render_human, verify, Report, VerifyOptions};
 
 const MANIFEST: &str = r#"
 [project]
@@ -402,7 +402,7 @@ fn generated_loops_are_found_the_same_reduced_and_in_full() {
 #[test]
 fn a_reload_is_refused_on_a_cascade_that_never_settles() {
     let r = run(&compile(r#"["MONITOR"]"#, false, HEALTH));
-    let f = petrel_nets::reload::refusing_finding(&r).expect("a refusing finding");
+    let f = petrel_verify::reload::refusing_finding(&r).expect("a refusing finding");
     assert!(
         f.what.starts_with(
             "livelock: events produced at one instant do not settle (health_check; MONITOR.check)"

@@ -1,5 +1,5 @@
 //! Verification of a mission project (section 2.4 of the ProCoSA paper): explore every stable
-//! state the project can reach, with the firing code the player runs ([`crate::semantics`]),
+//! state the project can reach, with the firing code the player runs ([`petrel_nets::semantics`]),
 //! and report what would go wrong in flight, each finding with the shortest sequence of events
 //! that shows it (the events that do not matter to it elided).
 //!
@@ -22,7 +22,9 @@ mod cascade;
 mod env;
 mod explore;
 mod minimize;
+pub mod reach;
 mod reduction;
+pub mod reload;
 mod render;
 mod store;
 mod timed;
@@ -31,8 +33,8 @@ pub use render::{
     diagnostics, diagnostics_all, render_human, render_human_all, render_summary, to_json,
 };
 
-use crate::compiled::{Action, CompiledProject, NetId, PlaceRef};
-use crate::semantics::{Semantics, State};
+use petrel_nets::compiled::{Action, CompiledProject, NetId, PlaceRef};
+use petrel_nets::semantics::{Semantics, State};
 use std::collections::HashMap;
 use std::time::Instant;
 
@@ -68,7 +70,7 @@ pub struct VerifyOptions {
     /// cross-checks and measurements.
     pub no_cache: bool,
     /// The bound of a zero-time cascade the check looks for, instead of
-    /// [`crate::semantics::CASCADE_BOUND`]: for cross-checks with an engine given the same
+    /// [`petrel_nets::semantics::CASCADE_BOUND`]: for cross-checks with an engine given the same
     /// bound.
     pub cascade_bound: Option<u32>,
 }
@@ -565,7 +567,7 @@ pub fn verify(project: &CompiledProject, opts: VerifyOptions) -> Result<Report, 
     verify_inner(project, opts, None)
 }
 
-/// Verifies `project` from `state` (a stable state of its [`crate::semantics::Layout`])
+/// Verifies `project` from `state` (a stable state of its [`petrel_nets::semantics::Layout`])
 /// instead of its initial state: what a reload checks before it swaps (docs/semantics.md).
 /// Programs' declared answers and internal events are free from there (the calls and
 /// emissions outstanding in `state` are not known). Traces start at `state`. Not with
@@ -899,7 +901,7 @@ fn verify_inner(
         .map(|(_, n)| n.name.clone())
         .collect();
     let builtin = |name: &str| {
-        crate::model::builtin_events()
+        petrel_nets::model::builtin_events()
             .iter()
             .any(|b| b.name.text == name)
     };
@@ -931,7 +933,7 @@ fn free_places(
     project: &CompiledProject,
     id: NetId,
     restricted: &CompiledProject,
-    l: &crate::semantics::Layout,
+    l: &petrel_nets::semantics::Layout,
 ) -> Vec<explore::FreePlace> {
     let me = &project.nets[id as usize];
     let uses = |g: u32| {

@@ -19,7 +19,7 @@
 //!   ended, before the analyses and the findings' traces).
 
 use petrel_nets::project::{from_sources, load_and_check};
-use petrel_nets::verify::{verify, EdgeMemory, VerifyOptions};
+use petrel_verify::{verify, EdgeMemory, VerifyOptions};
 use std::path::Path;
 use std::process::{Command, ExitCode};
 use std::time::Instant;

@@ -27,8 +27,8 @@
 use super::env::{Delivery, Env};
 use super::reduction::Components;
 use super::store::FxMap;
-use crate::compiled::CompiledProject;
-use crate::semantics::Layout;
+use petrel_nets::compiled::CompiledProject;
+use petrel_nets::semantics::Layout;
 use std::ops::Range;
 
 /// The cached moves of each component, by the component's bits of the state.

@@ -5,11 +5,11 @@
 //! step: `safety_violation`, `invariant_violated`) are queued and taken at the same instant, in
 //! the player's queue order. From each reachable stable state and each event the environment
 //! may deliver there, the search follows that **configuration** (a state and the queue of
-//! produced events) step by step with the firing code ([`crate::semantics`]), every way the
+//! produced events) step by step with the firing code ([`petrel_nets::semantics`]), every way the
 //! guards it cannot decide may go. A cascade that comes back to a configuration it was in
 //! never ends: a strongly connected component of the configurations (Tarjan's algorithm, over
 //! the configurations met from every start) with an edge inside is a loop. A cascade that takes
-//! [`crate::semantics::Semantics::cascade_bound`] steps with produced events still queued is
+//! [`petrel_nets::semantics::Semantics::cascade_bound`] steps with produced events still queued is
 //! one the player stops. Both are E0608.
 //!
 //! Only what can go on for ever is searched: an event is followed when a cycle of "a step on
@@ -22,8 +22,8 @@ use super::env::{cascade_deliveries, Gate};
 use super::explore::{Graph, Recorder};
 use super::store::FxMap;
 use super::{CascadeFinding, Trace};
-use crate::compiled::{Action, Arg, CompiledProject, EventId, Guard, NetId};
-use crate::semantics::{queue_index, Effects, Scratch, Semantics, State};
+use petrel_nets::compiled::{Action, Arg, CompiledProject, EventId, Guard, NetId};
+use petrel_nets::semantics::{queue_index, Effects, Scratch, Semantics, State};
 use petrel_value::Value;
 use std::collections::VecDeque;
 

@@ -12,9 +12,11 @@
 //! Counters are 0, 1 or "many": a second call (or emission) while one is outstanding makes the
 //! event free from then on, which keeps the model finite and over-approximates.
 
-use crate::compiled::{Action, Arg, CompiledProject, EventId, FunctionId, Guard, NetId, ProgramId};
-use crate::semantics::{Effects, Layout};
-use crate::verify::VerifyError;
+use crate::VerifyError;
+use petrel_nets::compiled::{
+    Action, Arg, CompiledProject, EventId, FunctionId, Guard, NetId, ProgramId,
+};
+use petrel_nets::semantics::{Effects, Layout};
 use petrel_value::{Type, Value};
 use std::collections::HashMap;
 
@@ -123,7 +125,9 @@ pub(super) fn truth(g: &Guard, params: &[Value]) -> Truth {
             match (known(a), known(b)) {
                 // Two parameters of the event: representatives do not cover their relations.
                 (Some((_, true)), Some((_, true))) => Truth::Unknown,
-                (Some((x, _)), Some((y, _))) => Truth::of(crate::compiled::compare(*op, &x, &y)),
+                (Some((x, _)), Some((y, _))) => {
+                    Truth::of(petrel_nets::compiled::compare(*op, &x, &y))
+                }
                 _ => Truth::Unknown,
             }
         }

@@ -3,7 +3,7 @@
 
 use petrel_nets::compiled::CompiledProject;
 use petrel_nets::project::{from_sources, load_and_check};
-use petrel_nets::verify::{verify, Report, VerifyError, VerifyOptions};
+use petrel_verify::{verify, Report, VerifyError, VerifyOptions};
 use std::path::Path;
 
 const MANIFEST: &str = r#"

@@ -8,8 +8,8 @@
 use super::env::{Env, Gate};
 use super::explore::{run_step, Graph, Recorder, NO_EVENT};
 use super::Trace;
-use crate::compiled::CompiledProject;
-use crate::semantics::{Scratch, Semantics, State};
+use petrel_nets::compiled::CompiledProject;
+use petrel_nets::semantics::{Scratch, Semantics, State};
 use std::cell::RefCell;
 
 /// Longest trace worth minimizing: each event costs a replay of the whole trace.

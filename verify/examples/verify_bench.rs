@@ -15,7 +15,7 @@
 //! the end is every robot done.
 
 use petrel_nets::project::{from_sources, load_and_check};
-use petrel_nets::verify::{verify, VerifyOptions};
+use petrel_verify::{verify, VerifyOptions};
 use std::path::Path;
 use std::process::{Command, ExitCode};
 use std::time::Instant;

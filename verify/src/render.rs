@@ -485,7 +485,7 @@ pub fn to_json(r: &Report) -> serde_json::Value {
 /// that never fire, nets never activated and events nobody waits for. Each is located at the
 /// transition, net, place or declaration concerned (an instance's at its template's text).
 pub fn diagnostics(
-    project: &crate::model::Project,
+    project: &petrel_nets::model::Project,
     r: &Report,
 ) -> petrel_diag::report::Diagnostics {
     diagnostics_with(project, r, false)
@@ -494,14 +494,14 @@ pub fn diagnostics(
 /// [`diagnostics`] with every finding apart (`petrel verify --all`): one diagnostic per dead
 /// marking.
 pub fn diagnostics_all(
-    project: &crate::model::Project,
+    project: &petrel_nets::model::Project,
     r: &Report,
 ) -> petrel_diag::report::Diagnostics {
     diagnostics_with(project, r, true)
 }
 
 fn diagnostics_with(
-    project: &crate::model::Project,
+    project: &petrel_nets::model::Project,
     r: &Report,
     all: bool,
 ) -> petrel_diag::report::Diagnostics {

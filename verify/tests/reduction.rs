@@ -6,7 +6,7 @@
 
 use petrel_nets::compiled::CompiledProject;
 use petrel_nets::project::{from_sources, load_and_check};
-use petrel_nets::verify::{check_cache, check_replay, verify, EdgeMemory, Report, VerifyOptions};
+use petrel_verify::{check_cache, check_replay, verify, EdgeMemory, Report, VerifyOptions};
 use proptest::prelude::*;
 use std::collections::BTreeSet;
 use std::path::Path;
@@ -423,7 +423,7 @@ fn most_generated_projects_check() {
         "{ok} of 100 check, the reduction applies to {partial}, {cascades} have a cascade that never settles"
     );
     assert!(partial >= 10, "the reduction applies to {partial} of them");
-    // Some loop (nets/tests/cascade.rs compares many more, reduced and in full).
+    // Some loop (verify/tests/cascade.rs compares many more, reduced and in full).
     assert!(
         (3..ok).contains(&cascades),
         "{cascades} of {ok} have a cascade that never settles"

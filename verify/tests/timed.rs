@@ -4,7 +4,7 @@
 use petrel_diag::source::SourceMap;
 use petrel_nets::compiled::CompiledProject;
 use petrel_nets::project::{from_sources, load_and_check};
-use petrel_nets::verify::{verify, BoundFinding, BoundStatus, Report, VerifyOptions};
+use petrel_verify::{verify, BoundFinding, BoundStatus, Report, VerifyOptions};
 use std::path::Path;
 
 fn run(c: &CompiledProject, timed: bool) -> Report {
@@ -233,7 +233,7 @@ fn a_bound_over_its_requirement_is_an_error() {
     assert_eq!(r.errors(), 1);
     assert!(!r.is_clean());
     // Located at the requirement in the manifest, with the path that takes too long.
-    let d = petrel_nets::verify::diagnostics(&project, &r);
+    let d = petrel_verify::diagnostics(&project, &r);
     let e = d.iter().find(|x| x.code == "E0607").expect("E0607");
     let json = d.to_json(&sources).to_string();
     assert!(json.contains("E0607"), "{json}");

@@ -18,8 +18,8 @@
 //! The zone is stored after the state's words: one word per timer for its duration (or
 //! [`IDLE`], [`UNTIMED`]), then the matrix, row by row, each bound as an `i64`.
 
-use crate::compiled::{CompiledProject, TimerDuration, TimerId};
-use crate::semantics::Layout;
+use petrel_nets::compiled::{CompiledProject, TimerDuration, TimerId};
+use petrel_nets::semantics::Layout;
 
 /// Duration word of a timer that does not run.
 const IDLE: u64 = u64::MAX;
@@ -287,7 +287,7 @@ impl Timing {
     }
 
     /// The timer whose event is `event`, if it is a timer's.
-    pub fn timer_of(p: &CompiledProject, event: crate::compiled::EventId) -> Option<usize> {
+    pub fn timer_of(p: &CompiledProject, event: petrel_nets::compiled::EventId) -> Option<usize> {
         p.timers.iter().position(|t| t.event == event)
     }
 

@@ -6,7 +6,7 @@
 
 use petrel_nets::compiled::CompiledProject;
 use petrel_nets::project::{from_sources, load_and_check, LoadedProject};
-use petrel_nets::verify::{self, verify, Report, VerifyOptions};
+use petrel_verify::{verify, Report, VerifyOptions};
 use std::path::{Path, PathBuf};
 
 fn data(name: &str) -> PathBuf {
@@ -68,7 +68,7 @@ fn a_mission_stuck_in_its_first_transit_behind_a_catastrophic_leak_cannot_finish
         ["MISSION{transit1}", "SAFETY{watching}"]
     );
     // E0605 points at the place the mission stays in, in mission.pn.
-    let d = located(&loaded, &verify::diagnostics(&loaded.project, &r));
+    let d = located(&loaded, &petrel_verify::diagnostics(&loaded.project, &r));
     let e = find(&d, "E0605");
     assert_eq!(e.len(), 1);
     assert!(
@@ -128,7 +128,7 @@ fn a_mutex_leaked_by_a_shock_leaves_both_robots_waiting_for_it() {
         assert_eq!(s.resource_cycle, None);
     }
     // The help says what happened to the place.
-    let d = verify::diagnostics(&loaded.project, &r);
+    let d = petrel_verify::diagnostics(&loaded.project, &r);
     let e = d.iter().find(|d| d.code == "E0606").unwrap();
     assert!(
         e.help
@@ -183,7 +183,7 @@ fn a_lock_order_deadlock_beside_an_always_enabled_net_is_two_stuck_nets_and_thei
         )
     );
     assert_eq!(a.places, ["A.has_x"]);
-    let d = located(&loaded, &verify::diagnostics(&loaded.project, &r));
+    let d = located(&loaded, &petrel_verify::diagnostics(&loaded.project, &r));
     let e = find(&d, "E0606");
     assert_eq!(e.len(), 2);
     assert!(e[0]["message"]
@@ -209,7 +209,7 @@ fn a_net_the_environment_can_keep_waiting_for_a_place_others_take_is_starved() {
     // A warning: the goal stays reachable, the verification passes.
     assert!(r.no_progress.is_none());
     assert!(r.is_clean() && r.errors() == 0 && r.warnings() == 1);
-    let d = located(&loaded, &verify::diagnostics(&loaded.project, &r));
+    let d = located(&loaded, &petrel_verify::diagnostics(&loaded.project, &r));
     let w = find(&d, "W0606");
     assert_eq!(w[0]["severity"], "warning");
     assert_eq!(
@@ -531,7 +531,7 @@ fn one_net_alone_is_given_only_the_places_other_nets_change() {
     };
     // ROBOT uses no global place: the environment only finishes its children (MOVE, PASS).
     let r = alone("R1");
-    assert_eq!(r.errors(), 0, "{}", verify::render_human("ugv", &r));
+    assert_eq!(r.errors(), 0, "{}", petrel_verify::render_human("ugv", &r));
     assert!(r.never_fired.is_empty(), "{:?}", r.never_fired);
     let traces: Vec<&String> = r
         .dead_markings
@@ -545,7 +545,7 @@ fn one_net_alone_is_given_only_the_places_other_nets_change() {
     );
     // SYNC reads the bottleneck, which the passages take and give back: not stuck, not dead.
     let r = alone("SYNC");
-    assert_eq!(r.errors(), 0, "{}", verify::render_human("ugv", &r));
+    assert_eq!(r.errors(), 0, "{}", petrel_verify::render_human("ugv", &r));
     // A move finishing: the net's end, not a dead marking.
     let r = alone("R1/MOVE");
     assert!(r.is_clean());
@@ -578,7 +578,7 @@ fn many_findings_of_one_kind_are_grouped_with_a_count_and_all_lists_them() {
     assert!(!d.has_errors());
     let r = verify(&c.unwrap(), VerifyOptions::default()).unwrap();
     assert_eq!(r.errors(), 5);
-    let grouped = verify::diagnostics(&project, &r);
+    let grouped = petrel_verify::diagnostics(&project, &r);
     let e: Vec<_> = grouped.iter().filter(|d| d.code == "E0602").collect();
     assert_eq!(e.len(), 1);
     assert!(
@@ -587,16 +587,16 @@ fn many_findings_of_one_kind_are_grouped_with_a_count_and_all_lists_them() {
         e[0].message
     );
     assert!(e[0].span.is_some(), "at the dead marking's place");
-    let all = verify::diagnostics_all(&project, &r);
+    let all = petrel_verify::diagnostics_all(&project, &r);
     assert_eq!(all.iter().filter(|d| d.code == "E0602").count(), 5);
 
-    let summary = verify::render_summary("g", &r, false);
+    let summary = petrel_verify::render_summary("g", &r, false);
     assert!(
         summary.contains("... and 2 more dead markings (--all lists them)"),
         "{summary}"
     );
     assert_eq!(summary.matches("error[E0602]").count(), 3, "{summary}");
-    let summary = verify::render_summary("g", &r, true);
+    let summary = petrel_verify::render_summary("g", &r, true);
     assert_eq!(summary.matches("error[E0602]").count(), 5, "{summary}");
     assert!(
         summary.ends_with("result: 5 error(s), 0 warning(s)\n"),
@@ -607,14 +607,14 @@ fn many_findings_of_one_kind_are_grouped_with_a_count_and_all_lists_them() {
 #[test]
 fn ends_after_a_catastrophic_event_are_one_line_unless_all_are_asked_for() {
     let (_, r) = verified(&data("stuck_transit"));
-    let summary = verify::render_summary("stuck_transit", &r, false);
+    let summary = petrel_verify::render_summary("stuck_transit", &r, false);
     assert!(
         summary.contains(
             "  3 end(s) after a catastrophic event (the mission is over there; --all lists them)"
         ),
         "{summary}"
     );
-    let all = verify::render_summary("stuck_transit", &r, true);
+    let all = petrel_verify::render_summary("stuck_transit", &r, true);
     assert_eq!(
         all.matches("end after a catastrophic event:").count(),
         3,
@@ -636,7 +636,7 @@ fn the_report_never_claims_a_place_holds_two_tokens() {
     let r = verify(&inline(manifest, nets), VerifyOptions::default()).unwrap();
     assert!(!r.safe);
     assert_eq!(r.max_tokens_in_place, 1);
-    let text = verify::render_human("u", &r);
+    let text = petrel_verify::render_human("u", &r);
     assert!(text.contains("no place ever holds two tokens"), "{text}");
     assert!(!text.contains("tokens in a place: 2"), "{text}");
     // The refused firing changes nothing: it is no loop.
@@ -661,7 +661,7 @@ fn every_mission_of_the_repository_verifies_without_error() {
     for m in missions.iter().map(String::as_str) {
         let dir = root.join(m);
         let (_, r) = verified(&dir);
-        assert_eq!(r.errors(), 0, "{m}: {}", verify::render_human(m, &r));
+        assert_eq!(r.errors(), 0, "{m}: {}", petrel_verify::render_human(m, &r));
         assert!(r.declares_ends, "{m} declares its ends");
         assert!(r.starvation.is_empty(), "{m}: {:?}", r.starvation);
     }
