@@ -27,7 +27,7 @@
 //! component below it has none, so its closure's enabled transitions are its own. The search
 //! stops there, so a marking costs at most one pass over the part of the graph it visits.
 
-use crate::reach::Compiled;
+use super::arcs::Arcs;
 
 /// The net's arcs indexed for closures, with the scratch space of one exploration.
 pub(crate) struct Stubborn {
@@ -88,7 +88,7 @@ struct Frame {
 
 impl Stubborn {
     /// Indexes the arcs of a net.
-    pub(crate) fn new(arcs: &Compiled) -> Self {
+    pub(crate) fn new(arcs: &Arcs) -> Self {
         let (places, transitions) = (arcs.places, arcs.transitions);
         let mut cons: Vec<Vec<u32>> = vec![Vec::new(); places];
         let mut prod: Vec<Vec<u32>> = vec![Vec::new(); places];
@@ -159,7 +159,7 @@ impl Stubborn {
     /// gives) to the enabled transitions of a stubborn set.
     pub(crate) fn reduce(
         &mut self,
-        arcs: &Compiled,
+        arcs: &Arcs,
         enabled: &mut Vec<u32>,
         tokens: impl Fn(usize) -> u64,
     ) {
@@ -189,7 +189,7 @@ impl Stubborn {
     }
 
     /// [`Self::reduce`]'s search, on a marking with two enabled transitions or more.
-    fn narrow(&mut self, arcs: &Compiled, enabled: &mut Vec<u32>, tokens: impl Fn(usize) -> u64) {
+    fn narrow(&mut self, arcs: &Arcs, enabled: &mut Vec<u32>, tokens: impl Fn(usize) -> u64) {
         self.generation = self.generation.wrapping_add(1);
         if self.generation == 0 {
             // The stamps wrapped: clear them so no stale stamp matches.
@@ -239,7 +239,7 @@ impl Stubborn {
     /// transition and returns where it starts on `stack`.
     fn search(
         &mut self,
-        arcs: &Compiled,
+        arcs: &Arcs,
         root: u32,
         counter: &mut u32,
         tokens: &impl Fn(usize) -> u64,
@@ -294,13 +294,7 @@ impl Stubborn {
     }
 
     /// Visits `t`: numbers it, stacks it, and lists what it needs as a new frame.
-    fn enter(
-        &mut self,
-        arcs: &Compiled,
-        t: u32,
-        counter: &mut u32,
-        tokens: &impl Fn(usize) -> u64,
-    ) {
+    fn enter(&mut self, arcs: &Arcs, t: u32, counter: &mut u32, tokens: &impl Fn(usize) -> u64) {
         let ti = t as usize;
         let generation = self.generation;
         self.visited_at[ti] = generation;
