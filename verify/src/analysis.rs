@@ -9,7 +9,7 @@
 
 use super::explore::{Edge, Edges, Graph, NO_EVENT};
 use super::store::{width_of, Packed};
-use super::{
+use crate::report::{
     DeadFinding, InvariantFinding, LoopFinding, ProgressFinding, StarvationFinding, StuckFinding,
     Trace,
 };

@@ -25,7 +25,7 @@
 use super::env::Env;
 use super::explore::{run_step, Edges, Graph, Recorder};
 use super::timed::{TimerOps, Timing, INF};
-use super::{BoundFinding, BoundStatus, Trace};
+use crate::report::{BoundFinding, BoundStatus, Trace};
 use petrel_nets::compiled::{Bound, CompiledProject, Occurrence};
 use petrel_nets::semantics::{Scratch, Semantics};
 use std::collections::HashMap;

@@ -21,7 +21,7 @@
 use super::env::{cascade_deliveries, Gate};
 use super::explore::{Graph, Recorder};
 use super::store::FxMap;
-use super::{CascadeFinding, Trace};
+use crate::report::{CascadeFinding, Trace};
 use petrel_nets::compiled::{Action, Arg, CompiledProject, EventId, Guard, NetId};
 use petrel_nets::semantics::{queue_index, Effects, Scratch, Semantics, State};
 use petrel_value::Value;

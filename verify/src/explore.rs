@@ -12,7 +12,8 @@ use super::env::{
 };
 use super::store::{FxMap, Packed, StateStore};
 use super::timed::{TimerOps, Timing};
-use super::{ConflictFinding, LivelockFinding, Trace, UnsafeFinding, VerifyError, VerifyOptions};
+use super::{VerifyError, VerifyOptions};
+use crate::report::{ConflictFinding, LivelockFinding, Trace, UnsafeFinding};
 use petrel_nets::compiled::{
     Arg, CompiledProject, EventId, FunctionId, Guard, NetId, ProgramId, TimerDuration, TimerId,
 };

@@ -7,7 +7,7 @@
 
 use super::env::{Env, Gate};
 use super::explore::{run_step, Graph, Recorder, NO_EVENT};
-use super::Trace;
+use crate::report::Trace;
 use petrel_nets::compiled::CompiledProject;
 use petrel_nets::semantics::{Scratch, Semantics, State};
 use std::cell::RefCell;

@@ -2,7 +2,7 @@
 //! tools ([`to_json`]), and as diagnostics on the project's text ([`diagnostics`], what
 //! `petrel check` and `petrel verify` print with file, line and caret).
 
-use super::{Report, Trace};
+use crate::report::{BoundFinding, BoundStatus, CascadeFinding, Report, Trace};
 use std::fmt::Write as _;
 
 /// How many findings of one kind the grouped report shows before "and N more".
@@ -17,7 +17,7 @@ fn trace_text(t: &Trace) -> String {
 }
 
 /// What a cascade finding says (E0608): the loop's turn, or the events that reach the bound.
-fn cascade_text(c: &super::CascadeFinding, bound: u32) -> String {
+fn cascade_text(c: &CascadeFinding, bound: u32) -> String {
     if c.endless {
         format!(
             "events produced at one instant loop for ever: {} → {} → ... (each turn fires {})",
@@ -406,15 +406,15 @@ fn secs(v: f64) -> String {
 }
 
 /// A bound's `within` as written in petrel.toml (`10min`), or in seconds when it was not written.
-fn within_text(b: &super::BoundFinding) -> Option<String> {
+fn within_text(b: &BoundFinding) -> Option<String> {
     b.within.clone().or_else(|| b.within_seconds.map(secs))
 }
 
 /// A time bound on one line: `bound NAME (FROM .. TO): 0s to 600s, ...`.
-fn bound_text(b: &super::BoundFinding) -> String {
-    use super::BoundStatus as S;
+fn bound_text(b: &BoundFinding) -> String {
+    use BoundStatus as S;
     let mut line = format!("bound {} ({} .. {}): ", b.name, b.from, b.to);
-    let path = |b: &super::BoundFinding| {
+    let path = |b: &BoundFinding| {
         let then = if b.then.is_empty() {
             "at once".to_string()
         } else {
@@ -712,7 +712,7 @@ fn diagnostics_with(
         let span = decl.map(|x| x.within.as_ref().map_or(x.name.span, |w| w.span));
         let within = within_text(b).unwrap_or_default();
         let what = match (b.status, b.max_seconds) {
-            (super::BoundStatus::Bounded, Some(max)) => {
+            (BoundStatus::Bounded, Some(max)) => {
                 format!("{} after {} can take up to {}", b.to, b.from, secs(max))
             }
             _ => format!(
@@ -725,7 +725,7 @@ fn diagnostics_with(
         let mut path = trace_text(&b.trace);
         if !b.then.is_empty() {
             let _ = write!(path, ", then {}", b.then.join(" → "));
-        } else if b.status == super::BoundStatus::Bounded {
+        } else if b.status == BoundStatus::Bounded {
             path.push_str(", then at once");
         }
         d.push(at(
