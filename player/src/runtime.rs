@@ -15,7 +15,8 @@
 //! anyway is logged and counted (`heartbeats_refused` in the status).
 
 use crate::ack::Ledger;
-use crate::engine::{Args, Engine, Micros, Refusal, Sink, Stats};
+use crate::engine::{Args, Engine, Micros, Sink, Stats};
+use crate::intake::{Header, Intake};
 use crate::journal::{
     Entry, FlushPolicy, Journal, JournalLock, JournalWriter, RecorderChange, Settlement, StepParts,
     BATCH_DELAY,
@@ -24,7 +25,7 @@ use crate::record::{marked_places, outcome_name, place_changes, StepRecord};
 use petrel_ipc::{
     CallMsg, CallRef, CallSender, EventMsg, EventReceiver, Heartbeat, HeartbeatPublisher,
     MarkingMsg, MarkingPublisher, Participant, ProgramWatch, Reactor, RecvError, ReloadAnswer,
-    ReloadAnswerPublisher, ReloadReceiver, ReloadRequest, Role, SendError, Vehicle, WaitStrategy,
+    ReloadAnswerPublisher, ReloadReceiver, ReloadRequest, SendError, Vehicle, WaitStrategy,
 };
 use petrel_nets::compiled::{
     CompiledProject, EventId, FunctionId, NetId, Program, ProgramId, TimerId, Value,
@@ -399,49 +400,6 @@ fn engine_version(entries: &[Entry]) -> String {
     }
 }
 
-/// Why an event that arrived on the events service names a built-in event it may not: `None`
-/// when it may.
-///
-/// Built-in events (`program_lost`, `call_failed`, `safety_violation`, `livelock`,
-/// `bad_message`) tell the nets what the player itself saw, and the player raises them without
-/// the events service: one arriving there comes from another process, whatever origin it
-/// claims (`player` included), and is refused. The exceptions are `call_failed` from the CAN
-/// data server, which reports the CAN commands it could not carry out as the failed calls they
-/// are (see `petrel_can_bridge::runtime`), and `call_failed` from a gateway, which reports the
-/// calls the link to another computer could not carry (docs/gateway.md).
-fn builtin_refusal(name: &str, origin: &str) -> Option<String> {
-    if !petrel_nets::model::builtin_events()
-        .iter()
-        .any(|b| b.name.text == name)
-    {
-        return None;
-    }
-    if name == "call_failed"
-        && (origin == Role::CanBridge.node_name() || Role::is_gateway_node(origin))
-    {
-        return None;
-    }
-    Some(format!(
-        "`{name}` is a built-in event: only the player raises it (refused from `{origin}`)"
-    ))
-}
-
-/// Submits an event raised by the player itself, journaled like any input.
-fn raise(engine: &mut Engine, journal: &mut Journal, event: Option<EventId>, params: Vec<Value>) {
-    let Some(e) = event else { return };
-    let record = Entry::Submit {
-        time: engine.now(),
-        event: engine.project().events[e as usize].name.clone(),
-        params: params.clone(),
-        origin: "player".into(),
-        seq: 0,
-    };
-    match engine.submit(e, params) {
-        Ok(()) => journal.append(&record),
-        Err(r) => debug!(refusal = %r, "built-in event refused"),
-    }
-}
-
 /// The player: the engine, its ports, its journal, and the clocks of its loop.
 pub struct PlayerLoop<'p> {
     project: &'p CompiledProject,
@@ -460,6 +418,9 @@ pub struct PlayerLoop<'p> {
     ledger: Ledger,
     /// Where each event's parameters are decoded, before they move into an engine's buffer.
     decoded: Vec<Value>,
+    /// The programs that said they leave in good order (since they last joined): their going
+    /// is a stop, not a loss.
+    leaves: std::collections::BTreeSet<String>,
     /// When the loop started, and the mission time it started at (after a resume).
     t0: Instant,
     base: Micros,
@@ -680,6 +641,7 @@ impl<'p> PlayerLoop<'p> {
             report,
             ledger: Ledger::new(),
             decoded: Vec::new(),
+            leaves: Default::default(),
             t0,
             base,
             previous: vec![0u64; words],
@@ -801,7 +763,7 @@ impl<'p> PlayerLoop<'p> {
 
     /// Submits an event raised by the player itself, journaled like any input.
     fn raise(&mut self, event: Option<EventId>, params: Vec<Value>) {
-        raise(&mut self.engine, &mut self.journal, event, params);
+        crate::intake::raise(&mut self.engine, &mut self.journal, event, params);
     }
 
     /// Processes everything queued (by the start, a timer, an event), journals and publishes
@@ -958,104 +920,49 @@ impl<'p> PlayerLoop<'p> {
         }
     }
 
-    /// Drains the events service into the engine; true when iceoryx2 saw a sender die.
+    /// Drains the events service into the engine ([`Intake`]); true when iceoryx2 saw a
+    /// sender die.
     fn take_events(&mut self) -> bool {
-        let engine = &mut self.engine;
-        let journal = &mut self.journal;
-        let report = &mut self.report;
-        let ledger = &mut self.ledger;
-        let bad_message = self.builtins.bad_message;
+        let mut intake = Intake {
+            engine: &mut self.engine,
+            journal: &mut self.journal,
+            ledger: &mut self.ledger,
+            report: &mut self.report,
+            bad_message: self.builtins.bad_message,
+            leaves: &mut self.leaves,
+        };
         // Each event is decoded where it lies: its name read from the sample, its parameters
         // into `decoded` (kept from one drain to the next), then moved into one of the
         // engine's buffers. No event is built, and no name copied.
-        let decoded = &mut self.decoded;
-        let drained = self.ports.events.drain_in_place(decoded, |r, decoded| {
-            report.messages += 1;
-            match r {
-                Ok(rcv) => {
-                    let (sender, who, seq, missed) = (rcv.sender, rcv.origin, rcv.seq, rcv.missed);
-                    let origin = who.as_str();
-                    let time = engine.now();
-                    let name = rcv.msg;
-                    if let Some(reason) = builtin_refusal(name, origin) {
-                        report.bad_messages += 1;
-                        warn!(from = %origin, seq = rcv.seq, %reason, "event refused");
-                        journal.append(&Entry::Refused {
-                            time,
-                            what: name.to_owned(),
-                            reason: reason.clone(),
-                            origin: origin.to_string(),
-                        });
-                        raise(
-                            engine,
-                            journal,
-                            bad_message,
-                            vec![Value::Text(origin.to_string()), Value::Text(reason)],
-                        );
-                        return;
-                    }
-                    let mut params = engine.param_buffer();
-                    params.append(decoded);
-                    // Journaled from the parameters the engine keeps, before it queues the
-                    // event: no copy of the event on the way to its call.
-                    let submitted = engine.submit_named_with(name, params, |params| {
-                        journal.append_submit(time, name, params, origin, seq);
-                    });
-                    match submitted {
-                        Ok(()) => {
-                            ledger.taken(sender, who, seq, missed);
-                        }
-                        Err(refusal) => {
-                            ledger.refused(sender, who, seq, missed, &refusal.to_string(), false);
-                            journal.append(&Entry::Refused {
-                                time,
-                                what: name.to_owned(),
-                                reason: refusal.to_string(),
-                                origin: origin.to_string(),
-                            });
-                            if matches!(refusal, Refusal::AfterCatastrophic(_)) {
-                                info!(from = %origin, reason = %refusal, "event refused");
-                            } else {
-                                report.bad_messages += 1;
-                                warn!(from = %origin, seq = rcv.seq, reason = %refusal, "event refused");
-                                let params = vec![
-                                    Value::Text(origin.to_string()),
-                                    Value::Text(refusal.to_string()),
-                                ];
-                                raise(engine, journal, bad_message, params);
-                            }
-                        }
-                    }
-                }
+        let drained = self
+            .ports
+            .events
+            .drain_in_place(&mut self.decoded, |r, decoded| match r {
+                Ok(rcv) => intake.event(Header::from(&rcv), rcv.msg, decoded),
                 Err(RecvError::Undecodable {
                     origin,
                     seq,
                     error,
                     sender,
                     ..
-                }) => {
-                    report.bad_messages += 1;
-                    let reason = format!("undecodable: {error}");
-                    ledger.refused(sender, origin, seq, 0, &reason, true);
-                    warn!(from = %origin, seq, error = %error, "undecodable event refused");
-                    journal.append(&Entry::Refused {
-                        time: engine.now(),
-                        what: "(undecodable)".into(),
-                        reason: error.to_string(),
-                        origin: origin.to_string(),
-                    });
-                    let params = vec![
-                        Value::Text(origin.to_string()),
-                        Value::Text(format!("undecodable: {error}")),
-                    ];
-                    raise(engine, journal, bad_message, params);
+                }) => intake.undecodable(
+                    Header {
+                        sender,
+                        origin,
+                        seq,
+                        missed: 0,
+                    },
+                    &error.to_string(),
+                ),
+                Err(e @ RecvError::Foreign { .. }) => {
+                    let origin = match &e {
+                        RecvError::Foreign { origin, .. } => origin.to_string(),
+                        _ => String::new(),
+                    };
+                    intake.foreign(&origin, &e.to_string())
                 }
-                Err(e) => {
-                    report.bad_messages += 1;
-                    warn!(error = %e, "event could not be received");
-                }
-            }
-        });
+                Err(e) => intake.failed(&e),
+            });
         match drained {
             Ok(d) => d.wakeups.senders_died > 0,
             Err(e) => {
