@@ -271,6 +271,7 @@ pub fn replay_in<'p>(
             // Refused live and counted so (received and refused): the counters of a resumed
             // engine account for it too.
             Entry::Refused { .. } => engine.count_refused(),
+            Entry::ProgramStopped { .. } => {}
             Entry::Reload {
                 time,
                 source_hash,

@@ -16,6 +16,7 @@
 
 use crate::ack::Ledger;
 use crate::engine::{Args, Engine, Micros, Sink, Stats};
+use crate::held::{HeldCalls, Undelivered, HOLD_POLL};
 use crate::intake::{Header, Intake};
 use crate::journal::{
     Entry, FlushPolicy, Journal, JournalLock, JournalWriter, RecorderChange, Settlement, StepParts,
@@ -121,8 +122,12 @@ pub struct PlayReport {
     pub bad_messages: u64,
     /// Calls delivered to programs.
     pub calls_sent: u64,
-    /// Calls to absent programs (each became `call_failed`).
+    /// Calls that could not be delivered (each became `call_failed`): to a program with no
+    /// live process, held past [`CALL_HOLD`](crate::held::CALL_HOLD), to a program that went while they were held.
     pub calls_failed: u64,
+    /// Calls held because their program's process lived but did not receive them yet
+    /// (delivered since, or counted in `calls_failed`).
+    pub calls_held: u64,
     /// Journal records written.
     pub journal_records: u64,
     /// Attempts to write the journal that failed (a full disk...).
@@ -153,8 +158,10 @@ pub fn play(project: &CompiledProject, opts: &PlayOptions) -> Result<PlayReport,
 struct RuntimeSink<'a, 'p> {
     record: &'a mut StepRecord<'p>,
     calls: &'a [CallSender],
-    /// Calls that could not be delivered in this step: each becomes `call_failed`.
-    failed: &'a mut Vec<(ProgramId, FunctionId)>,
+    /// By program: calls to it are held ([`HeldCalls`]); a new one goes behind them.
+    holding: &'a [bool],
+    /// Calls that could not be delivered in this step: each is held, or becomes `call_failed`.
+    undelivered: &'a mut Vec<Undelivered>,
     sent: &'a mut u64,
 }
 
@@ -181,23 +188,53 @@ impl Sink for RuntimeSink<'_, '_> {
         let project = self.record.project;
         let prog = &project.programs[program as usize];
         let fname = &prog.functions[function as usize].name;
-        // Encoded from the borrowed arguments straight into the loaned sample.
-        let sent = self.calls[program as usize].send_body(&CallRef {
+        let body = CallRef {
             function: fname,
             args: args.iter(),
-        });
-        // The call's text for the journal and the monitors once the call is out.
-        self.record.call(program, function, args);
+        };
+        // Behind calls to the same program held, or not yet settled, in order.
+        let behind = self.holding.get(program as usize) == Some(&true)
+            || self
+                .undelivered
+                .iter()
+                .any(|u| u.program == program && u.body.is_some());
+        // Encoded from the borrowed arguments straight into the loaned sample.
+        let sent = match behind {
+            false => self.calls[program as usize].send_body(&body).map_err(Some),
+            true => Err(None),
+        };
         match sent {
             Ok(_) => {
                 *self.sent += 1;
                 debug!(program = %prog.name, function = %fname, "call sent");
             }
             Err(e) => {
-                warn!(program = %prog.name, function = %fname, error = %e, "call not delivered: raising call_failed");
-                self.failed.push((program, function));
+                // A call that found no receiver may be held (the program may be joining):
+                // encoded apart, for later.
+                let holdable = e
+                    .as_ref()
+                    .is_none_or(|e| matches!(e, SendError::NoReceiver { .. }));
+                let body = holdable
+                    .then(|| {
+                        let mut bytes = vec![0; petrel_ipc::wire::encoded_len(&body).ok()?];
+                        petrel_ipc::wire::encode_into(&body, &mut bytes).ok()?;
+                        Some(bytes)
+                    })
+                    .flatten();
+                let error = e.map_or_else(
+                    || "calls to this program are held".to_string(),
+                    |e| e.to_string(),
+                );
+                self.undelivered.push(Undelivered {
+                    program,
+                    function,
+                    body,
+                    error,
+                });
             }
         }
+        // The call's text for the journal and the monitors once the call is out.
+        self.record.call(program, function, args);
     }
 
     fn emitted(&mut self, event: EventId, params: &[Value]) {
@@ -406,8 +443,10 @@ pub struct PlayerLoop<'p> {
     opts: PlayOptions,
     engine: Engine<'p>,
     record: StepRecord<'p>,
-    /// Calls of the current step that could not be delivered.
-    failed: Vec<(ProgramId, FunctionId)>,
+    /// Calls of the current step that could not be delivered: held or failed after the step.
+    undelivered: Vec<Undelivered>,
+    /// Calls held for programs whose process lives but does not receive them yet.
+    held: HeldCalls,
     journal: Journal,
     ports: Ports,
     watch: ProgramWatch,
@@ -431,8 +470,6 @@ pub struct PlayerLoop<'p> {
     next_liveness: Instant,
     /// The next marking message is a snapshot (after a reload, or steps no monitor saw).
     snapshot_next: bool,
-    /// The vehicle, for the programs' liveness watch of a reloaded version.
-    vehicle: Vehicle,
     /// The reload under verification, if any.
     pending: Option<PendingReload>,
     /// The content hash of the version running, once a reload brought one.
@@ -536,7 +573,8 @@ impl<'p> PlayerLoop<'p> {
                 .events
                 .consume_wakeups_every(Some(petrel_ipc::SPIN_WAKEUP_PERIOD));
         }
-        let watch = ProgramWatch::new(&vehicle, project.programs.iter().map(|p| p.name.clone()));
+        let watch = ProgramWatch::new(&ports._me, project.programs.iter().map(|p| p.name.clone()))
+            .map_err(setup)?;
         let reactor = Reactor::new(opts.wait).map_err(|e| PlayError::Setup(e.to_string()))?;
 
         let writer = match &opts.journal {
@@ -566,8 +604,9 @@ impl<'p> PlayerLoop<'p> {
         let mut journal = Journal::with_backlog(writer, opts.journal_backlog);
         journal.batch_records();
         let mut record = StepRecord::new(project).without_calls();
-        let mut failed = Vec::new();
+        let mut undelivered = Vec::new();
         let mut report = PlayReport::default();
+        let held = HeldCalls::new(project.programs.len());
         let (engine, base) = match resumed {
             Some((mut engine, last, steps, _)) => {
                 report.resumed_steps = steps;
@@ -607,7 +646,8 @@ impl<'p> PlayerLoop<'p> {
                     &mut RuntimeSink {
                         record: &mut record,
                         calls: &ports.calls,
-                        failed: &mut failed,
+                        holding: held.holding(),
+                        undelivered: &mut undelivered,
                         sent: &mut report.calls_sent,
                     },
                 );
@@ -626,7 +666,8 @@ impl<'p> PlayerLoop<'p> {
             opts: opts.clone(),
             engine,
             record,
-            failed,
+            undelivered,
+            held,
             journal,
             ports,
             watch,
@@ -649,7 +690,6 @@ impl<'p> PlayerLoop<'p> {
             next_heartbeat: Instant::now(),
             next_liveness: Instant::now() + opts.liveness,
             snapshot_next: false,
-            vehicle,
             pending: None,
             version,
             _lock: lock,
@@ -717,6 +757,10 @@ impl<'p> PlayerLoop<'p> {
                 // The verifier's thread says nothing when it is done: look again soon.
                 timeout = timeout.min(Duration::from_millis(2));
             }
+            if !self.held.is_empty() {
+                // Nothing says when a receiver connects: look for the held calls' programs.
+                timeout = timeout.min(HOLD_POLL);
+            }
             if let Some(hold) = hold {
                 // Within a spin window, so that the wait ends before it could sleep.
                 timeout = timeout.min(hold);
@@ -776,11 +820,15 @@ impl<'p> PlayerLoop<'p> {
         if self.pending.as_ref().is_some_and(|p| !p.request.dry_run) {
             return;
         }
+        // The start's calls not delivered, then the held calls whose program now receives.
+        self.settle_undelivered();
+        self.deliver_held();
         loop {
             let mut sink = RuntimeSink {
                 record: &mut self.record,
                 calls: &self.ports.calls,
-                failed: &mut self.failed,
+                holding: self.held.holding(),
+                undelivered: &mut self.undelivered,
                 sent: &mut self.report.calls_sent,
             };
             let Some(step) = self.engine.step(&mut sink) else {
@@ -812,16 +860,64 @@ impl<'p> PlayerLoop<'p> {
             self.publish_delta();
             self.step_no += 1;
             self.record.clear();
-            for (p, f) in std::mem::take(&mut self.failed) {
-                self.report.calls_failed += 1;
-                let prog = &self.project.programs[p as usize];
-                let params = vec![
-                    Value::Text(prog.name.clone()),
-                    Value::Text(prog.functions[f as usize].name.clone()),
-                ];
-                self.raise(self.builtins.call_failed, params);
+            self.settle_undelivered();
+        }
+    }
+
+    /// Holds each call of the last step that could not be delivered, if its program's process
+    /// lives (it may be joining: [`HeldCalls`]) or calls to it are held already; raises
+    /// `call_failed` for the others.
+    fn settle_undelivered(&mut self) {
+        for u in std::mem::take(&mut self.undelivered) {
+            let prog = &self.project.programs[u.program as usize];
+            let function = &prog.functions[u.function as usize].name;
+            let hold = match &u.body {
+                None => false,
+                Some(_) if self.held.holding().get(u.program as usize) == Some(&true) => true,
+                Some(_) => match self.watch.probe(&prog.name) {
+                    Ok(status) => status.is_some_and(|s| s.is_running()),
+                    Err(e) => {
+                        warn!(error = %e, "liveness check failed");
+                        false
+                    }
+                },
+            };
+            match u.body {
+                Some(body) if hold => {
+                    self.report.calls_held += 1;
+                    self.held
+                        .hold(u.program, &prog.name, function, body, Instant::now());
+                }
+                _ => {
+                    let (program, function) = (prog.name.clone(), function.clone());
+                    self.call_failed(program, function, &u.error);
+                }
             }
         }
+    }
+
+    /// Sends the held calls whose program receives now; raises `call_failed` for those held
+    /// too long.
+    fn deliver_held(&mut self) {
+        if self.held.is_empty() {
+            return;
+        }
+        let (sent, failed) = self
+            .held
+            .deliver(self.project, &self.ports.calls, Instant::now());
+        self.report.calls_sent += sent;
+        for (program, function, why) in failed {
+            self.call_failed(program, function, &why);
+        }
+    }
+
+    /// A call that could not be delivered, `why`: logged, counted, and raised as
+    /// `call_failed(program, function)`.
+    fn call_failed(&mut self, program: String, function: String, why: &str) {
+        warn!(%program, %function, reason = why, "call not delivered: raising call_failed");
+        self.report.calls_failed += 1;
+        let params = vec![Value::Text(program), Value::Text(function)];
+        self.raise(self.builtins.call_failed, params);
     }
 
     /// Raises `recorder_failed` and `recorder_restored` for the recorder's changes of state;
@@ -972,22 +1068,46 @@ impl<'p> PlayerLoop<'p> {
         }
     }
 
-    /// Lists the vehicle's nodes: a program that died becomes `program_lost`.
+    /// Lists the vehicle's nodes: a program whose process went becomes `program_lost`, or, if it
+    /// said it leaves in good order, a stop (journaled, logged at INFO); the calls held for it
+    /// fail.
     fn check_liveness(&mut self) {
         self.next_liveness = Instant::now() + self.opts.liveness;
-        match self.watch.check() {
-            Ok(changes) => {
-                for c in changes {
-                    if c.is_lost() {
-                        warn!(program = %c.program, "program lost");
-                        let params = vec![Value::Text(c.program.clone())];
-                        self.raise(self.builtins.program_lost, params);
-                    } else {
-                        info!(program = %c.program, status = ?c.to, "program status");
-                    }
+        let changes = match self.watch.check() {
+            Ok(changes) => changes,
+            Err(e) => return warn!(error = %e, "liveness check failed"),
+        };
+        if changes.iter().any(|c| c.is_lost()) {
+            // A leave sent just before the process went is read before its going is judged:
+            // the listing saw the node gone, so the leave (sent before) is there to read.
+            self.take_events();
+        }
+        for c in changes {
+            if !c.is_lost() {
+                if !c.from.is_running() {
+                    // A new process of the program: what the old one said is forgotten.
+                    self.leaves.remove(&c.program);
                 }
+                info!(program = %c.program, status = ?c.to, "program status");
+                continue;
             }
-            Err(e) => warn!(error = %e, "liveness check failed"),
+            let because = if self.leaves.remove(&c.program) {
+                info!(program = %c.program, "program stopped in good order");
+                self.journal.append(&Entry::ProgramStopped {
+                    time: self.engine.now(),
+                    program: c.program.clone(),
+                });
+                "it stopped"
+            } else {
+                warn!(program = %c.program, status = ?c.to, "program lost");
+                let params = vec![Value::Text(c.program.clone())];
+                self.raise(self.builtins.program_lost, params);
+                "it was lost"
+            };
+            let failed = self.held.drop_program(self.project, &c.program, because);
+            for (program, function, why) in failed {
+                self.call_failed(program, function, &why);
+            }
         }
     }
 
@@ -1274,10 +1394,16 @@ impl<'p> PlayerLoop<'p> {
         self.engine = engine;
         self.project = new;
         self.record = StepRecord::new(new).without_calls();
-        self.watch = ProgramWatch::new(&self.vehicle, new.programs.iter().map(|p| p.name.clone()));
+        match ProgramWatch::new(&self.ports._me, new.programs.iter().map(|p| p.name.clone())) {
+            Ok(watch) => self.watch = watch,
+            Err(e) => {
+                warn!(error = %e, "the new version's programs cannot be watched: the old version's are")
+            }
+        }
         if let Err(e) = self.watch.check() {
             warn!(error = %e, "liveness check failed");
         }
+        self.held.refresh(new);
         self.builtins = Builtins {
             program_lost: new.event_id("program_lost"),
             call_failed: new.event_id("call_failed"),
@@ -1378,7 +1504,7 @@ struct StatusSnapshot {
     /// The marked places of each active net (`global` last); `None`: left out (too large).
     marking: Option<Vec<(String, Vec<String>)>>,
     /// The counters of `stats`, in [`STATS_FIELDS`] order.
-    stats: [u64; 15],
+    stats: [u64; 16],
     /// Each sender: origin, last_seq, received, undecodable, missing, taken, refused, pending,
     /// unrecorded, settled_seq.
     senders: Vec<(String, [u64; 9])>,
@@ -1400,7 +1526,7 @@ const RECORDER_FIELDS: [&str; 4] = [
 ];
 
 /// The names of the counters in the status JSON's `stats`, in [`StatusSnapshot::stats`] order.
-const STATS_FIELDS: [&str; 15] = [
+const STATS_FIELDS: [&str; 16] = [
     "messages",
     "bad_messages",
     "received",
@@ -1410,6 +1536,7 @@ const STATS_FIELDS: [&str; 15] = [
     "queued",
     "calls_sent",
     "calls_failed",
+    "calls_held",
     "journal_records",
     "resumed_steps",
     "heartbeats_sent",
@@ -1480,6 +1607,7 @@ impl StatusSnapshot {
                 engine.queued() as u64,
                 report.calls_sent,
                 report.calls_failed,
+                report.calls_held,
                 report.journal_records,
                 report.resumed_steps,
                 report.heartbeats_sent,
@@ -1670,7 +1798,7 @@ fn status_bound(project: &CompiledProject) -> usize {
         time_s: -f64::MAX,
         over: false,
         marking: Some(marking),
-        stats: [u64::MAX; 15],
+        stats: [u64::MAX; 16],
         senders: (0..petrel_ipc::wire::MAX_ACKS)
             .map(|i| (origin(i), [u64::MAX; 9]))
             .collect(),
