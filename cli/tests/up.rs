@@ -325,6 +325,21 @@ args = ["{vehicle}", "ECHO"]
     dir
 }
 
+/// `petrel up` of the first-call project in `dir` until its answer, on a vehicle of its own:
+/// how it ended, the player's log, and the ended run (its output, its run directory).
+fn fly_first_call(work: &Workdir, dir: &Path, tag: &str) -> (ExitStatus, String, Up) {
+    let vehicle = unique_vehicle(tag);
+    let mut up = Up::start(
+        work,
+        dir,
+        &vehicle,
+        &["--until", "FIRST.done", "--timeout", "30"],
+    );
+    let status = up.wait(60);
+    let log = std::fs::read_to_string(up.run.join("player.log")).unwrap_or_default();
+    (status, log, up)
+}
+
 /// Regression (issue 30, item 1): `petrel up` counted a program ready when its node lived,
 /// before its calls receiver connected, and the player's first call was sometimes dropped
 /// (`call_failed`; 2 runs in 17 in the issue). Fifty runs, in both orders (the program first,
@@ -342,16 +357,8 @@ fn fifty_starts_deliver_the_first_call_every_time() {
                     let program_first = k % 2 == 1;
                     let work = Workdir::new();
                     let dir = first_call_project(&work, program_first);
-                    let vehicle = unique_vehicle(&format!("first{lane}k{k}"));
-                    let mut up = Up::start(
-                        &work,
-                        &dir,
-                        &vehicle,
-                        &["--until", "FIRST.done", "--timeout", "30"],
-                    );
-                    let status = up.wait(60);
+                    let (status, log, up) = fly_first_call(&work, &dir, &format!("first{lane}k"));
                     let out = up.stdout();
-                    let log = std::fs::read_to_string(up.run.join("player.log")).unwrap();
                     let what = format!("lane {lane} run {k} (program first: {program_first})");
                     assert_eq!(status.code(), Some(0), "{what}\n{out}\n{log}");
                     assert!(
@@ -361,7 +368,7 @@ fn fifty_starts_deliver_the_first_call_every_time() {
                     assert!(log.contains("1 calls sent"), "{what}\n{log}");
                     assert!(log.contains(" 0 failed;"), "{what}\n{log}");
                     assert!(!log.contains("call not delivered"), "{what}\n{log}");
-                    assert_vehicle_left_clean(&vehicle);
+                    assert_vehicle_left_clean(&up.vehicle);
                 }
             })
         })
@@ -431,14 +438,7 @@ fn a_program_is_ready_only_once_it_receives_its_calls() {
         ),
     )
     .unwrap();
-    let vehicle = unique_vehicle("upslow");
-    let mut up = Up::start(
-        &work,
-        &dir,
-        &vehicle,
-        &["--until", "FIRST.done", "--timeout", "30"],
-    );
-    let status = up.wait(60);
+    let (status, log, up) = fly_first_call(&work, &dir, "upslow");
     let out = up.stdout();
     let echo = std::fs::read_to_string(up.run.join("echo.log")).unwrap();
     assert_eq!(status.code(), Some(0), "{out}\n{echo}");
@@ -447,7 +447,6 @@ fn a_program_is_ready_only_once_it_receives_its_calls() {
         "{echo}\n{out}"
     );
     assert!(echo.contains("answered ping"), "{echo}");
-    let log = std::fs::read_to_string(up.run.join("player.log")).unwrap();
     assert!(log.contains("1 calls sent, 0 held, 0 failed"), "{log}");
 }
 
@@ -712,10 +711,8 @@ fn sigterm_stops_every_process_cleanly_in_reverse_order() {
         &["--scenario", &scenario, "--timeout", "60"],
     );
     up.wait_for_output("vehicle up in", 60);
-    // A program is ready once its nodes live, a moment before it handles signals (a SIGTERM
-    // then ends it by the default action, a clean stop too); give them that moment, so that
-    // each is seen leaving the vehicle in good order.
-    std::thread::sleep(Duration::from_secs(1));
+    // A program is ready once it receives its calls, after the SDK installed its signal
+    // handlers: a SIGTERM from then on ends it in good order.
     let pids = up.child_pids();
     assert_eq!(pids.len(), 3, "{}", up.stdout());
     assert!(pids.iter().all(|&p| alive(p)), "{pids:?}");

@@ -790,6 +790,10 @@ impl<'p> PlayerLoop<'p> {
             self.take_reload_requests();
             self.finish_reload();
         }
+        // A last look at the programs: one gone since the last check (the programs of a
+        // vehicle stop before its player) is journaled, a stop, or a loss as an input that a
+        // resumed player takes.
+        self.check_liveness();
         if self.journal.flush() != Settlement::Recorded {
             error!(
                 state = self.journal.state().as_str(),
@@ -1040,13 +1044,14 @@ impl<'p> PlayerLoop<'p> {
                     seq,
                     error,
                     sender,
+                    missed,
                     ..
                 }) => intake.undecodable(
                     Header {
                         sender,
                         origin,
                         seq,
-                        missed: 0,
+                        missed,
                     },
                     &error.to_string(),
                 ),

@@ -4,7 +4,7 @@
 
 use super::*;
 use crate::engine::NullSink;
-use petrel_nets::compiled::CompiledProject;
+use petrel_nets::compiled::{CompiledProject, EventId};
 use proptest::prelude::*;
 use std::collections::HashMap;
 
@@ -14,6 +14,42 @@ fn project() -> CompiledProject {
     let (_, c, d, _) = petrel_nets::project::from_sources(manifest, &[("a.pn", net)]);
     assert!(!d.has_errors(), "{d:?}");
     c.unwrap()
+}
+
+/// The parts of a player an intake borrows, the engine started on `p`.
+struct Parts<'p> {
+    engine: Engine<'p>,
+    journal: Journal,
+    ledger: Ledger,
+    report: PlayReport,
+    leaves: BTreeSet<String>,
+    bad_message: Option<EventId>,
+}
+
+impl<'p> Parts<'p> {
+    fn new(p: &'p CompiledProject) -> Self {
+        let mut engine = Engine::new(p);
+        engine.start(0, &mut NullSink);
+        Parts {
+            engine,
+            journal: Journal::new(None),
+            ledger: Ledger::new(),
+            report: PlayReport::default(),
+            leaves: BTreeSet::new(),
+            bad_message: p.event_id("bad_message"),
+        }
+    }
+
+    fn intake(&mut self) -> Intake<'_, 'p> {
+        Intake {
+            engine: &mut self.engine,
+            journal: &mut self.journal,
+            ledger: &mut self.ledger,
+            report: &mut self.report,
+            bad_message: self.bad_message,
+            leaves: &mut self.leaves,
+        }
+    }
 }
 
 /// One thing that happens to the player.
@@ -74,25 +110,12 @@ fn op() -> impl Strategy<Value = Op> {
 /// message of a known sender is answered.
 fn run(ops: &[Op]) -> Result<(), TestCaseError> {
     let p = project();
-    let mut engine = Engine::new(&p);
-    engine.start(0, &mut NullSink);
-    let mut journal = Journal::new(None);
-    let mut ledger = Ledger::new();
-    let mut report = PlayReport::default();
-    let mut leaves = BTreeSet::new();
-    let bad_message = p.event_id("bad_message");
+    let mut parts = Parts::new(&p);
     let mut seqs: HashMap<usize, u64> = HashMap::new();
     let mut messages = 0;
     let mut decoded = Vec::new();
     for op in ops {
-        let mut intake = Intake {
-            engine: &mut engine,
-            journal: &mut journal,
-            ledger: &mut ledger,
-            report: &mut report,
-            bad_message,
-            leaves: &mut leaves,
-        };
+        let mut intake = parts.intake();
         match op {
             Op::Message(s, m) => {
                 messages += 1;
@@ -130,21 +153,21 @@ fn run(ops: &[Op]) -> Result<(), TestCaseError> {
             }
             Op::Steps(n) => {
                 for _ in 0..*n {
-                    engine.step(&mut NullSink);
+                    parts.engine.step(&mut NullSink);
                 }
             }
             Op::Failed => intake.failed(&"a transport error"),
         }
-        let s = engine.stats();
+        let s = parts.engine.stats();
         prop_assert_eq!(
             s.received,
-            s.processed + s.unused + s.refused + engine.queued() as u64,
+            s.processed + s.unused + s.refused + parts.engine.queued() as u64,
             "{:?} after {:?}",
             s,
             op
         );
-        prop_assert_eq!(report.messages, messages);
-        for a in ledger.recent() {
+        prop_assert_eq!(parts.report.messages, messages);
+        for a in parts.ledger.recent() {
             let k = &a.ack;
             prop_assert_eq!(k.received, k.taken + k.refused, "{:?}", k);
             // Every message of the sender was answered (taken or refused).
@@ -153,8 +176,8 @@ fn run(ops: &[Op]) -> Result<(), TestCaseError> {
         }
     }
     // The queue emptied, everything is settled one way or the other.
-    engine.run_until_idle(&mut NullSink);
-    let s = engine.stats();
+    parts.engine.run_until_idle(&mut NullSink);
+    let s = parts.engine.stats();
     prop_assert_eq!(s.received, s.processed + s.unused + s.refused);
     Ok(())
 }
@@ -171,27 +194,17 @@ proptest! {
 #[test]
 fn a_built_in_event_from_another_process_is_answered_refused_with_its_reason() {
     let p = project();
-    let mut engine = Engine::new(&p);
-    engine.start(0, &mut NullSink);
-    let (mut journal, mut ledger, mut report) =
-        (Journal::new(None), Ledger::new(), PlayReport::default());
-    let mut leaves = BTreeSet::new();
-    let mut intake = Intake {
-        engine: &mut engine,
-        journal: &mut journal,
-        ledger: &mut ledger,
-        report: &mut report,
-        bad_message: p.event_id("bad_message"),
-        leaves: &mut leaves,
-    };
+    let mut parts = Parts::new(&p);
     let from = Header {
         sender: 7,
         origin: Origin::new("tool/send1"),
         seq: 1,
         missed: 0,
     };
-    intake.event(from, "program_lost", &mut vec![Value::Text("GUI".into())]);
-    let acks = ledger.acks();
+    parts
+        .intake()
+        .event(from, "program_lost", &mut vec![Value::Text("GUI".into())]);
+    let acks = parts.ledger.acks();
     assert_eq!(acks.len(), 1);
     assert_eq!((acks[0].refused, acks[0].last_seq), (1, 1));
     assert!(
@@ -202,27 +215,16 @@ fn a_built_in_event_from_another_process_is_answered_refused_with_its_reason() {
         acks[0]
     );
     // Counted as received and refused; the player's bad_message is queued (received too).
-    let s = engine.stats();
-    assert_eq!((s.received, s.refused, engine.queued()), (2, 1, 1));
-    assert_eq!(report.bad_messages, 1);
+    let s = parts.engine.stats();
+    assert_eq!((s.received, s.refused, parts.engine.queued()), (2, 1, 1));
+    assert_eq!(parts.report.bad_messages, 1);
 }
 
 #[test]
 fn a_leave_is_taken_from_the_program_itself_only() {
     let p = project();
-    let mut engine = Engine::new(&p);
-    engine.start(0, &mut NullSink);
-    let (mut journal, mut ledger, mut report) =
-        (Journal::new(None), Ledger::new(), PlayReport::default());
-    let mut leaves = BTreeSet::new();
-    let mut intake = Intake {
-        engine: &mut engine,
-        journal: &mut journal,
-        ledger: &mut ledger,
-        report: &mut report,
-        bad_message: p.event_id("bad_message"),
-        leaves: &mut leaves,
-    };
+    let mut parts = Parts::new(&p);
+    let mut intake = parts.intake();
     let from = |sender, origin| Header {
         sender,
         origin: Origin::new(origin),
@@ -233,8 +235,9 @@ fn a_leave_is_taken_from_the_program_itself_only() {
     intake.event(from(1, "program/WORKER"), leave, &mut vec![]);
     intake.event(from(2, "tool/x"), leave, &mut vec![]);
     intake.event(from(3, "program/OTHER"), leave, &mut vec![]);
-    assert_eq!(leaves.iter().collect::<Vec<_>>(), ["WORKER"]);
-    let by_sender: HashMap<u64, (u64, u64)> = ledger
+    assert_eq!(parts.leaves.iter().collect::<Vec<_>>(), ["WORKER"]);
+    let by_sender: HashMap<u64, (u64, u64)> = parts
+        .ledger
         .acks()
         .iter()
         .map(|a| (a.sender, (a.taken, a.refused)))
@@ -243,6 +246,6 @@ fn a_leave_is_taken_from_the_program_itself_only() {
     assert_eq!(by_sender[&2], (0, 1));
     assert_eq!(by_sender[&3], (0, 1));
     // The good leave is no event; the two bad ones are refused messages (and bad_messages).
-    let s = engine.stats();
-    assert_eq!((s.received, s.refused, engine.queued()), (4, 2, 2));
+    let s = parts.engine.stats();
+    assert_eq!((s.received, s.refused, parts.engine.queued()), (4, 2, 2));
 }
