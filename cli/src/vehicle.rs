@@ -121,8 +121,8 @@ pub fn play(a: PlayArgs) -> Outcome {
                 0.0
             };
             eprintln!(
-                "player stopped: {} messages ({} refused before the engine), {} events received, {} processed, {} unused, {} refused; {} calls sent, {} failed; journal: {} records, {:.1} us each, {} failed writes, {} entries lost{}",
-                r.messages, r.bad_messages, s.received, s.processed, s.unused, s.refused, r.calls_sent, r.calls_failed,
+                "player stopped: {} messages ({} refused before the engine), {} events received, {} processed, {} unused, {} refused; {} calls sent, {} held, {} failed; journal: {} records, {:.1} us each, {} failed writes, {} entries lost{}",
+                r.messages, r.bad_messages, s.received, s.processed, s.unused, s.refused, r.calls_sent, r.calls_held, r.calls_failed,
                 r.journal_records, per_record, r.journal_failures, r.journal_lost,
                 if r.resumed_steps > 0 { format!("; resumed after {} steps", r.resumed_steps) } else { String::new() }
             );
@@ -426,6 +426,7 @@ pub fn status(a: StatusArgs) -> Outcome {
         .map(|p| {
             let st = match petrel_ipc::program_status(&v, &p.name) {
                 Ok(petrel_ipc::ProgramStatus::Alive) => "alive",
+                Ok(petrel_ipc::ProgramStatus::Joining) => "joining",
                 Ok(petrel_ipc::ProgramStatus::Dead) => "dead",
                 Ok(petrel_ipc::ProgramStatus::Absent) => "absent",
                 Err(_) => "unknown",
