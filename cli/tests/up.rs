@@ -548,6 +548,15 @@ fn a_program_that_crashes_is_restarted_by_policy_and_counted() {
     let log = std::fs::read_to_string(up.run.join("dec.log")).unwrap();
     assert_eq!(log.matches("=== petrel up").count(), 2, "{log}");
     assert!(log.contains("crashing after 1 answers"), "{log}");
+    // A crash says no goodbye: the player reports the loss (and the restart's return), not a
+    // stop in good order.
+    let (entries, o) = petrel_tests::journal_json(&up.run.join("journal"));
+    assert!(o.status.success(), "{o:?}");
+    assert!(
+        entries.iter().any(|e| e["event"] == "program_lost"
+            && e["params"][0].as_str().is_some_and(|p| p.contains("DEC"))),
+        "{entries:?}"
+    );
     assert_vehicle_left_clean(&vehicle);
 }
 

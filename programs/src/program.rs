@@ -679,6 +679,19 @@ impl Program {
         flushed.map(|_| stats)
     }
 
+    /// Waits up to `timeout` (250 ms at least) for the player to acknowledge every event
+    /// delivered so far, without leaving: true when all are on its record. For a program that
+    /// must know its events are safe before it goes on, or before it ends abruptly (a
+    /// simulated crash ends without [`close`](Self::close), so that the player reports
+    /// `program_lost` rather than a stop).
+    pub fn acknowledged_within(&mut self, timeout: Duration) -> Result<bool, ProgramError> {
+        let deadline = Instant::now() + timeout;
+        if self.flush_for(timeout)? > 0 {
+            return Ok(false);
+        }
+        Ok(self.wait_acknowledged(deadline))
+    }
+
     /// Whether the player acknowledged every host's last delivered event by `deadline` (250 ms
     /// at least from now).
     fn wait_acknowledged(&self, deadline: Instant) -> bool {
