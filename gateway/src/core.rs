@@ -122,6 +122,13 @@ pub struct Peer {
     pub restorations: u64,
     /// Restarts of its gateway seen (new incarnations after the first).
     pub restarts: u64,
+    /// Whether its latest beacon says it follows this gateway for this computer. Until it
+    /// does, nothing it sends is delivered here and none of its nodes is mirrored: what it
+    /// sent was meant for another gateway of this computer, or for none yet.
+    pub follows_me: bool,
+    /// Since when (microseconds) it follows another gateway of this computer, and which.
+    #[serde(skip)]
+    pub follows_other: Option<(u64, u64)>,
 }
 
 impl Peer {
@@ -136,7 +143,33 @@ impl Peer {
             losses: 0,
             restorations: 0,
             restarts: 0,
+            follows_me: false,
+            follows_other: None,
         }
+    }
+}
+
+impl Peer {
+    /// Whether a message of incarnation `incarnation` is a second gateway's: the peer's
+    /// gateway is another one, heard within the detection bound. (One silent longer is
+    /// taken as dead: the new one is its restart.)
+    fn claimed_by_another(&self, incarnation: u64, now_us: u64, detection_us: u64) -> bool {
+        self.incarnation.is_some_and(|i| i != incarnation)
+            && self.state == PeerState::Up
+            && now_us.saturating_sub(self.last_heard_us.unwrap_or(0)) <= detection_us
+    }
+
+    /// Takes a beacon's `follows`: whether the peer follows `me` (this computer, this
+    /// gateway's incarnation), or another gateway of this computer, since when.
+    fn heard_follows(&mut self, follows: &[(String, u64)], me: (&str, u64), now_us: u64) {
+        let mine = follows.iter().find(|(c, _)| c == me.0).map(|(_, i)| *i);
+        self.follows_me = mine == Some(me.1);
+        self.follows_other = match mine {
+            Some(other) if other != me.1 => {
+                Some((self.follows_other.map_or(now_us, |(since, _)| since), other))
+            }
+            _ => None,
+        };
     }
 }
 
@@ -174,6 +207,9 @@ pub struct Counters {
     pub undecodable: u64,
     /// The latest refusals (at most 8), newest last.
     pub refusals: Vec<String>,
+    /// Link messages of a second gateway claiming a computer whose first gateway is up
+    /// (this one's computer included), refused, by the computer claimed.
+    pub claims_refused: BTreeMap<String, u64>,
 }
 
 impl Counters {
@@ -194,7 +230,8 @@ impl Counters {
         self.remember(reason);
     }
 
-    fn remember(&mut self, reason: String) {
+    /// Keeps `reason` among the latest refusals.
+    pub fn remember(&mut self, reason: String) {
         if self.refusals.len() == 8 {
             self.refusals.remove(0);
         }
@@ -279,7 +316,23 @@ pub enum Route {
     NotMine,
     /// To be delivered here.
     Deliver,
+    /// From a second gateway claiming a computer whose first gateway is up: refused (one
+    /// gateway per computer). The reason the first time this second gateway is heard (to
+    /// log), `None` after.
+    Claim(Option<String>),
+    /// From a peer that does not follow this gateway (it follows another gateway of this
+    /// computer, or has not heard this one yet): what it sent was not meant for it. Counted
+    /// refused, dropped.
+    NotFollowed,
 }
+
+/// How long a peer may follow another gateway of this computer before this one gives up
+/// (beyond twice the detection bound: a restarted gateway waits that long at most, until its
+/// peers lose its killed predecessor).
+pub const CLAIM_GRACE_US: u64 = 2_000_000;
+
+/// Second gateways remembered (to log each once); past it, they are forgotten.
+const CLAIMANTS_MAX: usize = 1024;
 
 /// The gateway's state.
 #[derive(Debug, Clone)]
@@ -290,6 +343,8 @@ pub struct Core {
     pub counters: Counters,
     incarnation: u64,
     next_seq: u64,
+    /// Second gateways already reported: (computer claimed, incarnation).
+    claimants: BTreeSet<(String, u64)>,
 }
 
 impl Core {
@@ -306,6 +361,7 @@ impl Core {
             counters: Counters::default(),
             incarnation,
             next_seq: 1,
+            claimants: BTreeSet::new(),
         }
     }
 
@@ -376,13 +432,20 @@ impl Core {
         if msg.from == self.plan.computer {
             if msg.incarnation != self.incarnation {
                 // Another gateway claims this computer: refuse it rather than mix their messages.
-                self.counters.undecodable += 1;
-                self.counters
-                    .remember(format!("a second gateway claims computer `{}`", msg.from));
-                return Route::Foreign(format!("a second gateway claims `{}`", msg.from));
+                return self.refuse_claim(msg);
             }
             return Route::Own;
         }
+        let detection_us = self.plan.detection_us;
+        if self
+            .peers
+            .get(&msg.from)
+            .is_some_and(|p| p.claimed_by_another(msg.incarnation, now_us, detection_us))
+        {
+            return self.refuse_claim(msg);
+        }
+        let foreign_origin = self.foreign_origin(msg);
+        let me = (self.plan.computer.as_str(), self.incarnation);
         let Some(peer) = self.peers.get_mut(&msg.from) else {
             self.counters.undecodable += 1;
             let why = format!("`{}` is not a computer of the vehicle file", msg.from);
@@ -395,6 +458,9 @@ impl Core {
             }
             peer.incarnation = Some(msg.incarnation);
             peer.expected_seq = msg.link_seq;
+            // A new gateway there: it says whom it follows in its beacons.
+            peer.follows_me = false;
+            peer.follows_other = None;
         }
         if msg.link_seq > peer.expected_seq {
             peer.missing += msg.link_seq - peer.expected_seq;
@@ -413,10 +479,20 @@ impl Core {
         let kind = msg.kind.name();
         self.counters.of(kind).from_link += 1;
         let mine = match &msg.kind {
-            LinkKind::Beacon { alive } => {
+            LinkKind::Beacon { alive, follows } => {
                 peer.alive = alive.iter().cloned().collect();
+                peer.heard_follows(follows, me, now_us);
                 self.counters.of(kind).delivered += 1;
                 return Route::Beacon;
+            }
+            _ if !peer.follows_me => {
+                self.counters.of(kind).refused += 1;
+                return Route::NotFollowed;
+            }
+            _ if foreign_origin.is_some() => {
+                let why = foreign_origin.unwrap_or_default();
+                self.counters.refuse(kind, why.clone());
+                return Route::Foreign(why);
             }
             LinkKind::Event => self.plan.has_player(),
             LinkKind::Call { program } => self.plan.host_of(program) == self.plan.computer,
@@ -434,6 +510,72 @@ impl Core {
             self.counters.of(kind).not_mine += 1;
             Route::NotMine
         }
+    }
+
+    /// Why a message's origin is not its computer's to claim, if it is not: the player's
+    /// messages come from the player's computer, a program's from its host, the data server's
+    /// from its computer (tools, `tool/NAME`, may run anywhere). A computer of the vehicle
+    /// speaks for its own processes only.
+    fn foreign_origin(&self, msg: &LinkMsg) -> Option<String> {
+        let home = match msg.origin.as_str() {
+            "player" => Some(self.plan.player_computer.as_str()),
+            "can_bridge" => self.plan.signals_computer.as_deref(),
+            o => o.strip_prefix("program/").map(|p| self.plan.host_of(p)),
+        };
+        match home {
+            Some(h) if h != msg.from => Some(format!(
+                "{} from computer `{}` claims origin `{}`, which is computer `{h}`'s",
+                msg.kind.name(),
+                msg.from,
+                msg.origin
+            )),
+            _ => None,
+        }
+    }
+
+    /// Refuses a message of a second gateway claiming its computer.
+    fn refuse_claim(&mut self, msg: &LinkMsg) -> Route {
+        *self
+            .counters
+            .claims_refused
+            .entry(msg.from.clone())
+            .or_default() += 1;
+        if self.claimants.len() >= CLAIMANTS_MAX {
+            self.claimants.clear();
+        }
+        if !self.claimants.insert((msg.from.clone(), msg.incarnation)) {
+            return Route::Claim(None);
+        }
+        let why = format!(
+            "a second gateway claims computer `{}` (incarnation {:x}) while its first is up: refused",
+            msg.from, msg.incarnation
+        );
+        self.counters.remember(why.clone());
+        Route::Claim(Some(why))
+    }
+
+    /// The gateway this one follows for each computer it has heard, for its beacons.
+    pub fn follows(&self) -> Vec<(String, u64)> {
+        self.peers
+            .iter()
+            .filter_map(|(name, p)| p.incarnation.map(|i| (name.clone(), i)))
+            .collect()
+    }
+
+    /// Why this gateway gives up, if a peer has followed another gateway of this computer for
+    /// longer than twice the detection bound and [`CLAIM_GRACE_US`]: that gateway is alive,
+    /// and this one is the second claim.
+    pub fn refused(&self, now_us: u64) -> Option<String> {
+        let bound = 2 * self.plan.detection_us + CLAIM_GRACE_US;
+        self.peers.iter().find_map(|(name, p)| {
+            let (since, other) = p.follows_other?;
+            (now_us.saturating_sub(since) > bound).then(|| {
+                format!(
+                    "computer `{name}` follows another gateway of computer `{}` (incarnation {other:x}) and refuses this one: a computer has one gateway; stop the other first",
+                    self.plan.computer
+                )
+            })
+        })
     }
 
     /// Peers silent past the detection bound at `now_us` become lost.
@@ -460,7 +602,7 @@ impl Core {
     pub fn mirrored(&self) -> BTreeMap<String, String> {
         let mut nodes = BTreeMap::new();
         for (name, peer) in &self.peers {
-            if peer.state != PeerState::Up {
+            if peer.state != PeerState::Up || !peer.follows_me {
                 continue;
             }
             for node in &peer.alive {
@@ -514,6 +656,19 @@ mod tests {
         }
     }
 
+    /// `core` hears a beacon of `from` (incarnation 9) that follows it (and lists `alive`).
+    fn followed_by(core: &mut Core, from: &str, seq: u64, alive: &[&str]) {
+        let beacon = LinkKind::Beacon {
+            alive: alive.iter().map(|s| s.to_string()).collect(),
+            follows: vec![(core.plan.computer.clone(), core.incarnation)],
+        };
+        let mut ch = vec![];
+        assert_eq!(
+            core.on_link(&msg(from, seq, beacon), 0, &mut ch),
+            Route::Beacon
+        );
+    }
+
     #[test]
     fn events_go_to_the_player_computer_only() {
         let mut b = Core::new(plan("B"), 1);
@@ -523,14 +678,27 @@ mod tests {
         let mut a = Core::new(plan("A"), 2);
         assert!(!a.forward_local(&LinkKind::Event, "program/X", false));
         let mut ch = vec![];
+        // Before B's beacon says it follows A, what B sends was not meant for A.
         assert_eq!(
             a.on_link(&msg("B", 1, LinkKind::Event), 0, &mut ch),
-            Route::Deliver
+            Route::NotFollowed
         );
         assert_eq!(ch, vec![PeerChange::Joined("B".into())]);
-        let mut g = Core::new(plan("G"), 3);
+        followed_by(&mut a, "B", 2, &[]);
         assert_eq!(
-            g.on_link(&msg("B", 1, LinkKind::Event), 0, &mut ch),
+            a.on_link(&msg("B", 3, LinkKind::Event), 0, &mut ch),
+            Route::Deliver
+        );
+        let c = a.counters.kinds["event"];
+        assert_eq!(
+            (c.from_link, c.refused),
+            (2, 1),
+            "the runtime counts deliveries"
+        );
+        let mut g = Core::new(plan("G"), 3);
+        followed_by(&mut g, "B", 1, &[]);
+        assert_eq!(
+            g.on_link(&msg("B", 2, LinkKind::Event), 0, &mut ch),
             Route::NotMine
         );
         let c = g.counters.kinds["event"];
@@ -551,22 +719,31 @@ mod tests {
         assert!(!a.forward_local(&LinkKind::Heartbeat, "tool/gw-A", false));
         let mut b = Core::new(plan("B"), 2);
         let mut ch = vec![];
+        followed_by(&mut b, "A", 1, &[]);
+        let player = |seq, kind| LinkMsg {
+            origin: "player".into(),
+            ..msg("A", seq, kind)
+        };
         assert_eq!(
-            b.on_link(&msg("A", 1, call.clone()), 0, &mut ch),
+            b.on_link(&player(2, call.clone()), 0, &mut ch),
             Route::Deliver
         );
         assert_eq!(
-            b.on_link(&msg("A", 2, LinkKind::Marking), 0, &mut ch),
+            b.on_link(&player(3, LinkKind::Marking), 0, &mut ch),
             Route::Deliver
         );
         let mut g = Core::new(plan("G"), 3);
-        assert_eq!(g.on_link(&msg("A", 1, call), 0, &mut ch), Route::NotMine);
-        // Its own messages, heard back, are dropped; a second gateway on its computer refused.
+        followed_by(&mut g, "A", 1, &[]);
+        assert_eq!(g.on_link(&player(2, call), 0, &mut ch), Route::NotMine);
+        // Its own messages, heard back, are dropped; a second gateway on its computer refused,
+        // reported once.
         let mut own = msg("G", 1, LinkKind::Event);
         own.incarnation = 3;
         assert_eq!(g.on_link(&own, 0, &mut ch), Route::Own);
         own.incarnation = 4;
-        assert!(matches!(g.on_link(&own, 0, &mut ch), Route::Foreign(_)));
+        assert!(matches!(g.on_link(&own, 0, &mut ch), Route::Claim(Some(_))));
+        assert_eq!(g.on_link(&own, 0, &mut ch), Route::Claim(None));
+        assert_eq!(g.counters.claims_refused["G"], 2);
         assert!(matches!(
             g.on_link(&msg("Z", 1, LinkKind::Event), 0, &mut ch),
             Route::Foreign(_)
@@ -584,14 +761,17 @@ mod tests {
         let mut b = Core::new(plan("B"), 2);
         assert!(!b.forward_local(&LinkKind::Signals, "can_bridge", false));
         let mut ch = vec![];
-        let mut m = msg("A", 1, LinkKind::Signals);
+        followed_by(&mut b, "A", 1, &[]);
+        let mut m = msg("A", 2, LinkKind::Signals);
         m.origin = "can_bridge".into();
         assert_eq!(b.on_link(&m, 0, &mut ch), Route::Deliver);
         let mut g = Core::new(plan("G"), 3);
+        followed_by(&mut g, "A", 1, &[]);
+        followed_by(&mut g, "B", 1, &[]);
         assert_eq!(g.on_link(&m, 0, &mut ch), Route::Deliver);
         // Signals claimed by a computer without the data server are not taken.
         assert_eq!(
-            g.on_link(&msg("B", 1, LinkKind::Signals), 0, &mut ch),
+            g.on_link(&msg("B", 2, LinkKind::Signals), 0, &mut ch),
             Route::NotMine
         );
         let c = g.counters.kinds["signals"];
@@ -613,6 +793,7 @@ mod tests {
                 seq,
                 LinkKind::Beacon {
                     alive: alive.iter().map(|s| s.to_string()).collect(),
+                    follows: vec![("A".into(), 1)],
                 },
             )
         };
@@ -630,13 +811,103 @@ mod tests {
         a.on_link(&beacon(4, &["program/PLN"]), 6_000_000, &mut ch);
         assert_eq!(ch, vec![PeerChange::Restored("B".into())]);
         assert_eq!(a.peers()["B"].missing, 2, "2 and 3 never came");
-        // A restarted gateway starts again at 1: not a gap.
+        // A restarted gateway (its predecessor silent past the bound) starts again at 1: not
+        // a gap.
         let mut restarted = beacon(1, &[]);
         restarted.incarnation = 10;
-        a.on_link(&restarted, 6_100_000, &mut ch);
+        assert_eq!(a.on_link(&restarted, 7_000_001, &mut ch), Route::Beacon);
         assert_eq!(a.peers()["B"].missing, 2);
         assert_eq!(a.peers()["B"].restarts, 1);
         assert_eq!(a.peers()["B"].losses, 1);
+        assert_eq!(a.follows(), vec![("B".to_string(), 10)]);
+    }
+
+    #[test]
+    fn a_computer_speaks_for_its_own_processes_only() {
+        let mut b = Core::new(plan("B"), 2);
+        followed_by(&mut b, "G", 1, &[]);
+        let mut ch = vec![];
+        // G calls PLN (on B) as the player (on A), sends A's heartbeat, PLN's event: refused.
+        let call = LinkKind::Call {
+            program: "PLN".into(),
+        };
+        for (seq, origin, kind) in [
+            (2, "player", call.clone()),
+            (3, "player", LinkKind::Heartbeat),
+            (4, "program/PLN", LinkKind::Event),
+        ] {
+            let mut m = msg("G", seq, kind);
+            m.origin = origin.into();
+            assert!(
+                matches!(b.on_link(&m, 0, &mut ch), Route::Foreign(w) if w.contains("claims origin"))
+            );
+        }
+        // A tool of G calling PLN is G's to send.
+        let mut m = msg("G", 5, call);
+        m.origin = "tool/call1".into();
+        assert_eq!(b.on_link(&m, 0, &mut ch), Route::Deliver);
+        let c = b.counters.kinds["call"];
+        assert_eq!((c.from_link, c.refused), (2, 1));
+    }
+
+    #[test]
+    fn a_second_gateway_claiming_a_computer_is_refused_and_the_first_undisturbed() {
+        let mut a = Core::new(plan("A"), 1);
+        followed_by(&mut a, "B", 1, &["program/PLN"]);
+        let mut ch = vec![];
+        // A second gateway of B (incarnation 77) while the first is heard: refused, whatever
+        // it sends, and reported once.
+        let mut second = msg("B", 1, LinkKind::Event);
+        second.incarnation = 77;
+        assert!(
+            matches!(a.on_link(&second, 100, &mut ch), Route::Claim(Some(w)) if w.contains("second gateway"))
+        );
+        second.kind = LinkKind::Beacon {
+            alive: vec![],
+            follows: vec![("A".into(), 1)],
+        };
+        assert_eq!(a.on_link(&second, 200, &mut ch), Route::Claim(None));
+        // The first goes on: no restart, its nodes still mirrored, its messages delivered.
+        assert_eq!(
+            a.on_link(&msg("B", 2, LinkKind::Event), 300, &mut ch),
+            Route::Deliver
+        );
+        let b = &a.peers()["B"];
+        assert_eq!((b.restarts, b.incarnation, b.missing), (0, Some(9), 0));
+        assert!(
+            ch.iter().all(|c| matches!(c, PeerChange::Joined(_))),
+            "{ch:?}"
+        );
+        assert_eq!(a.mirrored().len(), 1);
+        assert_eq!(a.counters.claims_refused["B"], 2);
+        assert_eq!(a.follows(), vec![("B".to_string(), 9)]);
+
+        // The second's side: A follows the other gateway of B; B2 takes nothing of A's, and
+        // gives up once that lasts past twice the bound and the grace.
+        let mut b2 = Core::new(plan("B"), 77);
+        let beacon = LinkKind::Beacon {
+            alive: vec!["player".into()],
+            follows: a.follows(),
+        };
+        let mut from_a = msg("A", 1, beacon);
+        from_a.incarnation = 1;
+        assert_eq!(b2.on_link(&from_a, 0, &mut ch), Route::Beacon);
+        let mut call = msg(
+            "A",
+            2,
+            LinkKind::Call {
+                program: "PLN".into(),
+            },
+        );
+        call.incarnation = 1;
+        assert_eq!(b2.on_link(&call, 10, &mut ch), Route::NotFollowed);
+        assert!(b2.mirrored().is_empty(), "no stand-in of A's player on B2");
+        assert_eq!(b2.refused(2_000_000 + CLAIM_GRACE_US), None);
+        let why = b2.refused(2_000_001 + CLAIM_GRACE_US).expect("given up");
+        assert!(
+            why.contains("`A` follows another gateway of computer `B`"),
+            "{why}"
+        );
     }
 
     #[test]

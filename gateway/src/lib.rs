@@ -13,6 +13,9 @@
 //! - [`link`]: the one message type on the link and its keys (`petrel/<vehicle>/link/<computer>`).
 //! - [`core`]: the decisions, sans I/O: routing, peers lost and restored within the detection
 //!   bound, which stand-ins to keep, counters accounting for every message.
+//! - [`session`]: the zenoh session: endpoints, mutual TLS with the vehicle's keys, each peer
+//!   bound by zenoh's access control to its certificate's computer.
+//! - [`keys`]: the vehicle's keys (its certificate authority, a certificate per computer).
 //! - [`runtime`]: the process: one thread, a reactor over the iceoryx2 ports and the zenoh
 //!   subscriber's wake-ups.
 //!
@@ -21,8 +24,11 @@
 #![warn(missing_docs)]
 
 pub mod core;
+pub mod keys;
 pub mod link;
 pub mod runtime;
+pub mod session;
 
 pub use crate::core::{Core, Counts, PeerChange, PeerState, Plan};
 pub use crate::runtime::{run, Credentials, GatewayError, LinkEvents, Settings};
+pub use crate::session::Security;

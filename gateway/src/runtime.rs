@@ -28,6 +28,7 @@ use zenoh::Wait;
 
 use crate::core::{AckMap, Core, PeerChange, Plan, Route};
 use crate::link::{key_all, key_of, LinkKind, LinkMsg};
+use crate::session::{zenoh_config, Security, INSECURE_WARNING};
 
 /// The events the player's computer raises when a peer computer is lost or comes back, each
 /// with one parameter, the computer's name (`computer: text`).
@@ -61,7 +62,10 @@ pub struct Settings {
     pub listen: Vec<String>,
     /// zenoh endpoints of the peers to connect to.
     pub connect: Vec<String>,
-    /// Authentication of the peers, if the vehicle file asks for it.
+    /// How the link is secured (mutual TLS with the vehicle's keys, unless a lab bench opts
+    /// out).
+    pub security: Security,
+    /// zenoh's user/password authentication of the peers too, if the vehicle file asks for it.
     pub credentials: Option<Credentials>,
     /// The link's events, if the vehicle file names them.
     pub link_events: Option<LinkEvents>,
@@ -83,30 +87,6 @@ impl std::error::Error for GatewayError {}
 
 fn err(what: &str, e: impl std::fmt::Display) -> GatewayError {
     GatewayError(format!("{what}: {e}"))
-}
-
-/// The zenoh configuration of a gateway: peer mode, no multicast scouting (the peers are the
-/// vehicle file's, and tests on one host must not find each other), quick reconnection.
-pub fn zenoh_config(s: &Settings) -> Result<zenoh::Config, GatewayError> {
-    let mut doc = serde_json::json!({
-        "mode": "peer",
-        "listen": { "endpoints": s.listen },
-        "connect": {
-            "endpoints": s.connect,
-            "retry": { "period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2.0 }
-        },
-        "scouting": { "multicast": { "enabled": false }, "gossip": { "enabled": false } },
-    });
-    if let Some(c) = &s.credentials {
-        doc["transport"] = serde_json::json!({
-            "auth": { "usrpwd": {
-                "user": c.user,
-                "password": c.password,
-                "dictionary_file": c.dictionary.to_string_lossy(),
-            } }
-        });
-    }
-    zenoh::Config::from_json5(&doc.to_string()).map_err(|e| err("the zenoh configuration", e))
 }
 
 /// Removes the resources of the vehicle's dead nodes on this computer, saying what it did.
@@ -250,6 +230,10 @@ pub fn run(settings: Settings) -> Result<serde_json::Value, GatewayError> {
         participant,
     };
 
+    match &settings.security {
+        Security::Tls(_) => tracing::info!("the link: {}", settings.security.describe()),
+        Security::None => tracing::warn!("WARNING: {INSECURE_WARNING}"),
+    }
     let session = zenoh::open(zenoh_config(&settings)?)
         .wait()
         .map_err(|e| err("cannot open the zenoh session", e))?;
@@ -258,7 +242,9 @@ pub fn run(settings: Settings) -> Result<serde_json::Value, GatewayError> {
         .congestion_control(zenoh::qos::CongestionControl::Block)
         .wait()
         .map_err(|e| err("cannot declare the link publisher", e))?;
-    let (tx, rx) = mpsc::channel::<Vec<u8>>();
+    // Each message with the computer of the key it came on: the access control lets a peer
+    // put on its own computer's key only, and a message must say it is from that computer.
+    let (tx, rx) = mpsc::channel::<(String, Vec<u8>)>();
     let (wake_r, wake_w) = UnixStream::pair().map_err(|e| err("the wake-up socket", e))?;
     wake_r
         .set_nonblocking(true)
@@ -267,7 +253,11 @@ pub fn run(settings: Settings) -> Result<serde_json::Value, GatewayError> {
     let _subscriber = session
         .declare_subscriber(key_all(vehicle.name()))
         .callback(move |sample| {
-            let _ = tx.send(sample.payload().to_bytes().into_owned());
+            let computer = sample.key_expr().as_str().rsplit('/').next().unwrap_or("");
+            let _ = tx.send((
+                computer.to_owned(),
+                sample.payload().to_bytes().into_owned(),
+            ));
             // A full socket already holds a wake-up: nothing is lost.
             let _ = (&wake_w).write(&[1]);
         })
@@ -294,6 +284,7 @@ pub fn run(settings: Settings) -> Result<serde_json::Value, GatewayError> {
         publisher,
         start: Instant::now(),
         status_period,
+        security: settings.security.describe(),
     };
     tracing::info!(
         "gateway of computer `{me}` up, link key {}",
@@ -309,6 +300,9 @@ pub fn run(settings: Settings) -> Result<serde_json::Value, GatewayError> {
             gw.beacon();
             let changes = gw.core.tick(gw.now_us());
             gw.on_changes(changes);
+            if let Some(why) = gw.core.refused(gw.now_us()) {
+                return Err(GatewayError(format!("refused: {why}")));
+            }
             next_beacon = now + beacon_period;
         }
         if now >= next_status {
@@ -344,8 +338,8 @@ pub fn run(settings: Settings) -> Result<serde_json::Value, GatewayError> {
         }
         while matches!((&wake_r).read(&mut buf), Ok(n) if n > 0) {}
         let mut changes = Vec::new();
-        while let Ok(bytes) = rx.try_recv() {
-            gw.take_link(&bytes, &mut changes);
+        while let Ok((computer, bytes)) = rx.try_recv() {
+            gw.take_link(&computer, &bytes, &mut changes);
         }
         gw.on_changes(changes);
         gw.take_local();
@@ -365,6 +359,8 @@ struct Gateway {
     publisher: zenoh::pubsub::Publisher<'static>,
     start: Instant,
     status_period: Duration,
+    /// How the link is secured, for the status.
+    security: String,
 }
 
 impl Gateway {
@@ -421,7 +417,13 @@ impl Gateway {
                 Vec::new()
             }
         };
-        self.put("gateway", (0, 0), LinkKind::Beacon { alive }, Vec::new());
+        let follows = self.core.follows();
+        self.put(
+            "gateway",
+            (0, 0),
+            LinkKind::Beacon { alive, follows },
+            Vec::new(),
+        );
     }
 
     fn take_local(&mut self) {
@@ -536,9 +538,19 @@ impl Gateway {
         }
     }
 
-    fn take_link(&mut self, bytes: &[u8], changes: &mut Vec<PeerChange>) {
+    fn take_link(&mut self, key_computer: &str, bytes: &[u8], changes: &mut Vec<PeerChange>) {
         let msg = match LinkMsg::decode(bytes) {
-            Ok(m) => m,
+            Ok(m) if m.from == key_computer => m,
+            Ok(m) => {
+                let why = format!(
+                    "a message claiming computer `{}` on computer `{key_computer}`'s key",
+                    m.from
+                );
+                tracing::warn!("link message refused: {why}");
+                self.core.counters.undecodable += 1;
+                self.core.counters.remember(why);
+                return;
+            }
             Err(e) => {
                 self.core.counters.undecodable += 1;
                 tracing::warn!("a link message does not decode: {e}");
@@ -547,7 +559,9 @@ impl Gateway {
         };
         let now = self.now_us();
         match self.core.on_link(&msg, now, changes) {
-            Route::Own | Route::NotMine | Route::Beacon => {}
+            Route::Own | Route::NotMine | Route::Beacon | Route::NotFollowed => {}
+            Route::Claim(None) => {}
+            Route::Claim(Some(why)) => tracing::warn!("{why}"),
             Route::Foreign(why) => tracing::warn!("link message refused: {why}"),
             Route::Deliver => {
                 // A stand-in may be needed before the message is delivered (a beacon that
@@ -687,6 +701,11 @@ impl Gateway {
     }
 
     fn on_changes(&mut self, changes: Vec<PeerChange>) {
+        // A computer heard (again): say at once whom this gateway follows, so that it takes
+        // what this one sends it without waiting for the next beacon.
+        let heard = changes
+            .iter()
+            .any(|c| matches!(c, PeerChange::Joined(_) | PeerChange::Restored(_)));
         for change in changes {
             let (event, computer) = match &change {
                 PeerChange::Joined(c) => {
@@ -714,6 +733,9 @@ impl Gateway {
                     self.core.counters.of("link_event").delivered += 1;
                 }
             }
+        }
+        if heard {
+            self.beacon();
         }
         self.sync_mirrors();
     }
@@ -784,6 +806,7 @@ impl Gateway {
             "peers": self.core.peers(),
             "mirrors": self.mirrors.keys().collect::<Vec<_>>(),
             "counters": self.core.counters,
+            "security": self.security,
         })
     }
 
