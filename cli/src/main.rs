@@ -123,11 +123,11 @@ fn main() -> ExitCode {
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
-                // zenoh's TLS client warns at each connection that it does not check the
+                // zenoh's QUIC client warns at each connection that it does not check the
                 // server's name: the gateway chose so (docs/gateway.md), the name that matters
                 // being the certificate's computer, which zenoh's access control checks.
                 .unwrap_or_else(|_| {
-                    tracing_subscriber::EnvFilter::new("info,zenoh_link_tls::utils=error")
+                    tracing_subscriber::EnvFilter::new("info,zenoh_link_commons::quic::utils=error")
                 }),
         )
         .with_writer(std::io::stderr)

@@ -123,8 +123,8 @@ pub struct Peer {
     /// Restarts of its gateway seen (new incarnations after the first).
     pub restarts: u64,
     /// Whether its latest beacon says it follows this gateway for this computer. Until it
-    /// does, nothing it sends is delivered here and none of its nodes is mirrored: what it
-    /// sent was meant for another gateway of this computer, or for none yet.
+    /// does, no event or call it sends is delivered here and none of its nodes is mirrored:
+    /// what it sent was meant for another gateway of this computer, or for none yet.
     pub follows_me: bool,
     /// Since when (microseconds) it follows another gateway of this computer, and which.
     #[serde(skip)]
@@ -320,9 +320,9 @@ pub enum Route {
     /// gateway per computer). The reason the first time this second gateway is heard (to
     /// log), `None` after.
     Claim(Option<String>),
-    /// From a peer that does not follow this gateway (it follows another gateway of this
-    /// computer, or has not heard this one yet): what it sent was not meant for it. Counted
-    /// refused, dropped.
+    /// An event or a call from a peer that does not follow this gateway (it follows another
+    /// gateway of this computer, or has not heard this one yet): it was not meant for this
+    /// one. Counted refused, dropped.
     NotFollowed,
 }
 
@@ -485,7 +485,9 @@ impl Core {
                 self.counters.of(kind).delivered += 1;
                 return Route::Beacon;
             }
-            _ if !peer.follows_me => {
+            // What is addressed (an event for the player, a call for a program) is meant for
+            // the gateway the sender follows; broadcast news is everyone's.
+            LinkKind::Event | LinkKind::Call { .. } if !peer.follows_me => {
                 self.counters.of(kind).refused += 1;
                 return Route::NotFollowed;
             }

@@ -345,7 +345,25 @@ pub fn run(settings: Settings) -> Result<serde_json::Value, GatewayError> {
         gw.take_local();
     }
     gw.publish_status();
-    Ok(gw.status_json())
+    let status = gw.status_json();
+    drop(gw);
+    drop(_subscriber);
+    leave(session);
+    Ok(status)
+}
+
+/// Closes the zenoh session without waiting on peers that are gone: zenoh closes each QUIC
+/// link gracefully and waits (up to 10 s) for an answer a stopped peer never gives. The live
+/// peers are told at once; the gateway waits half a second at most, then leaves (its peers
+/// would see its silence within the detection bound anyway).
+fn leave(session: zenoh::Session) {
+    let closing = std::thread::spawn(move || {
+        let _ = session.close().wait();
+    });
+    let deadline = Instant::now() + Duration::from_millis(500);
+    while !closing.is_finished() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(10));
+    }
 }
 
 struct Gateway {

@@ -4,6 +4,11 @@
 //!
 //! The project (tests/data/relay) is the same as on one computer: the player calls ECHO and
 //! waits for its `pong`; nothing in it or in the program knows there are two computers.
+//!
+//! The link is secured as by default (mutual TLS with the vehicle's keys): the computers of a
+//! test share one state directory in its work directory (one machine: the gateways make the
+//! keys at their first start), except where a test gives each its own and distributes keys
+//! made by `petrel keys`, as for a real vehicle.
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -20,6 +25,8 @@ struct Computer {
     work: PathBuf,
     /// The network namespace its processes run in, if any.
     netns: Option<String>,
+    /// Its user's state directory (`PETREL_STATE_DIR`: the vehicle's keys).
+    state: PathBuf,
     /// The root, removed pass or fail; short, in /tmp: iceoryx2's Unix sockets live in it.
     _root: tempfile::TempDir,
 }
@@ -35,6 +42,7 @@ impl Computer {
             root: root.path().to_path_buf(),
             work: work.path().to_path_buf(),
             netns: None,
+            state: work.path().join("state"),
             _root: root,
         }
     }
@@ -48,7 +56,8 @@ impl Computer {
             }
             None => Command::new(program),
         };
-        c.env("PETREL_RUNTIME_DIR", &self.root);
+        c.env("PETREL_RUNTIME_DIR", &self.root)
+            .env(petrel_gateway::keys::STATE_DIR_ENV, &self.state);
         c
     }
 
@@ -370,6 +379,104 @@ fn a_link_event_must_be_a_communication_event_of_the_project() {
     );
 }
 
+/// The link is secured by default. With computers not all on this machine, `petrel check`
+/// says this machine has no keys and how to make them, and a gateway without its keys refuses
+/// to start, saying the same; `petrel keys` makes them, and `petrel check` then says where.
+/// The lab bench's opt-out (`[link] security = "none"`) is warned of by `petrel check` and by
+/// the gateway as it starts.
+#[test]
+fn the_link_is_secured_by_default_and_its_opt_out_is_loud() {
+    let work = Workdir::new();
+    let dir = project(&work);
+    let vehicle = unique_vehicle("keys");
+    let file = std::fs::read_to_string(dir.join("vehicle.toml")).expect("vehicle.toml");
+    let far = format!(
+        "[vehicle]\nname = \"{vehicle}\"\n{}",
+        file.replace("tcp/127.0.0.1:", "tcp/10.255.255.1:")
+    );
+    std::fs::write(dir.join("vehicle.toml"), &far).expect("vehicle.toml");
+    let a = Computer::new(&work, "A");
+    let run = |args: &[&str]| {
+        let o = a
+            .command(&petrel_bin())
+            .args(args)
+            .output()
+            .expect("petrel runs");
+        let text = |b: &[u8]| String::from_utf8_lossy(b).into_owned();
+        (o.status.code(), text(&o.stdout), text(&o.stderr))
+    };
+    let d = dir.display().to_string();
+    let (_, _, err) = run(&["check", &d, "--no-verify"]);
+    assert!(
+        err.contains("W0803") && err.contains("petrel keys"),
+        "{err}"
+    );
+    let (code, _, err) = run(&["gateway", &d, "--computer", "A"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("no usable keys") && err.contains("petrel keys"),
+        "{err}"
+    );
+    let (code, said, err) = run(&["keys", &d]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(
+        said.contains("A.key") && said.contains("keep it off the vehicle"),
+        "{said}"
+    );
+    let (code, said, err) = run(&["check", &d, "--no-verify"]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(
+        said.contains("link: mutual TLS, keys of A, B in") && !err.contains("W08"),
+        "{said}{err}"
+    );
+
+    // The opt-out.
+    std::fs::write(
+        dir.join("vehicle.toml"),
+        far.replace("[link]\n", "[link]\nsecurity = \"none\"\n"),
+    )
+    .expect("vehicle.toml");
+    let (code, said, err) = run(&["check", &d, "--no-verify"]);
+    assert_eq!(code, Some(0), "{err}");
+    let warning = "neither encrypted nor authenticated";
+    assert!(
+        err.contains("W0802") && err.contains(warning) && said.contains("NOT SECURED"),
+        "{said}{err}"
+    );
+    let listen = format!("tcp/127.0.0.1:{}", free_port());
+    let connect = format!("tcp/127.0.0.1:{}", free_port());
+    let gateway = a.spawn(
+        &petrel_bin(),
+        &[
+            "gateway",
+            &d,
+            "--computer",
+            "A",
+            "--listen",
+            &listen,
+            "--connect",
+            &connect,
+        ],
+        "gw-open",
+    );
+    let gateway = Processes(vec![gateway]);
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let log = loop {
+        let log = std::fs::read_to_string(work.path().join("gw-open.log")).unwrap_or_default();
+        if log.contains("up, link key") || Instant::now() > deadline {
+            break log;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(
+        log.contains(&format!(
+            "WARNING: the link between the vehicle's computers is {warning}"
+        )),
+        "{log}"
+    );
+    assert_eq!(gateway.stop(), vec![Some(0)], "{log}");
+}
+
 /// tests/data/relay with ECHO and the player on A, a ground station G, and the gateways
 /// authenticating each other with `password` (the credentials file of the copy).
 fn ground_project(work: &Workdir, name: &str, ports: (u16, u16), password: &str) -> PathBuf {
@@ -429,13 +536,29 @@ fn only_an_authenticated_ground_station_sends_events_and_its_shadow_follows() {
         ],
         "player",
     )]);
-    procs.0.push(a.gateway(&dir, &vehicle, "gw-a"));
+    // zenoh logs a refused password at debug level.
+    let log = |ext: &str| std::fs::File::create(work.path().join(format!("gw-a.{ext}")));
+    procs.0.push(
+        a.command(&petrel_bin())
+            .env(
+                "RUST_LOG",
+                "info,zenoh_transport::unicast::establishment=debug",
+            )
+            .arg("gateway")
+            .arg(&dir)
+            .args(["--vehicle", &vehicle, "--computer", "A"])
+            .stdout(log("out").expect("log"))
+            .stderr(log("log").expect("log"))
+            .spawn()
+            .expect("the gateway starts"),
+    );
     procs
         .0
         .push(a.spawn(&example_bin("echo"), &[&vehicle, "ECHO"], "echo"));
 
-    // A ground station with the wrong password: the vehicle's gateway refuses its session (its
-    // log says so), so it never hears the player, and what it is sent goes nowhere.
+    // A ground station with the vehicle's keys but the wrong password: the vehicle's gateway
+    // refuses its session (its log says so), so it never hears the player, and what it is sent
+    // goes nowhere.
     let mut bad = Processes(vec![g.gateway(&impostor, &vehicle, "gw-impostor")]);
     let deadline = Instant::now() + Duration::from_secs(60);
     while !std::fs::read_to_string(work.path().join("gw-a.log"))
@@ -533,36 +656,87 @@ fn only_an_authenticated_ground_station_sends_events_and_its_shadow_follows() {
     );
 }
 
-/// missions/ugv copied with free ports for its three computers' gateways.
-fn ugv_project(work: &Workdir) -> PathBuf {
+/// missions/ugv copied, with free ports for its three computers' gateways when `free_ports`
+/// (on this host's loopback; in a network namespace of its own, its file runs as shipped).
+fn ugv_project(work: &Workdir, free_ports: bool) -> PathBuf {
     let dir = work.path().join("ugv");
     std::fs::create_dir_all(&dir).expect("project dir");
     for f in ["petrel.toml", "robot.pn", "sync.pn", "vehicle.toml"] {
         let text = std::fs::read_to_string(repo().join("missions/ugv").join(f)).expect("read");
-        let text = ["7447", "7448", "7449"].iter().fold(text, |t, p| {
-            t.replace(
-                &format!("127.0.0.1:{p}"),
-                &format!("127.0.0.1:{}", free_port()),
-            )
-        });
+        let text = ["7447", "7448", "7449"]
+            .iter()
+            .filter(|_| free_ports)
+            .fold(text, |t, p| {
+                t.replace(
+                    &format!("127.0.0.1:{p}"),
+                    &format!("127.0.0.1:{}", free_port()),
+                )
+            });
         std::fs::write(dir.join(f), text).expect("write");
     }
     dir
 }
 
+/// The `gateway` endpoints of a project's vehicle.toml, in file order.
+fn endpoints(dir: &Path) -> Vec<String> {
+    std::fs::read_to_string(dir.join("vehicle.toml"))
+        .expect("vehicle.toml")
+        .lines()
+        .filter_map(|l| l.strip_prefix("gateway = \""))
+        .map(|l| l.trim_end_matches('"').to_owned())
+        .collect()
+}
+
+/// `examples/rogue_peer` on `at` (its network namespace), for `seconds`: a zenoh peer that
+/// connects to `connect`, listens to everything and forges link messages (`args`).
+fn rogue(
+    at: &Computer,
+    vehicle: &str,
+    seconds: &str,
+    connect: &[String],
+    args: &[&str],
+    log: &str,
+) -> Child {
+    let mut all: Vec<&str> = vec![vehicle, seconds];
+    for e in connect {
+        all.extend(["--connect", e]);
+    }
+    all.extend(args);
+    at.spawn(&example_bin("rogue_peer"), &all, log)
+}
+
+/// What a rogue peer got (its last line).
+fn rogue_report(work: &Workdir, rogue: Child, log: &str) -> serde_json::Value {
+    let out = rogue.wait_with_output().expect("the rogue ends");
+    assert!(out.status.success(), "{}", logs(work.path()));
+    last_json(&work.path().join(format!("{log}.out")))
+}
+
 /// The paper's UGV pair live (section 3.3): the supervision on one computer, each robot's
 /// movement program on its own; both robots reach the bottleneck together, and the journal
 /// shows them in it one at a time.
+///
+/// The link as shipped (`missions/ugv/vehicle.toml`, nothing added: the gateways make the
+/// vehicle's keys at their first start, every computer being on this machine), attacked while
+/// the mission runs, in a network namespace of its own where one can be made (the file's
+/// loopback ports are then the namespace's): a stranger's zenoh peer, in plain TCP and in QUIC
+/// with a CA of its own, reaches no gateway, hears nothing and gets nothing in; a peer with
+/// robot2's keys (a computer of the vehicle) may not speak for robot1, and its claim to be
+/// robot2 is refused, as is a second `petrel gateway` for robot2: the first link goes on with
+/// no restart, and the journal holds the operator's `start_mission` and nothing forged.
 #[test]
 fn the_ugv_pair_on_three_computers_passes_the_bottleneck_one_at_a_time() {
     let work = Workdir::new();
-    let dir = ugv_project(&work);
+    let ns = Cable::new();
+    let dir = ugv_project(&work, ns.is_none());
     let vehicle = unique_vehicle("ugv");
-    let s = Computer::new(&work, "supervision");
-    let (r1, r2) = (
-        Computer::new(&work, "robot1"),
-        Computer::new(&work, "robot2"),
-    );
+    let names = ["supervision", "robot1", "robot2"];
+    let [mut s, mut r1, mut r2, mut stranger, mut second] =
+        [names[0], names[1], names[2], "stranger", names[2]].map(|n| Computer::new(&work, n));
+    for c in [&mut s, &mut r1, &mut r2, &mut stranger, &mut second] {
+        c.netns = ns.as_ref().map(|n| n.ns[0].clone());
+    }
+    stranger.state = work.path().join("stranger");
     let journal = work.path().join("journal");
     let ugv = example_bin("ugv");
     let mut procs = Processes(vec![s.spawn(
@@ -594,6 +768,60 @@ fn the_ugv_pair_on_three_computers_passes_the_bottleneck_one_at_a_time() {
             .iter()
             .all(|p| st["programs"][p] == "alive")
     });
+
+    // The attacks, while the mission runs. A stranger's keys: a CA of its own, certificates
+    // with the vehicle's computer names.
+    let foreign = stranger.state.join("keys").join(&vehicle);
+    petrel_gateway::keys::make(&foreign, &vehicle, &names.map(String::from)).expect("keys");
+    let plain = endpoints(&dir);
+    let quic: Vec<String> = plain.iter().map(|e| e.replace("tcp/", "quic/")).collect();
+    let forge = [
+        "--claim",
+        "robot1",
+        "--claim",
+        "supervision",
+        "--claim",
+        "robot2",
+        "--event",
+        "emergency_stop",
+        "--call",
+        "MOVES_R1.stop",
+    ];
+    let foreign_keys = foreign.display().to_string();
+    let mut with_keys = forge.to_vec();
+    with_keys.extend(["--keys", &foreign_keys, "--as", "robot1"]);
+    let stolen = s.state.join("keys").join(&vehicle).display().to_string();
+    let mut insider = forge.to_vec();
+    insider.extend(["--keys", &stolen, "--as", "robot2"]);
+    let rogues = [
+        rogue(&stranger, &vehicle, "3", &plain, &forge, "rogue-plain"),
+        rogue(&stranger, &vehicle, "3", &quic, &with_keys, "rogue-quic"),
+        rogue(
+            &stranger,
+            &vehicle,
+            "3",
+            &quic[..1],
+            &insider,
+            "rogue-insider",
+        ),
+    ];
+    // A second gateway for robot2 (on a port of its own): refused by the others, it gives up.
+    let port = format!("tcp/127.0.0.1:{}", free_port());
+    let second_gw = second.spawn(
+        &petrel_bin(),
+        &[
+            "gateway",
+            &dir.display().to_string(),
+            "--vehicle",
+            &vehicle,
+            "--computer",
+            "robot2",
+            "--listen",
+            &port,
+        ],
+        "gw-second",
+    );
+
     s.send(&dir, &vehicle, "start_mission");
     let st = s.wait_for(&dir, &vehicle, "both robots done", |st| {
         place(st, "R1", "done") && place(st, "R2", "done")
@@ -614,6 +842,58 @@ fn the_ugv_pair_on_three_computers_passes_the_bottleneck_one_at_a_time() {
         "{on_r1}"
     );
     assert!(events["delivered"] == 0 && accounted(events), "{on_r1}");
+
+    // The strangers reached no gateway and heard nothing; the insider reached the gateway it
+    // connected to and heard its computer's traffic (the control: this rogue does get in).
+    let [plain, quic, insider] = rogues;
+    for (rogue, log) in [(plain, "rogue-plain"), (quic, "rogue-quic")] {
+        let r = rogue_report(&work, rogue, log);
+        assert_eq!(
+            (r["peers"].as_u64(), r["received"].as_u64()),
+            (Some(0), Some(0)),
+            "{log}: {r}"
+        );
+        assert!(r["puts"].as_u64() > Some(0), "{log}: {r}");
+    }
+    let r = rogue_report(&work, insider, "rogue-insider");
+    assert!(r["peers"] == 1 && r["received"].as_u64() > Some(0), "{r}");
+    // The second gateway of robot2 gave up, saying why.
+    let out = second_gw
+        .wait_with_output()
+        .expect("the second gateway ends");
+    let log = std::fs::read_to_string(work.path().join("gw-second.log")).unwrap_or_default();
+    assert_eq!(out.status.code(), Some(2), "{log}");
+    assert!(
+        log.contains("follows another gateway of computer `robot2`"),
+        "{log}"
+    );
+    // The supervision refused the second gateways of robot2 (the insider's and the second
+    // `petrel gateway`), and robot2's first link went on: no restart, no loss (so no stand-in
+    // left: no program lost).
+    let st = s.wait_for(&dir, &vehicle, "the supervision's counters", |x| {
+        x["gateways"]["supervision"].is_object()
+    });
+    let gw = &st["gateways"]["supervision"];
+    assert!(
+        gw["counters"]["claims_refused"]["robot2"].as_u64() > Some(0),
+        "{gw}"
+    );
+    for peer in ["robot1", "robot2"] {
+        let p = &gw["peers"][peer];
+        let seen = (
+            p["restarts"].as_u64(),
+            p["losses"].as_u64(),
+            p["state"].as_str(),
+        );
+        assert_eq!(seen, (Some(0), Some(0), Some("up")), "{peer}: {gw}");
+    }
+    assert!(
+        std::fs::read_to_string(work.path().join("gw-s.log"))
+            .unwrap_or_default()
+            .contains("a second gateway claims computer `robot2`"),
+        "{}",
+        logs(work.path())
+    );
     let codes = procs.stop();
     assert!(
         codes.iter().all(|c| *c == Some(0)),
@@ -622,8 +902,20 @@ fn the_ugv_pair_on_three_computers_passes_the_bottleneck_one_at_a_time() {
     );
 
     // The trace: each robot entered the bottleneck once, never while the other was in it
-    // (from `enter`, which takes it, to `out`, which gives it back).
+    // (from `enter`, which takes it, to `out`, which gives it back); nothing forged is on
+    // record: one `start_mission` (the operator's), no `emergency_stop`.
     let (entries, _) = journal_json(&journal);
+    let submitted = |name: &str| {
+        entries
+            .iter()
+            .filter(|e| e["kind"] == "submit" && e["event"] == name)
+            .count()
+    };
+    assert_eq!(
+        [submitted("start_mission"), submitted("emergency_stop")],
+        [1, 0],
+        "{entries:?}"
+    );
     let mut inside = [false, false];
     let mut entered = [0, 0];
     let mut both_waited = false;
@@ -736,6 +1028,48 @@ impl Drop for Cable {
     }
 }
 
+/// The vehicle's keys made by `petrel keys` (in the work directory, as on an operator's
+/// computer), and each computer given its own in a state directory of its own: ca.pem,
+/// NAME.pem and NAME.key, owner-only, as docs/gateway.md says.
+fn distribute_keys<const N: usize>(
+    work: &Workdir,
+    dir: &Path,
+    vehicle: &str,
+    computers: [&mut Computer; N],
+) {
+    use std::os::unix::fs::PermissionsExt;
+    let made = work.path().join("made-keys");
+    let o = petrel_tests::petrel(&[
+        "keys",
+        &dir.display().to_string(),
+        "--vehicle",
+        vehicle,
+        "--out",
+        &made.display().to_string(),
+    ]);
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success() && said.contains("ca.key"),
+        "{said}{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    for c in computers {
+        c.state = work.path().join(format!("state-{}", c.name));
+        let to = c.state.join("keys").join(vehicle);
+        std::fs::create_dir_all(&to).expect("a keys directory");
+        std::fs::set_permissions(&to, std::fs::Permissions::from_mode(0o700)).expect("0700");
+        for f in [
+            "ca.pem".to_string(),
+            format!("{}.pem", c.name),
+            format!("{}.key", c.name),
+        ] {
+            std::fs::copy(made.join(&f), to.join(&f)).expect("copied");
+            std::fs::set_permissions(to.join(&f), std::fs::Permissions::from_mode(0o600))
+                .expect("0600");
+        }
+    }
+}
+
 /// The cable between the two computers cut mid-mission and plugged back: the loss and the
 /// return are events, the program is lost and back, and nothing put on the link was lost.
 #[test]
@@ -759,6 +1093,8 @@ fn a_cut_cable_is_a_lost_computer_and_nothing_is_lost_when_it_comes_back() {
     let (mut a, mut b) = (Computer::new(&work, "A"), Computer::new(&work, "B"));
     a.netns = Some(cable.ns[0].clone());
     b.netns = Some(cable.ns[1].clone());
+    // Each computer has only its own keys, as on a real vehicle.
+    distribute_keys(&work, &dir, &vehicle, [&mut a, &mut b]);
     let journal = work.path().join("journal");
     let mut procs = Processes(vec![a.spawn(
         &petrel_bin(),
@@ -780,10 +1116,25 @@ fn a_cut_cable_is_a_lost_computer_and_nothing_is_lost_when_it_comes_back() {
     a.wait_for(&dir, &vehicle, "ECHO alive on A", |s| {
         s["programs"]["ECHO"] == "alive"
     });
+    // A stranger on B's side of the cable, at A's address: no session, nothing heard.
+    let stranger = rogue(
+        &b,
+        &vehicle,
+        "2",
+        &endpoints(&dir)[..1],
+        &["--claim", "B", "--event", "start_mission"],
+        "rogue",
+    );
     a.send(&dir, &vehicle, "start_mission");
     let s = a.wait_for(&dir, &vehicle, "the pong back", |s| {
         place(s, "RELAY", "ready") && counts(s, "A", "event")["delivered"] == 1
     });
+    let r = rogue_report(&work, stranger, "rogue");
+    assert_eq!(
+        (r["peers"].as_u64(), r["received"].as_u64()),
+        (Some(0), Some(0)),
+        "{r}"
+    );
 
     let losses = losses_of(&s);
     cable.set(false);
