@@ -326,9 +326,11 @@ pub enum Route {
     NotFollowed,
 }
 
-/// How long a peer may follow another gateway of this computer before this one gives up
-/// (beyond twice the detection bound: a restarted gateway waits that long at most, until its
-/// peers lose its killed predecessor).
+/// How long a peer may follow another gateway of this computer before this one gives up,
+/// beyond the detection bound. A restarted gateway is refused from the first beacon it hears
+/// until its peers lose its killed predecessor: at most the bound after the predecessor's
+/// last message, then a beacon period (the peers' tick) and the news' way back; the grace
+/// covers those and a loaded machine.
 pub const CLAIM_GRACE_US: u64 = 2_000_000;
 
 /// Second gateways remembered (to log each once); past it, they are forgotten.
@@ -565,10 +567,10 @@ impl Core {
     }
 
     /// Why this gateway gives up, if a peer has followed another gateway of this computer for
-    /// longer than twice the detection bound and [`CLAIM_GRACE_US`]: that gateway is alive,
+    /// longer than the detection bound and [`CLAIM_GRACE_US`]: that gateway is alive,
     /// and this one is the second claim.
     pub fn refused(&self, now_us: u64) -> Option<String> {
-        let bound = 2 * self.plan.detection_us + CLAIM_GRACE_US;
+        let bound = self.plan.detection_us + CLAIM_GRACE_US;
         self.peers.iter().find_map(|(name, p)| {
             let (since, other) = p.follows_other?;
             (now_us.saturating_sub(since) > bound).then(|| {
@@ -885,7 +887,7 @@ mod tests {
         assert_eq!(a.follows(), vec![("B".to_string(), 9)]);
 
         // The second's side: A follows the other gateway of B; B2 takes nothing of A's, and
-        // gives up once that lasts past twice the bound and the grace.
+        // gives up once that lasts past the bound and the grace.
         let mut b2 = Core::new(plan("B"), 77);
         let beacon = LinkKind::Beacon {
             alive: vec!["player".into()],
@@ -904,8 +906,8 @@ mod tests {
         call.incarnation = 1;
         assert_eq!(b2.on_link(&call, 10, &mut ch), Route::NotFollowed);
         assert!(b2.mirrored().is_empty(), "no stand-in of A's player on B2");
-        assert_eq!(b2.refused(2_000_000 + CLAIM_GRACE_US), None);
-        let why = b2.refused(2_000_001 + CLAIM_GRACE_US).expect("given up");
+        assert_eq!(b2.refused(1_000_000 + CLAIM_GRACE_US), None);
+        let why = b2.refused(1_000_001 + CLAIM_GRACE_US).expect("given up");
         assert!(
             why.contains("`A` follows another gateway of computer `B`"),
             "{why}"
