@@ -1,13 +1,16 @@
 //! The gateway's decisions, sans I/O: which local messages go on the link, which link messages
 //! are for this computer, the state of each peer computer (heard within the detection bound or
-//! lost), which of the peers' nodes this computer mirrors, and the counters that account for
-//! every message. Time is injected (microseconds since the gateway started).
+//! lost), which of the peers' nodes this computer mirrors, the carried messages (events and
+//! calls: `crate::reliable`'s streams, acknowledged, sent again, or given up and their senders
+//! told), and the counters that account for every message. Time is injected (microseconds
+//! since the gateway started).
 
 use std::collections::{BTreeMap, BTreeSet};
 
 use serde::Serialize;
 
-use crate::link::{LinkKind, LinkMsg};
+use crate::link::{LinkKind, LinkMsg, StreamAck};
+use crate::reliable::{Accept, Bounds, Failure, Incoming, Outgoing};
 
 /// Where things live: the vehicle's computers, the player's, and the host of each program.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -26,6 +29,9 @@ pub struct Plan {
     pub signals_computer: Option<String>,
     /// A peer silent for this long is lost, microseconds.
     pub detection_us: u64,
+    /// A carried message (an event, a call) its destination has not acknowledged within this
+    /// long is given up and its sender told, microseconds (longer than `detection_us`).
+    pub retention_us: u64,
 }
 
 impl Plan {
@@ -75,6 +81,27 @@ impl Plan {
     pub fn beacon_period_us(&self) -> u64 {
         (self.detection_us / 4).clamp(10_000, 250_000)
     }
+
+    /// The computer that delivers a message of `kind`, when it is carried (events go to the
+    /// player's computer, calls to the program's); `None` for news (heartbeats, markings,
+    /// signals, beacons, acknowledgements), which is not.
+    pub fn destination(&self, kind: &LinkKind) -> Option<&str> {
+        match kind {
+            LinkKind::Event => Some(&self.player_computer),
+            LinkKind::Call { program } => Some(self.host_of(program)),
+            _ => None,
+        }
+    }
+}
+
+/// Microseconds as people read them: `10 s`, `1.5 s`, `250 ms`.
+pub fn seconds(us: u64) -> String {
+    if us >= 1_000_000 {
+        let s = us as f64 / 1e6;
+        format!("{} s", (s * 10.0).round() / 10.0)
+    } else {
+        format!("{} ms", us / 1000)
+    }
 }
 
 /// The state of a peer computer as this gateway sees it.
@@ -123,12 +150,15 @@ pub struct Peer {
     /// Restarts of its gateway seen (new incarnations after the first).
     pub restarts: u64,
     /// Whether its latest beacon says it follows this gateway for this computer. Until it
-    /// does, no event or call it sends is delivered here and none of its nodes is mirrored:
-    /// what it sent was meant for another gateway of this computer, or for none yet.
+    /// does, none of its nodes is mirrored here. (What it carries names the gateway it is for,
+    /// [`crate::link::Carried::to_incarnation`]: a copy meant for another gateway of this
+    /// computer is not taken here.)
     pub follows_me: bool,
     /// Since when (microseconds) it follows another gateway of this computer, and which.
     #[serde(skip)]
     pub follows_other: Option<(u64, u64)>,
+    /// Carried messages for it waiting for its acknowledgement (at the latest tick).
+    pub buffered: usize,
 }
 
 impl Peer {
@@ -145,6 +175,7 @@ impl Peer {
             restarts: 0,
             follows_me: false,
             follows_other: None,
+            buffered: 0,
         }
     }
 }
@@ -188,17 +219,35 @@ pub struct Counts {
     /// Link messages delivered to this computer's processes.
     pub delivered: u64,
     /// Link messages for this computer that could not be delivered (no receiver, a full
-    /// buffer, a body that does not decode...).
+    /// buffer, a body that does not decode...) or that their computer may not send (an origin
+    /// of another computer's, an event or a call not carried); a carried one's reason goes
+    /// back to its sender in the acknowledgement.
     pub refused: u64,
     /// Link messages for another computer (each computer hears every peer).
     pub not_mine: u64,
     /// Broadcast news (heartbeats, marking deltas, signals) for this computer that no process
     /// here follows (no status, monitor, shadow or program reading signals): not a loss.
     pub unheard: u64,
+    /// Carried messages (events, calls) sent again, unacknowledged.
+    pub retransmitted: u64,
+    /// Carried messages the destination's gateway acknowledged having taken.
+    pub carried: u64,
+    /// Carried messages given up (their senders told): unacknowledged within the retention
+    /// bound, refused by the destination, for a destination that restarted, or refused at once
+    /// by a full buffer.
+    pub given_up: u64,
+    /// Link messages not taken, and nothing said to their sender: copies of carried messages
+    /// already taken, out of order, too late, or for another gateway of this computer (see
+    /// `crate::reliable::Discarded`: they come again, or their sender gives them up), and
+    /// every message of a second gateway claiming a computer (also in
+    /// [`Counters::claims_refused`]).
+    pub discarded: u64,
 }
 
 /// The gateway's counters, by message kind; `from_link = delivered + refused + not_mine +
-/// unheard`.
+/// unheard + discarded` (once the held messages are delivered; a second gateway's messages
+/// count in `from_link` and `discarded`), and the carried messages taken here are `carried +
+/// given_up` plus those still buffered.
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct Counters {
     /// By kind (`event`, `call`, `heartbeat`, `marking`, `signals`, `beacon`).
@@ -208,7 +257,8 @@ pub struct Counters {
     /// The latest refusals (at most 8), newest last.
     pub refusals: Vec<String>,
     /// Link messages of a second gateway claiming a computer whose first gateway is up
-    /// (this one's computer included), refused, by the computer claimed.
+    /// (this one's computer included), refused (and counted `discarded` by kind), by the
+    /// computer claimed.
     pub claims_refused: BTreeMap<String, u64>,
 }
 
@@ -308,22 +358,24 @@ impl AckMap {
 pub enum Route {
     /// This gateway's own message, heard back: dropped.
     Own,
-    /// Not a computer of the vehicle, or damaged: counted, dropped.
+    /// Not a computer of the vehicle (counted `undecodable`), or a message its computer may
+    /// not send (counted `refused`): dropped, the reason to log.
     Foreign(String),
-    /// A beacon: nothing to deliver.
+    /// A beacon or an acknowledgement: nothing to deliver.
     Beacon,
     /// For another computer.
     NotMine,
-    /// To be delivered here.
+    /// To be delivered here (a carried message: then [`Core::taken`]).
     Deliver,
     /// From a second gateway claiming a computer whose first gateway is up: refused (one
     /// gateway per computer). The reason the first time this second gateway is heard (to
     /// log), `None` after.
     Claim(Option<String>),
-    /// An event or a call from a peer that does not follow this gateway (it follows another
-    /// gateway of this computer, or has not heard this one yet): it was not meant for this
-    /// one. Counted refused, dropped.
-    NotFollowed,
+    /// Carried, for this computer, but its computer came back and the player has not taken the
+    /// restored event yet: delivered later, from [`Core::take_released`].
+    Held,
+    /// A copy of a carried message not taken (counted `discarded`).
+    Discarded,
 }
 
 /// How long a peer may follow another gateway of this computer before this one gives up,
@@ -347,6 +399,18 @@ pub struct Core {
     next_seq: u64,
     /// Second gateways already reported: (computer claimed, incarnation).
     claimants: BTreeSet<(String, u64)>,
+    outgoing: Outgoing,
+    incoming: Incoming,
+    /// Whether a returning computer's carried messages wait for the player to take its
+    /// restored event (on the player's computer, with link events).
+    hold_on_restore: bool,
+    failures: Vec<Failure>,
+    released: Vec<LinkMsg>,
+    /// The clock carried messages age by: the injected one, without the time this gateway
+    /// itself stood still (stopped, or starved past two beacon periods), so that it judges
+    /// the link only while it listens to it.
+    judged_us: u64,
+    last_now_us: u64,
 }
 
 impl Core {
@@ -357,6 +421,7 @@ impl Core {
             .iter()
             .map(|p| (p.clone(), Peer::new()))
             .collect();
+        let bounds = Bounds::new(plan.detection_us, plan.retention_us);
         Core {
             plan,
             peers,
@@ -364,7 +429,29 @@ impl Core {
             incarnation,
             next_seq: 1,
             claimants: BTreeSet::new(),
+            outgoing: Outgoing::new(bounds),
+            incoming: Incoming::new(bounds),
+            hold_on_restore: false,
+            failures: Vec::new(),
+            released: Vec::new(),
+            judged_us: 0,
+            last_now_us: 0,
         }
+    }
+
+    /// A returning computer's carried messages wait until the player took its restored event
+    /// ([`link_event_sent`](Self::link_event_sent), [`player_took`](Self::player_took)).
+    pub fn set_hold_on_restore(&mut self, on: bool) {
+        self.hold_on_restore = on;
+    }
+
+    /// Advances the judging clock to the injected `now_us`: a step longer than two beacon
+    /// periods counts as two.
+    fn judge(&mut self, now_us: u64) -> u64 {
+        let step = now_us.saturating_sub(self.last_now_us);
+        self.judged_us += step.min(2 * self.plan.beacon_period_us());
+        self.last_now_us = self.last_now_us.max(now_us);
+        self.judged_us
     }
 
     /// The plan.
@@ -377,27 +464,183 @@ impl Core {
         &self.peers
     }
 
-    /// A message of this gateway for the link, numbered; `sender` and `seq` are the ipc
-    /// header's of the message it carries (0 for the gateway's own).
+    /// A message of this gateway for the link, numbered and stamped at `now_us`; `sender` and
+    /// `seq` are the ipc header's of the message it carries (0 for the gateway's own).
     pub fn outgoing(
         &mut self,
+        origin: &str,
+        header: (u64, u64),
+        kind: LinkKind,
+        body: Vec<u8>,
+        now_us: u64,
+    ) -> LinkMsg {
+        let mut msg = self.unnumbered(origin, header, kind, body);
+        self.number(&mut msg, now_us);
+        msg
+    }
+
+    fn unnumbered(
+        &self,
         origin: &str,
         (sender, seq): (u64, u64),
         kind: LinkKind,
         body: Vec<u8>,
     ) -> LinkMsg {
-        let link_seq = self.next_seq;
-        self.next_seq += 1;
         LinkMsg {
             from: self.plan.computer.clone(),
             incarnation: self.incarnation,
-            link_seq,
+            link_seq: 0,
             origin: origin.to_owned(),
             sender,
             seq,
             kind,
             body,
+            sent_us: 0,
+            carried: None,
         }
+    }
+
+    fn number(&mut self, msg: &mut LinkMsg, now_us: u64) {
+        msg.link_seq = self.next_seq;
+        self.next_seq += 1;
+        msg.sent_us = now_us;
+    }
+
+    /// Takes a local event or call for the link at `now_us`: kept until its destination's
+    /// gateway acknowledges it ([`due`](Self::due) sends it). `false`: refused at once (the
+    /// buffer for that destination is full, or the kind is not carried): its failure is in
+    /// [`take_failures`](Self::take_failures).
+    pub fn carry(
+        &mut self,
+        origin: &str,
+        header: (u64, u64),
+        kind: LinkKind,
+        body: Vec<u8>,
+        now_us: u64,
+    ) -> bool {
+        let Some(to) = self.plan.destination(&kind).map(str::to_owned) else {
+            return false;
+        };
+        let now = self.judge(now_us);
+        let msg = self.unnumbered(origin, header, kind, body);
+        match self.outgoing.queue(&to, msg, now) {
+            Ok(()) => true,
+            Err(f) => {
+                self.give_up(vec![*f]);
+                false
+            }
+        }
+    }
+
+    fn give_up(&mut self, failures: Vec<Failure>) {
+        for f in failures {
+            self.counters.of(f.msg.kind.name()).given_up += 1;
+            self.counters.remember(format!(
+                "{} from {} given up: {}",
+                f.msg.kind.name(),
+                f.msg.origin,
+                f.reason
+            ));
+            self.failures.push(f);
+        }
+    }
+
+    /// The carried messages given up since the last call: their senders must be told.
+    pub fn take_failures(&mut self) -> Vec<Failure> {
+        std::mem::take(&mut self.failures)
+    }
+
+    /// The held messages released since the last call, in order: to deliver now (then
+    /// [`taken`](Self::taken)).
+    pub fn take_released(&mut self) -> Vec<LinkMsg> {
+        std::mem::take(&mut self.released)
+    }
+
+    /// The copies of carried messages to put on the link at `now_us`, numbered and stamped:
+    /// the new ones and those unacknowledged for a while, for the peers up; with, for each,
+    /// whether it is a retransmission.
+    pub fn due(&mut self, now_us: u64) -> Vec<(LinkMsg, bool)> {
+        let now = self.judge(now_us);
+        let mut out = Vec::new();
+        for (name, peer) in &self.peers {
+            let (PeerState::Up, Some(inc)) = (peer.state, peer.incarnation) else {
+                continue;
+            };
+            let due = self.outgoing.due(name, inc, now);
+            out.extend(due.copies.into_iter().zip(due.again));
+        }
+        for (msg, _) in out.iter_mut() {
+            self.number(msg, now_us);
+        }
+        out
+    }
+
+    /// The acknowledgement of what this gateway took since the last one, if any, to put on the
+    /// link at `now_us`.
+    pub fn acks_due(&mut self, now_us: u64) -> Option<LinkMsg> {
+        let streams = self.incoming.acks_due();
+        if streams.is_empty() {
+            return None;
+        }
+        Some(self.outgoing(
+            "gateway",
+            (0, 0),
+            LinkKind::Ack { streams },
+            Vec::new(),
+            now_us,
+        ))
+    }
+
+    /// The carried `msg` (from [`on_link`](Self::on_link)'s `Deliver` or
+    /// [`take_released`](Self::take_released)) was delivered here, or refused for a reason the
+    /// acknowledgement carries back to its sender.
+    pub fn taken(&mut self, msg: &LinkMsg, refusal: Option<String>) {
+        self.incoming.taken(msg, refusal);
+    }
+
+    /// The restored event for `peer` went to the player as this gateway's message `seq`; `None`
+    /// when it could not be sent: then nothing waits for it.
+    pub fn link_event_sent(&mut self, peer: &str, seq: Option<u64>) {
+        match seq {
+            Some(seq) => self.incoming.told(peer, seq),
+            None => self.release(peer),
+        }
+    }
+
+    /// The player's heartbeat says it took this gateway's messages up to `seq`.
+    pub fn player_took(&mut self, seq: u64) {
+        for peer in self.incoming.player_took(seq) {
+            self.release(&peer);
+        }
+    }
+
+    fn release(&mut self, peer: &str) {
+        for msg in self.incoming.release(peer) {
+            if self.admit(&msg).is_ok() {
+                self.released.push(msg);
+            }
+        }
+    }
+
+    /// Messages waiting for `peer`'s acknowledgement.
+    pub fn buffered(&self, peer: &str) -> usize {
+        self.outgoing.buffered(peer)
+    }
+
+    fn on_acks(&mut self, from: &str, incarnation: u64, streams: &[StreamAck]) -> bool {
+        let mut mine = false;
+        for ack in streams {
+            if ack.from != self.plan.computer || ack.from_incarnation != self.incarnation {
+                continue;
+            }
+            mine = true;
+            let (taken, failures) = self.outgoing.acknowledged(from, incarnation, ack);
+            for m in taken {
+                self.counters.of(m.kind.name()).carried += 1;
+            }
+            self.give_up(failures);
+        }
+        mine
     }
 
     /// Whether a local message of `kind` from `origin` goes on the link. `own` says this
@@ -424,12 +667,18 @@ impl Core {
             LinkKind::Heartbeat | LinkKind::Marking => self.plan.has_player() && origin == "player",
             // The data server's signals, for the programs of the other computers.
             LinkKind::Signals => self.plan.has_signals(),
-            LinkKind::Beacon { .. } => false,
+            LinkKind::Beacon { .. } | LinkKind::Ack { .. } => false,
         }
     }
 
     /// Takes a link message heard at `now_us`: updates the sender's state and sequence, and
     /// says what to do with it. Peer changes it causes are appended to `changes`.
+    ///
+    /// One rule for a computer's gateways: the first heard is followed; a message of another
+    /// incarnation while it is up and heard within the detection bound is a second claim,
+    /// refused before anything else ([`Route::Claim`]: no peer state, no stream, no
+    /// acknowledgement touched); past the bound, the new incarnation is the first one's
+    /// restart, and only then are the messages numbered for its predecessor given up.
     pub fn on_link(&mut self, msg: &LinkMsg, now_us: u64, changes: &mut Vec<PeerChange>) -> Route {
         if msg.from == self.plan.computer {
             if msg.incarnation != self.incarnation {
@@ -446,7 +695,6 @@ impl Core {
         {
             return self.refuse_claim(msg);
         }
-        let foreign_origin = self.foreign_origin(msg);
         let me = (self.plan.computer.as_str(), self.incarnation);
         let Some(peer) = self.peers.get_mut(&msg.from) else {
             self.counters.undecodable += 1;
@@ -454,9 +702,11 @@ impl Core {
             self.counters.remember(why.clone());
             return Route::Foreign(why);
         };
+        let mut restarted = false;
         if peer.incarnation != Some(msg.incarnation) {
             if peer.incarnation.is_some() {
                 peer.restarts += 1;
+                restarted = true;
             }
             peer.incarnation = Some(msg.incarnation);
             peer.expected_seq = msg.link_seq;
@@ -469,35 +719,54 @@ impl Core {
         }
         peer.expected_seq = msg.link_seq.max(peer.expected_seq) + 1;
         peer.last_heard_us = Some(now_us);
+        let back = peer.state != PeerState::Up;
         match peer.state {
             PeerState::Unknown => changes.push(PeerChange::Joined(msg.from.clone())),
             PeerState::Lost => {
                 peer.restorations += 1;
                 changes.push(PeerChange::Restored(msg.from.clone()));
+                if self.hold_on_restore {
+                    // Its messages wait until the player took its restored event.
+                    self.incoming.hold(&msg.from, now_us);
+                }
             }
             PeerState::Up => {}
         }
         peer.state = PeerState::Up;
+        if let LinkKind::Beacon { alive, follows } = &msg.kind {
+            peer.alive = alive.iter().cloned().collect();
+            peer.heard_follows(follows, me, now_us);
+        }
+        if restarted {
+            // What was numbered for its predecessor may or may not have been delivered.
+            let failures = self.outgoing.restarted(&msg.from, msg.incarnation);
+            self.give_up(failures);
+        }
+        if back || restarted {
+            self.outgoing.resend(&msg.from);
+        }
+        self.incoming
+            .heard(&msg.from, msg.incarnation, msg.sent_us, now_us);
         let kind = msg.kind.name();
         self.counters.of(kind).from_link += 1;
         let mine = match &msg.kind {
-            LinkKind::Beacon { alive, follows } => {
-                peer.alive = alive.iter().cloned().collect();
-                peer.heard_follows(follows, me, now_us);
+            LinkKind::Beacon { .. } => {
                 self.counters.of(kind).delivered += 1;
                 return Route::Beacon;
             }
-            // What is addressed (an event for the player, a call for a program) is meant for
-            // the gateway the sender follows; broadcast news is everyone's.
-            LinkKind::Event | LinkKind::Call { .. } if !peer.follows_me => {
-                self.counters.of(kind).refused += 1;
-                return Route::NotFollowed;
+            LinkKind::Ack { streams } => {
+                if self.on_acks(&msg.from, msg.incarnation, streams) {
+                    self.counters.of(kind).delivered += 1;
+                } else {
+                    self.counters.of(kind).not_mine += 1;
+                }
+                return Route::Beacon;
             }
-            _ if foreign_origin.is_some() => {
-                let why = foreign_origin.unwrap_or_default();
-                self.counters.refuse(kind, why.clone());
-                return Route::Foreign(why);
-            }
+            // Carried: its destination says.
+            _ if msg.carried.is_some() => msg
+                .carried
+                .as_ref()
+                .is_some_and(|c| c.to == self.plan.computer),
             LinkKind::Event => self.plan.has_player(),
             LinkKind::Call { program } => self.plan.host_of(program) == self.plan.computer,
             LinkKind::Heartbeat | LinkKind::Marking => !self.plan.has_player(),
@@ -508,37 +777,62 @@ impl Core {
                     && !self.plan.has_signals()
             }
         };
-        if mine {
-            Route::Deliver
-        } else {
+        if !mine {
             self.counters.of(kind).not_mine += 1;
-            Route::NotMine
+            return Route::NotMine;
+        }
+        match self.incoming.accept(msg, self.incarnation, now_us) {
+            Accept::Take => match self.admit(msg) {
+                Ok(()) => Route::Deliver,
+                Err(why) => Route::Foreign(why),
+            },
+            Accept::Held => Route::Held,
+            Accept::Discard(_) => {
+                self.counters.of(kind).discarded += 1;
+                Route::Discarded
+            }
         }
     }
 
-    /// Why a message's origin is not its computer's to claim, if it is not: the player's
+    /// Whether this computer takes `msg`, a message for it that its stream (if carried) let
+    /// through: a computer of the vehicle speaks for its own processes only (the player's
     /// messages come from the player's computer, a program's from its host, the data server's
-    /// from its computer (tools, `tool/NAME`, may run anywhere). A computer of the vehicle
-    /// speaks for its own processes only.
-    fn foreign_origin(&self, msg: &LinkMsg) -> Option<String> {
+    /// from its computer; tools, `tool/NAME`, may run anywhere), and an event or a call comes
+    /// carried (a gateway always carries them). A refusal is counted `refused` with its reason
+    /// and, for a carried message, taken with that reason: the acknowledgement tells its
+    /// sender, and the stream goes on.
+    fn admit(&mut self, msg: &LinkMsg) -> Result<(), String> {
+        let kind = msg.kind.name();
         let home = match msg.origin.as_str() {
             "player" => Some(self.plan.player_computer.as_str()),
             "can_bridge" => self.plan.signals_computer.as_deref(),
             o => o.strip_prefix("program/").map(|p| self.plan.host_of(p)),
         };
-        match home {
-            Some(h) if h != msg.from => Some(format!(
-                "{} from computer `{}` claims origin `{}`, which is computer `{h}`'s",
-                msg.kind.name(),
-                msg.from,
-                msg.origin
-            )),
-            _ => None,
-        }
+        let why = match home {
+            Some(h) if h != msg.from => format!(
+                "{kind} from computer `{}` claims origin `{}`, which is computer `{h}`'s",
+                msg.from, msg.origin
+            ),
+            _ if self.plan.destination(&msg.kind).is_some() && msg.carried.is_none() => {
+                format!(
+                    "{kind} from computer `{}` not carried on a stream",
+                    msg.from
+                )
+            }
+            _ => return Ok(()),
+        };
+        self.counters.refuse(kind, why.clone());
+        self.incoming.taken(msg, Some(why.clone()));
+        Err(why)
     }
 
     /// Refuses a message of a second gateway claiming its computer.
+    /// Nothing of it is taken nor acknowledged: counted `discarded` (its kind's `from_link`
+    /// too) and in `claims_refused`.
     fn refuse_claim(&mut self, msg: &LinkMsg) -> Route {
+        let counts = self.counters.of(msg.kind.name());
+        counts.from_link += 1;
+        counts.discarded += 1;
         *self
             .counters
             .claims_refused
@@ -582,10 +876,14 @@ impl Core {
         })
     }
 
-    /// Peers silent past the detection bound at `now_us` become lost.
+    /// Peers silent past the detection bound at `now_us` become lost (a held one's messages
+    /// are released first: they came before the loss); carried messages unacknowledged within
+    /// the retention bound are given up; holds that waited too long for the player end.
     pub fn tick(&mut self, now_us: u64) -> Vec<PeerChange> {
+        let now = self.judge(now_us);
         let mut changes = Vec::new();
         for (name, peer) in self.peers.iter_mut() {
+            peer.buffered = self.outgoing.buffered(name);
             if peer.state != PeerState::Up {
                 continue;
             }
@@ -596,6 +894,26 @@ impl Core {
                 peer.alive.clear();
                 changes.push(PeerChange::Lost(name.clone()));
             }
+        }
+        for change in &changes {
+            if let PeerChange::Lost(name) = change {
+                if self.incoming.is_held(name) {
+                    self.release(name);
+                }
+            }
+        }
+        let failures = self.outgoing.expire(now);
+        self.give_up(failures);
+        // The player acknowledges within a few heartbeats: one that does not (it stopped, or
+        // restarted and never heard of the restored event) does not keep the link closed.
+        for peer in self
+            .incoming
+            .overdue(now_us, self.plan.detection_us.max(1_000_000))
+        {
+            self.counters.remember(format!(
+                "the player did not take the restored event of `{peer}` in time: its messages go on"
+            ));
+            self.release(&peer);
         }
         changes
     }
@@ -644,6 +962,7 @@ mod tests {
             hosts: [("PLN".to_string(), "B".to_string())].into(),
             signals_computer: Some("A".into()),
             detection_us: 1_000_000,
+            retention_us: 10_000_000,
         }
     }
 
@@ -657,6 +976,21 @@ mod tests {
             seq: 0,
             kind,
             body: vec![],
+            sent_us: 0,
+            carried: None,
+        }
+    }
+
+    /// `m` carried to computer `to`'s gateway of incarnation `inc`, number `n` on its stream.
+    fn carried(m: LinkMsg, to: &str, inc: u64, n: u64) -> LinkMsg {
+        LinkMsg {
+            carried: Some(crate::link::Carried {
+                to: to.into(),
+                to_incarnation: inc,
+                seq: n,
+                floor: 1,
+            }),
+            ..m
         }
     }
 
@@ -673,6 +1007,10 @@ mod tests {
         );
     }
 
+    fn accounted(c: Counts) -> bool {
+        c.from_link == c.delivered + c.refused + c.not_mine + c.unheard + c.discarded
+    }
+
     #[test]
     fn events_go_to_the_player_computer_only() {
         let mut b = Core::new(plan("B"), 1);
@@ -682,34 +1020,34 @@ mod tests {
         let mut a = Core::new(plan("A"), 2);
         assert!(!a.forward_local(&LinkKind::Event, "program/X", false));
         let mut ch = vec![];
-        // Before B's beacon says it follows A, what B sends was not meant for A.
+        // A copy meant for another gateway of A (B follows that one) is not taken here.
+        let event = |seq| msg("B", seq, LinkKind::Event);
         assert_eq!(
-            a.on_link(&msg("B", 1, LinkKind::Event), 0, &mut ch),
-            Route::NotFollowed
+            a.on_link(&carried(event(1), "A", 7, 1), 0, &mut ch),
+            Route::Discarded
         );
         assert_eq!(ch, vec![PeerChange::Joined("B".into())]);
-        followed_by(&mut a, "B", 2, &[]);
         assert_eq!(
-            a.on_link(&msg("B", 3, LinkKind::Event), 0, &mut ch),
+            a.on_link(&carried(event(2), "A", 2, 1), 0, &mut ch),
             Route::Deliver
         );
+        // An event not carried on a stream: no gateway sends one.
+        assert!(matches!(
+            a.on_link(&event(3), 0, &mut ch),
+            Route::Foreign(w) if w.contains("not carried")
+        ));
         let c = a.counters.kinds["event"];
         assert_eq!(
-            (c.from_link, c.refused),
-            (2, 1),
+            (c.from_link, c.discarded, c.refused),
+            (3, 1, 1),
             "the runtime counts deliveries"
         );
         let mut g = Core::new(plan("G"), 3);
-        followed_by(&mut g, "B", 1, &[]);
         assert_eq!(
-            g.on_link(&msg("B", 2, LinkKind::Event), 0, &mut ch),
+            g.on_link(&carried(event(2), "A", 2, 1), 0, &mut ch),
             Route::NotMine
         );
-        let c = g.counters.kinds["event"];
-        assert_eq!(
-            c.from_link,
-            c.delivered + c.refused + c.not_mine + c.unheard
-        );
+        assert!(accounted(g.counters.kinds["event"]));
     }
 
     #[test]
@@ -723,24 +1061,25 @@ mod tests {
         assert!(!a.forward_local(&LinkKind::Heartbeat, "tool/gw-A", false));
         let mut b = Core::new(plan("B"), 2);
         let mut ch = vec![];
-        followed_by(&mut b, "A", 1, &[]);
         let player = |seq, kind| LinkMsg {
             origin: "player".into(),
             ..msg("A", seq, kind)
         };
         assert_eq!(
-            b.on_link(&player(2, call.clone()), 0, &mut ch),
+            b.on_link(&carried(player(1, call.clone()), "B", 2, 1), 0, &mut ch),
             Route::Deliver
         );
         assert_eq!(
-            b.on_link(&player(3, LinkKind::Marking), 0, &mut ch),
+            b.on_link(&player(2, LinkKind::Marking), 0, &mut ch),
             Route::Deliver
         );
         let mut g = Core::new(plan("G"), 3);
-        followed_by(&mut g, "A", 1, &[]);
-        assert_eq!(g.on_link(&player(2, call), 0, &mut ch), Route::NotMine);
+        assert_eq!(
+            g.on_link(&carried(player(1, call), "B", 2, 1), 0, &mut ch),
+            Route::NotMine
+        );
         // Its own messages, heard back, are dropped; a second gateway on its computer refused,
-        // reported once.
+        // reported once, counted.
         let mut own = msg("G", 1, LinkKind::Event);
         own.incarnation = 3;
         assert_eq!(g.on_link(&own, 0, &mut ch), Route::Own);
@@ -748,10 +1087,13 @@ mod tests {
         assert!(matches!(g.on_link(&own, 0, &mut ch), Route::Claim(Some(_))));
         assert_eq!(g.on_link(&own, 0, &mut ch), Route::Claim(None));
         assert_eq!(g.counters.claims_refused["G"], 2);
+        let c = g.counters.kinds["event"];
+        assert_eq!((c.from_link, c.discarded, c.delivered), (2, 2, 0));
         assert!(matches!(
             g.on_link(&msg("Z", 1, LinkKind::Event), 0, &mut ch),
             Route::Foreign(_)
         ));
+        assert_eq!(g.counters.undecodable, 1);
     }
 
     #[test]
@@ -765,17 +1107,14 @@ mod tests {
         let mut b = Core::new(plan("B"), 2);
         assert!(!b.forward_local(&LinkKind::Signals, "can_bridge", false));
         let mut ch = vec![];
-        followed_by(&mut b, "A", 1, &[]);
-        let mut m = msg("A", 2, LinkKind::Signals);
+        let mut m = msg("A", 1, LinkKind::Signals);
         m.origin = "can_bridge".into();
         assert_eq!(b.on_link(&m, 0, &mut ch), Route::Deliver);
         let mut g = Core::new(plan("G"), 3);
-        followed_by(&mut g, "A", 1, &[]);
-        followed_by(&mut g, "B", 1, &[]);
         assert_eq!(g.on_link(&m, 0, &mut ch), Route::Deliver);
         // Signals claimed by a computer without the data server are not taken.
         assert_eq!(
-            g.on_link(&msg("B", 2, LinkKind::Signals), 0, &mut ch),
+            g.on_link(&msg("B", 1, LinkKind::Signals), 0, &mut ch),
             Route::NotMine
         );
         let c = g.counters.kinds["signals"];
@@ -829,29 +1168,44 @@ mod tests {
     #[test]
     fn a_computer_speaks_for_its_own_processes_only() {
         let mut b = Core::new(plan("B"), 2);
-        followed_by(&mut b, "G", 1, &[]);
         let mut ch = vec![];
-        // G calls PLN (on B) as the player (on A), sends A's heartbeat, PLN's event: refused.
+        let from_g = |seq, origin: &str, kind| LinkMsg {
+            origin: origin.into(),
+            ..msg("G", seq, kind)
+        };
+        // G calls PLN (on B) as the player (on A), sends the player's heartbeat: refused.
         let call = LinkKind::Call {
             program: "PLN".into(),
         };
-        for (seq, origin, kind) in [
-            (2, "player", call.clone()),
-            (3, "player", LinkKind::Heartbeat),
-            (4, "program/PLN", LinkKind::Event),
+        for m in [
+            carried(from_g(1, "player", call.clone()), "B", 2, 1),
+            from_g(2, "player", LinkKind::Heartbeat),
         ] {
-            let mut m = msg("G", seq, kind);
-            m.origin = origin.into();
             assert!(
                 matches!(b.on_link(&m, 0, &mut ch), Route::Foreign(w) if w.contains("claims origin"))
             );
         }
-        // A tool of G calling PLN is G's to send.
-        let mut m = msg("G", 5, call);
-        m.origin = "tool/call1".into();
+        // A tool of G calling PLN is G's to send: the stream went on past the refused call,
+        // whose reason goes back to G in the acknowledgement.
+        let m = carried(from_g(3, "tool/call1", call), "B", 2, 2);
         assert_eq!(b.on_link(&m, 0, &mut ch), Route::Deliver);
+        b.taken(&m, None);
         let c = b.counters.kinds["call"];
         assert_eq!((c.from_link, c.refused), (2, 1));
+        let Some(LinkMsg {
+            kind: LinkKind::Ack { streams },
+            ..
+        }) = b.acks_due(0)
+        else {
+            panic!("an acknowledgement is due")
+        };
+        assert_eq!((streams[0].from.as_str(), streams[0].taken), ("G", 2));
+        assert!(streams[0].refused[0].1.contains("claims origin `player`"));
+        // PLN's event sent by G to the player's computer: refused there.
+        let mut a = Core::new(plan("A"), 1);
+        let m = carried(from_g(1, "program/PLN", LinkKind::Event), "A", 1, 1);
+        assert!(matches!(a.on_link(&m, 0, &mut ch), Route::Foreign(_)));
+        assert!(accounted(a.counters.kinds["event"]));
     }
 
     #[test]
@@ -859,9 +1213,16 @@ mod tests {
         let mut a = Core::new(plan("A"), 1);
         followed_by(&mut a, "B", 1, &["program/PLN"]);
         let mut ch = vec![];
+        // A call of the player's to PLN, sent to B's first gateway (incarnation 9).
+        let call = LinkKind::Call {
+            program: "PLN".into(),
+        };
+        assert!(a.carry("player", (3, 1), call, vec![], 50));
+        let due = a.due(50);
+        assert_eq!(due[0].0.carried.as_ref().map(|c| c.to_incarnation), Some(9));
         // A second gateway of B (incarnation 77) while the first is heard: refused, whatever
         // it sends, and reported once.
-        let mut second = msg("B", 1, LinkKind::Event);
+        let mut second = carried(msg("B", 1, LinkKind::Event), "A", 1, 1);
         second.incarnation = 77;
         assert!(
             matches!(a.on_link(&second, 100, &mut ch), Route::Claim(Some(w)) if w.contains("second gateway"))
@@ -870,12 +1231,12 @@ mod tests {
             alive: vec![],
             follows: vec![("A".into(), 1)],
         };
+        second.carried = None;
         assert_eq!(a.on_link(&second, 200, &mut ch), Route::Claim(None));
-        // The first goes on: no restart, its nodes still mirrored, its messages delivered.
-        assert_eq!(
-            a.on_link(&msg("B", 2, LinkKind::Event), 300, &mut ch),
-            Route::Deliver
-        );
+        // The first goes on: no restart, its nodes still mirrored, its messages delivered, the
+        // call sent to it still waiting for its acknowledgement (nothing given up).
+        let first = carried(msg("B", 2, LinkKind::Event), "A", 1, 1);
+        assert_eq!(a.on_link(&first, 300, &mut ch), Route::Deliver);
         let b = &a.peers()["B"];
         assert_eq!((b.restarts, b.incarnation, b.missing), (0, Some(9), 0));
         assert!(
@@ -885,6 +1246,15 @@ mod tests {
         assert_eq!(a.mirrored().len(), 1);
         assert_eq!(a.counters.claims_refused["B"], 2);
         assert_eq!(a.follows(), vec![("B".to_string(), 9)]);
+        assert!(a.take_failures().is_empty());
+        assert_eq!(a.buffered("B"), 1);
+        let e = a.counters.kinds["event"];
+        assert_eq!(
+            (e.from_link, e.discarded),
+            (2, 1),
+            "and one for the runtime to deliver"
+        );
+        assert!(accounted(a.counters.kinds["beacon"]));
 
         // The second's side: A follows the other gateway of B; B2 takes nothing of A's, and
         // gives up once that lasts past the bound and the grace.
@@ -896,15 +1266,9 @@ mod tests {
         let mut from_a = msg("A", 1, beacon);
         from_a.incarnation = 1;
         assert_eq!(b2.on_link(&from_a, 0, &mut ch), Route::Beacon);
-        let mut call = msg(
-            "A",
-            2,
-            LinkKind::Call {
-                program: "PLN".into(),
-            },
-        );
-        call.incarnation = 1;
-        assert_eq!(b2.on_link(&call, 10, &mut ch), Route::NotFollowed);
+        let mut to_first = due[0].0.clone();
+        to_first.incarnation = 1;
+        assert_eq!(b2.on_link(&to_first, 10, &mut ch), Route::Discarded);
         assert!(b2.mirrored().is_empty(), "no stand-in of A's player on B2");
         assert_eq!(b2.refused(1_000_000 + CLAIM_GRACE_US), None);
         let why = b2.refused(1_000_001 + CLAIM_GRACE_US).expect("given up");
@@ -912,6 +1276,15 @@ mod tests {
             why.contains("`A` follows another gateway of computer `B`"),
             "{why}"
         );
+
+        // Once B's first gateway is silent past the bound, a new incarnation is its restart:
+        // only then is what was numbered for the first given up.
+        second.link_seq = 3;
+        assert_eq!(a.on_link(&second, 1_300_001, &mut ch), Route::Beacon);
+        assert_eq!(a.peers()["B"].restarts, 1);
+        let failures = a.take_failures();
+        assert_eq!(failures.len(), 1);
+        assert!(failures[0].reason.contains("restarted"), "{failures:?}");
     }
 
     #[test]
@@ -948,8 +1321,8 @@ mod tests {
     #[test]
     fn outgoing_messages_are_numbered() {
         let mut b = Core::new(plan("B"), 5);
-        let m1 = b.outgoing("program/PLN", (1, 1), LinkKind::Event, vec![1]);
-        let m2 = b.outgoing("program/PLN", (1, 2), LinkKind::Event, vec![2]);
+        let m1 = b.outgoing("program/PLN", (1, 1), LinkKind::Event, vec![1], 0);
+        let m2 = b.outgoing("program/PLN", (1, 2), LinkKind::Event, vec![2], 0);
         assert_eq!((m1.link_seq, m2.link_seq, m2.from.as_str()), (1, 2, "B"));
     }
 }

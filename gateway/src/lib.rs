@@ -16,6 +16,9 @@
 //! - [`session`]: the zenoh session: endpoints, mutual TLS with the vehicle's keys, each peer
 //!   bound by zenoh's access control to its certificate's computer.
 //! - [`keys`]: the vehicle's keys (its certificate authority, a certificate per computer).
+//! - [`reliable`]: events and calls carried on numbered streams, acknowledged, sent again, or
+//!   given up with their senders told; [`ledger`]: the verdicts this computer's senders wait for
+//!   on the events the link gave up.
 //! - [`runtime`]: the process: one thread, a reactor over the iceoryx2 ports and the zenoh
 //!   subscriber's wake-ups.
 //!
@@ -25,7 +28,9 @@
 
 pub mod core;
 pub mod keys;
+pub mod ledger;
 pub mod link;
+pub mod reliable;
 pub mod runtime;
 pub mod session;
 

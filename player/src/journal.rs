@@ -326,6 +326,25 @@ pub struct JournalWriter {
     pub busy: Duration,
 }
 
+/// Creates journal directory `dir` (and the directories on the way) owner-only, as every file
+/// of a journal is: it is the mission's whole record, for the vehicle's user alone. A directory
+/// that is already there keeps its mode.
+pub fn create_dir(dir: &Path) -> std::io::Result<()> {
+    use std::os::unix::fs::DirBuilderExt;
+    std::fs::DirBuilder::new()
+        .recursive(true)
+        .mode(0o700)
+        .create(dir)
+}
+
+/// Opens a journal file the journal creates: owner-only (`0600`) from its creation.
+fn private_file() -> OpenOptions {
+    use std::os::unix::fs::OpenOptionsExt;
+    let mut o = OpenOptions::new();
+    o.mode(0o600);
+    o
+}
+
 fn segment_path(dir: &Path, n: u32) -> PathBuf {
     dir.join(format!("journal-{n:06}.pj"))
 }
@@ -425,7 +444,7 @@ impl JournalWriter {
         policy: FlushPolicy,
         rotate_bytes: u64,
     ) -> std::io::Result<JournalWriter> {
-        std::fs::create_dir_all(dir)?;
+        create_dir(dir)?;
         let next = segments(dir)?
             .last()
             .and_then(|p| {
@@ -467,7 +486,7 @@ impl JournalWriter {
         policy: FlushPolicy,
     ) -> std::io::Result<(File, u64)> {
         let path = segment_path(dir, n);
-        let mut file = OpenOptions::new()
+        let mut file = private_file()
             .create_new(true)
             .read(true)
             .write(true)
@@ -1350,9 +1369,9 @@ impl JournalLock {
     /// Locks journal directory `dir` (created if needed), or says who holds it.
     pub fn acquire(dir: &Path) -> Result<JournalLock, LockError> {
         let io = |e: std::io::Error| LockError::Io(dir.to_path_buf(), e);
-        std::fs::create_dir_all(dir).map_err(io)?;
+        create_dir(dir).map_err(io)?;
         let path = dir.join(LOCK_FILE);
-        let mut file = OpenOptions::new()
+        let mut file = private_file()
             .read(true)
             .write(true)
             .create(true)

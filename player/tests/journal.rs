@@ -410,3 +410,23 @@ fn segments_end_at_their_last_record_once_the_writer_is_dropped() {
     let read = read_journal(dir.path()).unwrap();
     assert_eq!(read.entries.len(), written.len() + files.len() - 1);
 }
+
+#[test]
+fn a_journal_is_for_its_owner_alone() {
+    use petrel_player::journal::{JournalLock, LOCK_FILE};
+    use std::os::unix::fs::PermissionsExt;
+    let mode = |p: &std::path::Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+    let base = tempfile::tempdir().unwrap();
+    let dir = base.path().join("run/journal");
+    let lock = JournalLock::acquire(&dir).unwrap();
+    write(&dir, 400, 8192);
+    drop(lock);
+    assert_eq!(mode(&dir), 0o700);
+    assert_eq!(mode(&base.path().join("run")), 0o700);
+    assert_eq!(mode(&dir.join(LOCK_FILE)), 0o600);
+    let files = segments(&dir).unwrap();
+    assert!(files.len() >= 3, "{files:?}");
+    for f in &files {
+        assert_eq!(mode(f), 0o600, "{}", f.display());
+    }
+}

@@ -114,6 +114,8 @@ fn forged(a: &Args, computer: &str, incarnation: u64, seq: &mut u64) -> Vec<Link
                 seq: *seq,
                 kind,
                 body,
+                sent_us: 0,
+                carried: None,
             }
         })
         .collect()

@@ -36,6 +36,54 @@ pub fn petrel_bin() -> PathBuf {
     artifact(profile_dir().join("petrel"), "the `petrel` binary")
 }
 
+// Other users: the tests that switch users run as root, with `setpriv`.
+
+/// The effective user of this process.
+pub fn euid() -> u32 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find_map(|l| l.strip_prefix("Uid:"))
+                .and_then(|r| r.split_whitespace().nth(1)?.parse().ok())
+        })
+        .expect("the effective user in /proc/self/status")
+}
+
+/// True when the tests may switch users; otherwise says why the test is skipped.
+pub fn can_switch_users(test: &str) -> bool {
+    let root = euid() == 0;
+    let setpriv = Path::new("/usr/bin/setpriv").exists() || Path::new("/bin/setpriv").exists();
+    if !(root && setpriv) {
+        eprintln!(
+            "SKIPPED {test}: it runs commands as other users with setpriv, which needs root (running as uid {}, setpriv {})",
+            euid(),
+            if setpriv { "present" } else { "absent" }
+        );
+    }
+    root && setpriv
+}
+
+/// `setpriv` as `uid` (its group `uid`, and `groups` besides), running `program`.
+pub fn as_user(uid: u32, groups: &[u32], program: &Path) -> std::process::Command {
+    let mut c = std::process::Command::new("setpriv");
+    c.arg(format!("--reuid={uid}"))
+        .arg(format!("--regid={uid}"));
+    if groups.is_empty() {
+        c.arg("--clear-groups");
+    } else {
+        let list: Vec<String> = groups.iter().map(u32::to_string).collect();
+        c.arg(format!("--groups={}", list.join(",")));
+    }
+    // No home directory to read, no runtime directory of root's to inherit.
+    c.arg(program)
+        .env_remove("XDG_RUNTIME_DIR")
+        .env_remove(petrel_ipc::RUNTIME_DIR_ENV)
+        .env_remove(petrel_ipc::GROUP_ENV)
+        .current_dir("/");
+    c
+}
+
 /// A vehicle name no other test run uses (iceoryx2 resources are per vehicle).
 pub fn unique_vehicle(tag: &str) -> String {
     use std::sync::atomic::{AtomicU32, Ordering};

@@ -9,11 +9,13 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// An HTTP response: status and body.
+/// An HTTP response: status, headers and body.
 #[derive(Debug)]
 pub struct Response {
     /// The status code.
     pub status: u16,
+    /// The headers, names in lower case, in order.
+    pub headers: Vec<(String, String)>,
     /// The body (chunks joined).
     pub body: String,
 }
@@ -22,6 +24,14 @@ impl Response {
     /// The body as JSON (`Null` when it is not).
     pub fn json(&self) -> Value {
         serde_json::from_str(&self.body).unwrap_or(Value::Null)
+    }
+
+    /// The value of header `name` (lower case), if it has one.
+    pub fn header(&self, name: &str) -> Option<&str> {
+        self.headers
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v.as_str())
     }
 }
 
@@ -33,10 +43,22 @@ pub fn http(
     headers: &[(&str, &str)],
     body: &str,
 ) -> std::io::Result<Response> {
-    let mut s = TcpStream::connect(addr)?;
+    http_to_host(addr, &addr.to_string(), method, path, headers, body)
+}
+
+/// [`http`] with the `Host` header given: the name a browser would have used for `addr`.
+pub fn http_to_host(
+    addr: SocketAddr,
+    host: &str,
+    method: &str,
+    path: &str,
+    headers: &[(&str, &str)],
+    body: &str,
+) -> std::io::Result<Response> {
+    let mut s = TcpStream::connect_timeout(&addr, Duration::from_secs(30))?;
     s.set_read_timeout(Some(Duration::from_secs(60)))?;
     let mut req = format!(
-        "{method} {path} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\nContent-Length: {}\r\n",
+        "{method} {path} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\nContent-Length: {}\r\n",
         body.len()
     );
     for (k, v) in headers {
@@ -58,7 +80,14 @@ pub fn http(
         }
         raw.extend_from_slice(&buf[..n]);
     };
-    let head = String::from_utf8_lossy(&raw[..head_end]).to_ascii_lowercase();
+    let head_text = String::from_utf8_lossy(&raw[..head_end]).into_owned();
+    let headers: Vec<(String, String)> = head_text
+        .lines()
+        .skip(1)
+        .filter_map(|l| l.split_once(':'))
+        .map(|(n, v)| (n.trim().to_ascii_lowercase(), v.trim().to_string()))
+        .collect();
+    let head = head_text.to_ascii_lowercase();
     let status = head
         .split_whitespace()
         .nth(1)
@@ -87,7 +116,11 @@ pub fn http(
     }
     let rest = String::from_utf8_lossy(&raw[head_end..]).into_owned();
     let body = if chunked { dechunk(&rest) } else { rest };
-    Ok(Response { status, body })
+    Ok(Response {
+        status,
+        headers,
+        body,
+    })
 }
 
 fn find(hay: &[u8], needle: &[u8]) -> Option<usize> {
@@ -114,15 +147,30 @@ pub struct Monitor {
     pub addr: SocketAddr,
     /// The operator token, when started with `--operator`.
     pub token: Option<String>,
+    /// Where an operator monitor writes its token (its standard output, a pipe, never has it).
+    _token_dir: Option<tempfile::TempDir>,
 }
 
 impl Monitor {
-    /// Starts `petrel monitor ARGS --listen 127.0.0.1:0` and waits for its address.
+    /// Starts `petrel monitor ARGS --listen 127.0.0.1:0` (with `--operator`, its token written
+    /// to a file of a temporary directory, as `--token-file` does) and waits for its address.
     pub fn start(args: &[&str]) -> Monitor {
-        let mut child = Command::new(crate::petrel_bin())
-            .arg("monitor")
+        let operator = args.contains(&"--operator");
+        let token_dir = operator.then(|| {
+            tempfile::Builder::new()
+                .prefix("petrel-test-token-")
+                .tempdir()
+                .expect("a directory for the token")
+        });
+        let token_file = token_dir.as_ref().map(|d| d.path().join("token"));
+        let mut cmd = Command::new(crate::petrel_bin());
+        cmd.arg("monitor")
             .args(args)
-            .args(["--listen", "127.0.0.1:0"])
+            .args(["--listen", "127.0.0.1:0"]);
+        if let Some(f) = &token_file {
+            cmd.arg("--token-file").arg(f);
+        }
+        let mut child = cmd
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())
             .spawn()
@@ -130,20 +178,18 @@ impl Monitor {
         let out = child.stdout.take().expect("its standard output");
         let mut lines = BufReader::new(out).lines();
         let mut addr = None;
-        let mut token = None;
-        let operator = args.contains(&"--operator");
         for line in lines.by_ref() {
             let Ok(line) = line else { break };
             if let Some(a) = line.strip_prefix("petrel monitor: listening on http://") {
                 addr = a.trim_end_matches('/').parse().ok();
-            }
-            if let Some(t) = line.strip_prefix("operator token: ") {
-                token = Some(t.trim().to_string());
-            }
-            if addr.is_some() && (!operator || token.is_some()) {
                 break;
             }
         }
+        // Written before the address is printed.
+        let token = token_file
+            .as_ref()
+            .and_then(|f| std::fs::read_to_string(f).ok())
+            .map(|t| t.trim().to_string());
         // Keep reading its output, so that it never blocks on a full pipe.
         std::thread::spawn(move || for _ in lines {});
         let Some(addr) = addr else {
@@ -151,7 +197,12 @@ impl Monitor {
             let status = child.wait();
             panic!("petrel monitor did not start: {status:?}");
         };
-        Monitor { child, addr, token }
+        Monitor {
+            child,
+            addr,
+            token,
+            _token_dir: token_dir,
+        }
     }
 
     /// The process id.

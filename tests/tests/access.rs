@@ -6,7 +6,9 @@
 //! another user they say so and pass.
 
 use petrel_ipc::{EventMsg, Participant, Role, Value, Vehicle};
-use petrel_tests::{petrel_bin, repo, unique_vehicle, Player, Workdir};
+use petrel_tests::{
+    as_user, can_switch_users, euid, petrel_bin, repo, unique_vehicle, Player, Workdir,
+};
 use std::os::unix::fs::{MetadataExt, PermissionsExt};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -20,52 +22,6 @@ fn marked(s: &serde_json::Value, net: &str, place: &str) -> bool {
     s["marking"][net]
         .as_array()
         .is_some_and(|m| m.iter().any(|p| p == place))
-}
-
-/// The effective user of this process.
-fn euid() -> u32 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| {
-            s.lines()
-                .find_map(|l| l.strip_prefix("Uid:"))
-                .and_then(|r| r.split_whitespace().nth(1)?.parse().ok())
-        })
-        .expect("the effective user in /proc/self/status")
-}
-
-/// True when the tests may switch users; otherwise says why the test is skipped.
-fn can_switch_users(test: &str) -> bool {
-    let root = euid() == 0;
-    let setpriv = Path::new("/usr/bin/setpriv").exists() || Path::new("/bin/setpriv").exists();
-    if !(root && setpriv) {
-        eprintln!(
-            "SKIPPED {test}: it runs commands as other users with setpriv, which needs root (running as uid {}, setpriv {})",
-            euid(),
-            if setpriv { "present" } else { "absent" }
-        );
-    }
-    root && setpriv
-}
-
-/// `setpriv` as `uid` (its group `uid`, and `groups` besides), running `program`.
-fn as_user(uid: u32, groups: &[u32], program: &Path) -> Command {
-    let mut c = Command::new("setpriv");
-    c.arg(format!("--reuid={uid}"))
-        .arg(format!("--regid={uid}"));
-    if groups.is_empty() {
-        c.arg("--clear-groups");
-    } else {
-        let list: Vec<String> = groups.iter().map(u32::to_string).collect();
-        c.arg(format!("--groups={}", list.join(",")));
-    }
-    // No home directory to read, no runtime directory of root's to inherit.
-    c.arg(program)
-        .env_remove("XDG_RUNTIME_DIR")
-        .env_remove(petrel_ipc::RUNTIME_DIR_ENV)
-        .env_remove(petrel_ipc::GROUP_ENV)
-        .current_dir("/");
-    c
 }
 
 fn text(o: &Output) -> String {

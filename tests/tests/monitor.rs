@@ -88,6 +88,11 @@ fn the_page_shows_the_marking_change_as_events_are_sent() {
     // The page agrees with `petrel status`.
     let status = player.status().expect("the player answers");
     assert_eq!(b.marked(), status_places(&status));
+    // All of it under the page's Content Security Policy, which blocked nothing.
+    assert_eq!(
+        b.eval("return window.petrelMonitor.blocked"),
+        serde_json::json!([])
+    );
 }
 
 #[test]
@@ -276,12 +281,31 @@ fn operator_actions_need_operator_mode_and_its_token() {
     }
     // Nothing was sent so far.
     assert_eq!(player.status().unwrap()["stats"]["received"], 0);
-    // The token in the query, as the printed address gives it.
+    // The token in the address is refused (a form of another site could send it, and it
+    // stays in the browser's history): only the header carries it.
     let r = http(
         op.addr,
         "POST",
         &format!("/api/send?token={token}"),
         &[],
+        body,
+    )
+    .unwrap();
+    assert_eq!(r.status, 403, "{}", r.body);
+    assert!(
+        r.json()["error"]
+            .as_str()
+            .unwrap()
+            .contains("header X-Petrel-Token"),
+        "{}",
+        r.body
+    );
+    assert_eq!(player.status().unwrap()["stats"]["received"], 0);
+    let r = http(
+        op.addr,
+        "POST",
+        "/api/send",
+        &[("X-Petrel-Token", &token)],
         body,
     )
     .unwrap();
@@ -468,7 +492,7 @@ fn the_can_data_server_panel_shows_its_bus_and_signals() {
 fn bad_arguments_are_clear_usage_errors() {
     let work = petrel_tests::Workdir::new();
     let missing = work.path().join("no-journal-here");
-    let cases: [(Vec<String>, &str); 4] = [
+    let cases: [(Vec<String>, &str); 6] = [
         (vec!["monitor".into()], "give the project directory"),
         (
             vec![
@@ -490,6 +514,25 @@ fn bad_arguments_are_clear_usage_errors() {
         (
             vec!["monitor".into(), work.path().display().to_string()],
             "petrel.toml",
+        ),
+        // The token is never written into a log: with the standard output not a terminal
+        // (here a pipe), --operator needs a file of its own.
+        (
+            vec![
+                "monitor".into(),
+                uav().display().to_string(),
+                "--operator".into(),
+            ],
+            "give --token-file FILE",
+        ),
+        (
+            vec![
+                "monitor".into(),
+                uav().display().to_string(),
+                "--allow-origin".into(),
+                "ground-station".into(),
+            ],
+            "--allow-origin ground-station: an origin starts with http://",
         ),
     ];
     for (args, says) in cases {
@@ -526,9 +569,14 @@ fn the_operator_sends_from_the_page_only_with_the_token() {
         "{r}"
     );
     assert_eq!(player.status().unwrap()["stats"]["received"], 0);
-    // With it, the event goes and the page shows the player's verdict and the new marking.
-    b.open(&monitor.url(&format!("/?token={token}")));
+    // With it (in the address's fragment, as the monitor shows it), the event goes and the
+    // page shows the player's verdict and the new marking; the token is gone from the address.
+    b.open(&monitor.url(&format!("/#token={token}")));
     b.wait_ready();
+    let href = b.wait_for(10.0, "return location.href", |v| {
+        v.as_str().is_some_and(|h| !h.contains("token"))
+    });
+    assert_eq!(href, monitor.url("/"));
     b.eval(submit);
     let r = b.wait_for(30.0, result, |v| {
         v.as_str().is_some_and(|s| s.starts_with("ok"))
@@ -537,6 +585,15 @@ fn the_operator_sends_from_the_page_only_with_the_token() {
     assert_eq!(
         wait_marked(&b, &["EVENTS.watching", "MISSION.rolling"]),
         ["EVENTS.watching", "MISSION.rolling"]
+    );
+    // A reload keeps the token for this tab, not in the address.
+    b.open(&monitor.url("/"));
+    b.wait_ready();
+    assert_eq!(b.eval("return window.petrelMonitor.token"), token.as_str());
+    // The page works under its Content Security Policy: nothing of it was blocked.
+    assert_eq!(
+        b.eval("return window.petrelMonitor.blocked"),
+        serde_json::json!([])
     );
 }
 

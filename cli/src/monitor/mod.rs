@@ -11,9 +11,14 @@
 //!   gets the latest marking instead of the steps it missed, and says so.
 //! - Replay ([`replay`]): the journal's steps, each with its state, for the page's time slider;
 //!   the replay's check of every recorded state gives the divergence alarms.
-//! - Operator actions ([`operator`]): with `--operator` only, and only with the token printed at
-//!   start, the page sends events as `petrel send` does.
+//! - Operator actions ([`operator`]): with `--operator` only, and only with the token shown at
+//!   start (on a terminal, or in an owner-only `--token-file`, never in a log), the page sends
+//!   events as `petrel send` does.
+//! - Who may ask ([`gate`]: Host and Origin, the headers of every answer) and how many
+//!   connections it holds ([`conns`]: a cap, idle ones shed first).
 
+mod conns;
+mod gate;
 mod layout;
 mod live;
 mod names;
@@ -24,6 +29,10 @@ mod server;
 use crate::common::{require_clean, Outcome, Scope};
 use std::net::SocketAddr;
 use std::path::PathBuf;
+
+/// How long a connection may stay idle (no request being answered): also the time a client
+/// has to send a request's head.
+const IDLE: std::time::Duration = std::time::Duration::from_secs(10);
 
 /// `petrel monitor`.
 #[derive(clap::Args)]
@@ -40,9 +49,23 @@ pub struct MonitorArgs {
     /// address exposes the mission's state to whoever reaches it (see docs/monitor.md).
     #[arg(long, default_value = "127.0.0.1:7878")]
     listen: SocketAddr,
-    /// Let the page send events to the player, with the token printed at start.
+    /// Let the page send events to the player, with a token shown at start: on the terminal,
+    /// or written to --token-file (never into a log).
     #[arg(long, conflicts_with = "journal")]
     operator: bool,
+    /// With --operator: write the token to this file (created owner-only, removed at exit)
+    /// instead of showing it; needed when the standard output is not a terminal.
+    #[arg(long, value_name = "FILE", requires = "operator")]
+    token_file: Option<PathBuf>,
+    /// Also serve pages of this origin (http://ground-station:7878, a proxy's
+    /// https://monitor.example): its host is answered to, its requests taken. Repeat it.
+    /// Without it, only localhost, loopback addresses and the listen address.
+    #[arg(long, value_name = "ORIGIN")]
+    allow_origin: Vec<String>,
+    /// The most connections held at once (fewer if the open-files limit is lower); past it,
+    /// idle connections are closed first.
+    #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(16..))]
+    max_connections: u32,
     /// Stop after this many seconds (for tests and demos).
     #[arg(long, value_parser = crate::common::seconds)]
     run_for: Option<f64>,
@@ -50,6 +73,16 @@ pub struct MonitorArgs {
 
 /// Runs the monitor until Ctrl-C (or `--run-for`).
 pub fn monitor(a: MonitorArgs) -> Outcome {
+    use std::io::IsTerminal;
+    let gate = match gate::Gate::new(&a.allow_origin) {
+        Ok(g) => g,
+        Err(e) => return Outcome::Usage(e),
+    };
+    if a.operator && a.token_file.is_none() && !std::io::stdout().is_terminal() {
+        return Outcome::Usage(
+            "--operator: the standard output is not a terminal, and the token is never written where others may read it (a log): give --token-file FILE (created owner-only)".into(),
+        );
+    }
     let journal_entries = match &a.journal {
         Some(j) => match replay::read(j) {
             Ok(r) => Some(r),
@@ -90,12 +123,22 @@ pub fn monitor(a: MonitorArgs) -> Outcome {
             };
             server::Mode::Live {
                 vehicle: Box::new(vehicle),
-                operator: a.operator,
+                sending: match (a.operator, &a.token_file) {
+                    (false, _) => server::Sending::ReadOnly,
+                    (true, None) => server::Sending::Terminal,
+                    (true, Some(f)) => server::Sending::TokenFile(f.clone()),
+                },
             }
         }
     };
     let run_for = a
         .run_for
         .and_then(|s| std::time::Duration::try_from_secs_f64(s).ok());
-    server::serve(compiled, names, drawing, mode, a.listen, run_for)
+    let limits = conns::Limits::for_this_process(a.max_connections as usize, IDLE);
+    let web = server::Web {
+        listen: a.listen,
+        gate,
+        limits,
+    };
+    server::serve(compiled, names, drawing, mode, web, run_for)
 }

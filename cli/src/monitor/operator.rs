@@ -5,6 +5,7 @@
 use petrel_ipc::{Participant, Role, Vehicle};
 use petrel_value::Value;
 use serde_json::{json, Value as Json};
+use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 use std::time::Duration;
 use tokio::sync::oneshot;
@@ -30,6 +31,49 @@ pub fn new_token() -> Result<String, String> {
         .and_then(|mut f| f.read_exact(&mut bytes))
         .map_err(|e| format!("cannot draw the operator token from /dev/urandom: {e}"))?;
     Ok(bytes.iter().map(|b| format!("{b:02x}")).collect())
+}
+
+/// The token written to a file only its owner may read (`--token-file`), removed when the
+/// monitor ends.
+pub struct TokenFile(PathBuf);
+
+impl TokenFile {
+    /// Writes `token` to `path`: a new file, owner-only (`0600`) from its creation, put in
+    /// place by a rename (whatever was at `path`, a link included, is replaced, never
+    /// followed or written through).
+    pub fn write(path: &Path, token: &str) -> Result<TokenFile, String> {
+        use std::io::Write;
+        use std::os::unix::fs::OpenOptionsExt;
+        let name = path
+            .file_name()
+            .ok_or_else(|| format!("--token-file {}: not the path of a file", path.display()))?;
+        let tmp = path.with_file_name(format!(
+            ".{}.{}.tmp",
+            name.to_string_lossy(),
+            std::process::id()
+        ));
+        let fail = |e: std::io::Error| {
+            let _ = std::fs::remove_file(&tmp);
+            format!("cannot write the operator token to {}: {e}", path.display())
+        };
+        let mut f = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .mode(0o600)
+            .open(&tmp)
+            .map_err(|e| format!("cannot write the operator token to {}: {e}", path.display()))?;
+        f.write_all(format!("{token}\n").as_bytes()).map_err(fail)?;
+        drop(f);
+        std::fs::rename(&tmp, path).map_err(fail)?;
+        Ok(TokenFile(path.to_path_buf()))
+    }
+}
+
+impl Drop for TokenFile {
+    fn drop(&mut self) {
+        // The token dies with the monitor: its file goes too.
+        let _ = std::fs::remove_file(&self.0);
+    }
 }
 
 /// Compares two tokens in time independent of where they differ.
@@ -120,5 +164,25 @@ mod tests {
         other[31] = if other[31] == b'0' { b'1' } else { b'0' };
         assert!(!same_token(std::str::from_utf8(&other).unwrap(), &t));
         assert_ne!(new_token().unwrap(), t);
+    }
+
+    #[test]
+    fn the_token_file_is_owner_only_replaces_a_link_and_goes_at_the_end() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("monitor.token");
+        let elsewhere = dir.path().join("elsewhere");
+        std::fs::write(&elsewhere, "kept").unwrap();
+        std::os::unix::fs::symlink(&elsewhere, &path).unwrap();
+        let f = TokenFile::write(&path, "0123abcd").unwrap();
+        let meta = std::fs::symlink_metadata(&path).unwrap();
+        assert!(meta.is_file());
+        assert_eq!(meta.permissions().mode() & 0o777, 0o600);
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "0123abcd\n");
+        assert_eq!(std::fs::read_to_string(&elsewhere).unwrap(), "kept");
+        drop(f);
+        assert!(!path.exists());
+        let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert_eq!(names.len(), 1, "{names:?}");
     }
 }

@@ -12,9 +12,17 @@
 //! | `POST /api/send`       | `--operator` only, with the token: `{"event": "name(args)"}`  |
 //!
 //! Every error is JSON, `{"error": "..."}`, with 400 (a request that cannot mean anything),
-//! 403 (read-only monitor, missing or wrong token), 404 (no such route, or not in this mode)
-//! or 502 (the player did not take the event).
+//! 403 (read-only monitor, missing or wrong token, a foreign origin), 404 (no such route, or
+//! not in this mode), 408 (a body too slow to come), 413 (a body too large), 421 (a host
+//! the monitor does not answer to), 502 (the player did not take the event) or 503 (too many
+//! pages open).
+//!
+//! The requests go through [`conns`](super::conns) (the connection cap, the idle deadline)
+//! and [`gate`](super::gate) (Host, Origin, the headers of every answer) before they reach
+//! the routes.
 
+use super::conns::{self, Limits};
+use super::gate::Gate;
 use super::layout::Drawing;
 use super::live::{self, Live};
 use super::names::Names;
@@ -31,6 +39,8 @@ use petrel_nets::compiled::CompiledProject;
 use serde_json::{json, Value as Json};
 use std::convert::Infallible;
 use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{mpsc, Arc, Mutex};
 use std::time::Duration;
 
@@ -38,17 +48,42 @@ const INDEX_HTML: &str = include_str!("assets/index.html");
 const MONITOR_JS: &str = include_str!("assets/monitor.js");
 const MONITOR_CSS: &str = include_str!("assets/monitor.css");
 
+/// The largest body of a request (an event's text is a few hundred bytes).
+const BODY_LIMIT: usize = 64 * 1024;
+/// How long a request's body may take to come.
+const BODY_TIMEOUT: Duration = Duration::from_secs(10);
+
 /// What the monitor shows.
 pub enum Mode {
-    /// A running vehicle; `operator`: the page may send events.
+    /// A running vehicle.
     Live {
         /// The vehicle followed.
         vehicle: Box<petrel_ipc::Vehicle>,
-        /// Started with `--operator`.
-        operator: bool,
+        /// Whether the page may send events, and where the token goes.
+        sending: Sending,
     },
     /// A recorded mission: its timeline.
     Replay(Json),
+}
+
+/// Whether the page may send events (`--operator`), and where the token is shown.
+pub enum Sending {
+    /// No: the monitor only reads.
+    ReadOnly,
+    /// Yes, the token printed on the standard output, a terminal.
+    Terminal,
+    /// Yes, the token written to this file, owner-only (`--token-file`).
+    TokenFile(PathBuf),
+}
+
+/// Where and how the monitor serves.
+pub struct Web {
+    /// The address it listens on.
+    pub listen: SocketAddr,
+    /// Who may ask.
+    pub gate: Gate,
+    /// How many connections, how long idle.
+    pub limits: Limits,
 }
 
 /// The server's state, shared by every request.
@@ -60,6 +95,10 @@ struct App {
     replay: Option<Json>,
     /// The operator's token and the queue of the thread that sends, with `--operator`.
     operator: Option<(String, Mutex<mpsc::Sender<operator::Request>>)>,
+    /// Event streams open, and the most allowed: half the connections, so that a page can
+    /// always load whatever the streams hold.
+    streams: Arc<AtomicUsize>,
+    max_streams: usize,
 }
 
 /// A JSON error response.
@@ -67,24 +106,28 @@ fn error(status: StatusCode, message: impl Into<String>) -> Response {
     (status, axum::Json(json!({ "error": message.into() }))).into_response()
 }
 
-/// Serves the monitor on `listen` until Ctrl-C or `run_for`.
+/// Serves the monitor as `web` says until Ctrl-C or `run_for`.
 pub fn serve(
     project: CompiledProject,
     names: Names,
     drawing: Drawing,
     mode: Mode,
-    listen: SocketAddr,
+    web: Web,
     run_for: Option<Duration>,
 ) -> Outcome {
     let project = Arc::new(project);
     let names = Arc::new(names);
     let mut model = names.model.clone();
+    let mut token_file = None;
     let (live, replay, operator, vehicle) = match mode {
-        Mode::Live { vehicle, operator } => {
+        Mode::Live { vehicle, sending } => {
             model["mode"] = json!("live");
             model["vehicle"] = json!(vehicle.name());
-            model["operator"] = json!(operator);
-            let op = if operator {
+            model["operator"] = json!(!matches!(sending, Sending::ReadOnly));
+            if let Sending::TokenFile(f) = &sending {
+                token_file = Some(f.clone());
+            }
+            let op = if !matches!(sending, Sending::ReadOnly) {
                 let token = match operator::new_token() {
                     Ok(t) => t,
                     Err(e) => return Outcome::Usage(e),
@@ -112,6 +155,8 @@ pub fn serve(
         live: live.clone(),
         replay,
         operator,
+        streams: Arc::new(AtomicUsize::new(0)),
+        max_streams: (web.limits.max_connections / 2).max(1),
     });
     let follower = match (&live, vehicle) {
         (Some(live), Some(vehicle)) => {
@@ -133,17 +178,35 @@ pub fn serve(
         Ok(r) => r,
         Err(e) => return Outcome::Usage(format!("cannot start the web server: {e}")),
     };
+    let Web {
+        listen,
+        gate,
+        limits,
+    } = web;
     let outcome = runtime.block_on(async move {
-        let listener = match tokio::net::TcpListener::bind(listen).await {
+        let listener = match conns::bind(listen) {
             Ok(l) => l,
             Err(e) => return Outcome::Usage(format!("cannot listen on {listen}: {e}")),
         };
         let addr = listener.local_addr().unwrap_or(listen);
+        // Kept while the monitor serves; removed when it ends.
+        let _token_file = match (&token, &token_file) {
+            (Some(t), Some(path)) => match operator::TokenFile::write(path, t) {
+                Ok(f) => Some(f),
+                Err(e) => return Outcome::Usage(e),
+            },
+            _ => None,
+        };
         crate::common::out(&format!("petrel monitor: listening on http://{addr}/\n"));
-        if let Some(t) = &token {
-            crate::common::out(&format!(
-                "operator token: {t}\nopen http://{addr}/?token={t} to send events from the page\n"
-            ));
+        match (&token, &token_file) {
+            (Some(_), Some(path)) => crate::common::out(&format!(
+                "operator token: in {} (owner-only); open http://{addr}/#token=TOKEN to send events from the page\n",
+                path.display()
+            )),
+            (Some(t), None) => crate::common::out(&format!(
+                "operator token: {t}\nopen http://{addr}/#token={t} to send events from the page\n"
+            )),
+            _ => {}
         }
         let router = Router::new()
             .route("/", get(index))
@@ -176,13 +239,8 @@ pub fn serve(
                 }
             }
         };
-        match axum::serve(listener, router)
-            .with_graceful_shutdown(shutdown)
-            .await
-        {
-            Ok(()) => Outcome::Clean,
-            Err(e) => Outcome::Usage(format!("the web server failed: {e}")),
-        }
+        conns::serve(listener, router, Arc::new(gate), limits, shutdown).await;
+        Outcome::Clean
     });
     // Open event streams would hold the graceful shutdown forever: the runtime's end drops them.
     runtime.shutdown_timeout(Duration::from_millis(200));
@@ -292,18 +350,52 @@ async fn events(State(app): State<Arc<App>>) -> Response {
             "this monitor replays a journal: there is no live stream",
         );
     };
+    let Some(slot) = StreamSlot::take(&app.streams, app.max_streams) else {
+        return error(
+            StatusCode::SERVICE_UNAVAILABLE,
+            format!(
+                "{} pages are following this monitor already, as many as it serves: close one",
+                app.max_streams
+            ),
+        );
+    };
     let s: std::pin::Pin<Box<dyn Stream<Item = Result<Event, Infallible>> + Send>> =
-        Box::pin(live::page_stream(live).map(|m| Ok(Event::default().data(&*m))));
+        Box::pin(live::page_stream(live).map(move |m| {
+            // The stream owns its slot: given back when the page goes.
+            let _ = &slot;
+            Ok(Event::default().data(&*m))
+        }));
     Sse::new(s).keep_alive(KeepAlive::default()).into_response()
 }
 
-/// Sends an operator event: `--operator` only, with the token (header `X-Petrel-Token` or
-/// query `token`), a body `{"event": "name(args)"}` read as `petrel send` reads its argument.
+/// One of the event streams a monitor serves; given back when dropped.
+struct StreamSlot(Arc<AtomicUsize>);
+
+impl StreamSlot {
+    /// A slot, if fewer than `max` streams are open.
+    fn take(open: &Arc<AtomicUsize>, max: usize) -> Option<StreamSlot> {
+        open.fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
+            (n < max).then_some(n + 1)
+        })
+        .ok()
+        .map(|_| StreamSlot(open.clone()))
+    }
+}
+
+impl Drop for StreamSlot {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::AcqRel);
+    }
+}
+
+/// Sends an operator event: `--operator` only, with the token in the header `X-Petrel-Token`
+/// (never in the address: it would stay in the browser's history, and a form of another site
+/// could send it), a body `{"event": "name(args)"}` read as `petrel send` reads its argument.
 async fn send(
     State(app): State<Arc<App>>,
     RawQuery(query): RawQuery,
     headers: HeaderMap,
-    body: axum::body::Bytes,
+    body: axum::body::Body,
 ) -> Response {
     let Some((token, queue)) = &app.operator else {
         return error(
@@ -311,23 +403,51 @@ async fn send(
             "this monitor is read-only: start it with --operator to send events",
         );
     };
-    let given = headers
-        .get("x-petrel-token")
-        .and_then(|v| v.to_str().ok())
-        .map(str::to_string)
-        .or_else(|| query_token(query.as_deref().unwrap_or("")));
+    let given = headers.get("x-petrel-token").and_then(|v| v.to_str().ok());
     match given {
+        None if query_has_token(query.as_deref().unwrap_or("")) => {
+            return error(
+                StatusCode::FORBIDDEN,
+                "the operator token goes in the header X-Petrel-Token, not in the address (open the page at /#token=TOKEN)",
+            )
+        }
         None => {
             return error(
                 StatusCode::FORBIDDEN,
-                "sending events needs the operator token (header X-Petrel-Token or ?token=) that petrel monitor printed",
+                "sending events needs the operator token (header X-Petrel-Token) that petrel monitor showed or wrote to its --token-file",
             )
         }
-        Some(g) if !operator::same_token(&g, token) => {
+        Some(g) if !operator::same_token(g, token) => {
             return error(StatusCode::FORBIDDEN, "wrong operator token")
         }
         Some(_) => {}
     }
+    let body = match tokio::time::timeout(BODY_TIMEOUT, axum::body::to_bytes(body, BODY_LIMIT))
+        .await
+    {
+        Ok(Ok(b)) => b,
+        Ok(Err(e)) => {
+            let too_large = std::error::Error::source(&e)
+                .is_some_and(|s| s.is::<http_body_util::LengthLimitError>());
+            return if too_large {
+                error(
+                    StatusCode::PAYLOAD_TOO_LARGE,
+                    format!("the body is larger than the {BODY_LIMIT} bytes a request may hold"),
+                )
+            } else {
+                error(
+                    StatusCode::BAD_REQUEST,
+                    format!("the body could not be read: {e}"),
+                )
+            };
+        }
+        Err(_) => {
+            return error(
+                StatusCode::REQUEST_TIMEOUT,
+                format!("the body did not come within {} s", BODY_TIMEOUT.as_secs()),
+            )
+        }
+    };
     let doc: Json = match serde_json::from_slice(&body) {
         Ok(d) => d,
         Err(e) => {
@@ -376,11 +496,9 @@ async fn send(
     }
 }
 
-/// The `token` of a query string (tokens are hexadecimal: nothing to decode).
-fn query_token(query: &str) -> Option<String> {
+/// Whether a query string carries a `token` (as addresses printed before did).
+fn query_has_token(query: &str) -> bool {
     query
         .split('&')
-        .filter_map(|kv| kv.split_once('='))
-        .find(|(k, _)| *k == "token")
-        .map(|(_, v)| v.to_string())
+        .any(|kv| kv.split_once('=').map_or(kv, |(k, _)| k) == "token")
 }

@@ -15,6 +15,7 @@ pub mod signals;
 use crate::common::{require_clean, Outcome, Scope};
 use file::{expand, Journal, Kind, ProcessSpec, SendSpec, VehicleFile};
 use petrel_nets::compiled::CompiledProject;
+use std::os::unix::fs::{DirBuilderExt, PermissionsExt};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -590,7 +591,9 @@ fn plan(a: UpArgs) -> Result<Plan, Outcome> {
 }
 
 /// The run directory: `--logs`, or the file's `logs` template under the project (a new one
-/// for each run: `-2`, `-3`... when two runs start in the same second). Created.
+/// for each run: `-2`, `-3`... when two runs start in the same second). Created owner-only
+/// (`0700`, and so are the directories created on the way), and made so if it was there: its
+/// logs hold what the processes print, which is for the vehicle's user alone.
 fn run_directory(
     a: &UpArgs,
     file: &VehicleFile,
@@ -617,12 +620,19 @@ fn run_directory(
             dir
         }
     };
-    std::fs::create_dir_all(&dir).map_err(|e| {
+    let fail = |what: &str, e: std::io::Error| {
         Outcome::Usage(format!(
-            "cannot create the run directory {}: {e}",
+            "cannot {what} the run directory {}: {e}",
             dir.display()
         ))
-    })?;
+    };
+    std::fs::DirBuilder::new()
+        .recursive(true)
+        .mode(0o700)
+        .create(&dir)
+        .map_err(|e| fail("create", e))?;
+    std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o700))
+        .map_err(|e| fail("make owner-only", e))?;
     Ok(dir)
 }
 

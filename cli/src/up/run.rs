@@ -16,6 +16,7 @@ use nix::sys::signal::{killpg, Signal};
 use nix::unistd::Pid;
 use std::collections::BTreeSet;
 use std::io::Write;
+use std::os::unix::fs::{OpenOptionsExt, PermissionsExt};
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -322,10 +323,16 @@ impl Supervisor {
         if plan.spec.kind == Kind::Player && p.restarts > 0 && plan.journal.is_some() {
             args.push("--resume".into());
         }
+        // Owner-only, like the run directory: a log holds whatever the process prints.
         let mut log = std::fs::OpenOptions::new()
             .create(true)
             .append(true)
+            .mode(0o600)
             .open(&plan.log)
+            .and_then(|f| {
+                f.set_permissions(std::fs::Permissions::from_mode(0o600))?;
+                Ok(f)
+            })
             .map_err(|e| format!("cannot open {}: {e}", plan.log.display()))?;
         let _ = writeln!(
             log,

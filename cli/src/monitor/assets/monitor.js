@@ -35,9 +35,33 @@ async function getJson(url) {
   return r.json();
 }
 
+// The operator's token comes in the address's fragment (`/#token=...`: a fragment is never
+// sent to a server nor put in a Referer), or in the query as older addresses had it. It is
+// kept for this tab only (sessionStorage), sent in a header, and taken out of the address so
+// that it does not stay in the browser's history.
+function takeToken() {
+  const key = 'petrel-token';
+  const hash = new URLSearchParams(location.hash.slice(1));
+  const query = new URLSearchParams(location.search);
+  const given = hash.get('token') || query.get('token');
+  if (given) {
+    sessionStorage.setItem(key, given);
+    hash.delete('token');
+    query.delete('token');
+    const q = query.toString(), h = hash.toString();
+    history.replaceState(null, '', location.pathname + (q ? '?' + q : '') + (h ? '#' + h : ''));
+  }
+  M.token = sessionStorage.getItem(key);
+}
+
+// What the page's Content Security Policy blocked (a test hook: the policy must not break it).
+M.blocked = [];
+document.addEventListener('securitypolicyviolation', (e) => M.blocked.push(e.violatedDirective + ' ' + e.blockedURI));
+
 async function main() {
+  takeToken();
+  window.addEventListener('hashchange', takeToken);
   const q = new URLSearchParams(location.search);
-  M.token = q.get('token');
   M.model = await getJson('/api/model');
   M.mode = M.model.mode;
   document.title = 'Petrel monitor: ' + M.model.project;
