@@ -797,7 +797,8 @@ impl Core {
     /// Whether this computer takes `msg`, a message for it that its stream (if carried) let
     /// through: a computer of the vehicle speaks for its own processes only (the player's
     /// messages come from the player's computer, a program's from its host, the data server's
-    /// from its computer; tools, `tool/NAME`, may run anywhere), and an event or a call comes
+    /// from its computer, a gateway's, `tool/gw-NAME`, from computer NAME; other tools,
+    /// `tool/NAME`, may run anywhere), and an event or a call comes
     /// carried (a gateway always carries them). A refusal is counted `refused` with its reason
     /// and, for a carried message, taken with that reason: the acknowledgement tells its
     /// sender, and the stream goes on.
@@ -806,7 +807,11 @@ impl Core {
         let home = match msg.origin.as_str() {
             "player" => Some(self.plan.player_computer.as_str()),
             "can_bridge" => self.plan.signals_computer.as_deref(),
-            o => o.strip_prefix("program/").map(|p| self.plan.host_of(p)),
+            o => match o.strip_prefix("program/") {
+                Some(p) => Some(self.plan.host_of(p)),
+                // A gateway's node is `tool/gw-COMPUTER` (`petrel_ipc::Role::gateway`).
+                None => o.strip_prefix("tool/gw-"),
+            },
         };
         let why = match home {
             Some(h) if h != msg.from => format!(
@@ -1201,11 +1206,25 @@ mod tests {
         };
         assert_eq!((streams[0].from.as_str(), streams[0].taken), ("G", 2));
         assert!(streams[0].refused[0].1.contains("claims origin `player`"));
-        // PLN's event sent by G to the player's computer: refused there.
+        // PLN's event sent by G to the player's computer, and a `call_failed` as B's gateway
+        // (the player takes `call_failed` from a gateway): refused there. G's gateway's own is
+        // G's to send.
         let mut a = Core::new(plan("A"), 1);
-        let m = carried(from_g(1, "program/PLN", LinkKind::Event), "A", 1, 1);
-        assert!(matches!(a.on_link(&m, 0, &mut ch), Route::Foreign(_)));
-        assert!(accounted(a.counters.kinds["event"]));
+        for (n, origin, refused) in [
+            (1, "program/PLN", true),
+            (2, "tool/gw-B", true),
+            (3, "tool/gw-G", false),
+        ] {
+            let m = carried(from_g(n, origin, LinkKind::Event), "A", 1, n);
+            let route = a.on_link(&m, 0, &mut ch);
+            assert_eq!(
+                matches!(route, Route::Foreign(_)),
+                refused,
+                "{origin}: {route:?}"
+            );
+        }
+        let e = a.counters.kinds["event"];
+        assert_eq!((e.from_link, e.refused), (3, 2));
     }
 
     #[test]
