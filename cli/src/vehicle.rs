@@ -533,9 +533,22 @@ pub fn status(a: StatusArgs) -> Outcome {
                     .collect()
             })
             .unwrap_or_default();
+        // Second gateways claiming a computer whose gateway is up, refused (one per computer).
+        let claims: Vec<String> = g["counters"]["claims_refused"]
+            .as_object()
+            .into_iter()
+            .flatten()
+            .map(|(c, n)| format!("{n} message(s) of a second gateway of `{c}`"))
+            .collect();
         text.push_str(&format!(
-            "  gateway of `{computer}`: peers {}\n",
-            peers.join(", ")
+            "  gateway of `{computer}`: peers {}; link: {}{}\n",
+            peers.join(", "),
+            g["security"].as_str().unwrap_or("?"),
+            if claims.is_empty() {
+                String::new()
+            } else {
+                format!("; refused {}", claims.join(", "))
+            }
         ));
         if let Some(kinds) = g["counters"]["kinds"].as_object() {
             for (kind, c) in kinds {
