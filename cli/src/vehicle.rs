@@ -1,6 +1,7 @@
 //! Commands that run a vehicle or talk to one: `play`, `send`, `status`.
 
 use crate::common::{compiled, out, vehicle_of, wait_strategy, Outcome};
+use petrel_nets::plural::count;
 use std::path::PathBuf;
 
 /// `petrel play`.
@@ -121,10 +122,11 @@ pub fn play(a: PlayArgs) -> Outcome {
                 0.0
             };
             eprintln!(
-                "player stopped: {} messages ({} refused before the engine), {} events received, {} processed, {} unused, {} refused; {} calls sent, {} failed; journal: {} records, {:.1} us each, {} failed writes, {} entries lost{}",
-                r.messages, r.bad_messages, s.received, s.processed, s.unused, s.refused, r.calls_sent, r.calls_failed,
-                r.journal_records, per_record, r.journal_failures, r.journal_lost,
-                if r.resumed_steps > 0 { format!("; resumed after {} steps", r.resumed_steps) } else { String::new() }
+                "player stopped: {} ({} refused before the engine), {} received, {} processed, {} unused, {} refused; {} sent, {} failed; journal: {}, {:.1} us each, {}, {} lost{}",
+                count(r.messages, "message"), r.bad_messages, count(s.received, "event"), s.processed, s.unused, s.refused,
+                count(r.calls_sent, "call"), r.calls_failed, count(r.journal_records, "record"), per_record,
+                count(r.journal_failures, "failed write"), count(r.journal_lost, "entry"),
+                if r.resumed_steps > 0 { format!("; resumed after {}", count(r.resumed_steps, "step")) } else { String::new() }
             );
             Outcome::Clean
         }
@@ -494,25 +496,25 @@ pub fn status(a: StatusArgs) -> Outcome {
         Some("ok") => text.push_str("  flight recorder: ok\n"),
         Some("none") | None => text.push_str("  flight recorder: none (--no-journal)\n"),
         Some(state) => text.push_str(&format!(
-            "  flight recorder: {}: {} ({} records waiting in memory, {} entries lost); events are processed but not acknowledged\n",
+            "  flight recorder: {}: {} ({} waiting in memory, {} lost); events are processed but not acknowledged\n",
             state.to_uppercase(),
             recorder["reason"].as_str().unwrap_or("?"),
-            recorder["backlog_records"],
-            recorder["lost_entries"],
+            count(recorder["backlog_records"].as_u64().unwrap_or(0), "record"),
+            count(recorder["lost_entries"].as_u64().unwrap_or(0), "entry"),
         )),
     }
     if let Some(b) = &bridge_doc {
         text.push_str(&format!(
-            "  CAN data server on `{}`: bus {}, {} frames ({} unknown, {} of a wrong length, {} error frames), {} events sent ({} waiting), {} commands ({} failed)\n",
+            "  CAN data server on `{}`: bus {}, {} ({} unknown, {} of a wrong length, {}), {} sent ({} waiting), {} ({} failed)\n",
             b["interface"].as_str().unwrap_or("?"),
             b["bus_state"].as_str().unwrap_or("?"),
-            b["frames"],
+            count(b["frames"].as_u64().unwrap_or(0), "frame"),
             b["unknown_id"],
             b["wrong_length"],
-            b["error_frames"],
-            b["events_sent"],
+            count(b["error_frames"].as_u64().unwrap_or(0), "error frame"),
+            count(b["events_sent"].as_u64().unwrap_or(0), "event"),
             b["events_pending"],
-            b["commands"],
+            count(b["commands"].as_u64().unwrap_or(0), "command"),
             b["commands_failed"],
         ));
     }

@@ -666,3 +666,66 @@ event = "start_misson"
     assert_eq!(first["line"], 8);
     assert_eq!(first["column"], 20);
 }
+
+/// `petrel` as if built into `work/target/PROFILE/`: a copy of this build's binary there (a
+/// hard link when the file system allows), which makes that directory the `{target}` of
+/// vehicle files.
+fn petrel_built_as(work: &Workdir, profile: &str) -> PathBuf {
+    let dir = work.path().join("target").join(profile);
+    std::fs::create_dir_all(&dir).unwrap();
+    let exe = dir.join("petrel");
+    let built = Path::new(env!("CARGO_BIN_EXE_petrel"));
+    if std::fs::hard_link(built, &exe).is_err() {
+        std::fs::copy(built, &exe).unwrap();
+    }
+    exe
+}
+
+#[test]
+fn a_missing_program_gets_the_cargo_command_that_builds_it_with_petrel_s_profile() {
+    // Redermor's programs are a binary of petrel-redermor-live, the UAV's examples of
+    // petrel-programs; neither is in the fresh target directory the running petrel comes
+    // from. cargo, asked in the repository's workspace, would build into it
+    // (CARGO_TARGET_DIR), so the hint is the one command that fills `{target}`.
+    let work = Workdir::new();
+    let cases = [
+        (
+            "release",
+            "missions/redermor",
+            "redermor-program",
+            "`cargo build --release -p petrel-redermor-live --bin redermor-program`",
+        ),
+        (
+            "debug",
+            "missions/uav",
+            "examples/uav_gui",
+            "`cargo build -p petrel-programs --example uav_gui`",
+        ),
+    ];
+    for (profile, project, missing, command) in cases {
+        let exe = petrel_built_as(&work, profile);
+        let vehicle = unique_vehicle("hint");
+        let o = Command::new(&exe)
+            .arg("up")
+            .arg(repo().join(project))
+            .args(["--vehicle", &vehicle])
+            .arg("--logs")
+            .arg(work.path().join(format!("run-{profile}")))
+            .env("CARGO_TARGET_DIR", work.path().join("target"))
+            .output()
+            .expect("petrel up runs");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        let looked_for = exe.parent().unwrap().join(missing);
+        assert!(
+            err.contains(&format!("{} does not exist", looked_for.display())),
+            "{err}"
+        );
+        assert!(err.contains(command), "{command} missing:\n{err}");
+        let root = repo().canonicalize().unwrap();
+        assert!(err.contains(&format!("(in {})", root.display())), "{err}");
+        if let Ok(v) = petrel_ipc::Vehicle::new(&vehicle) {
+            let _ = petrel_ipc::remove_vehicle_files(&v);
+        }
+    }
+}

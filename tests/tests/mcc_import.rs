@@ -58,7 +58,7 @@ fn every_mcc_net_imports_or_is_refused_with_reasons() {
         let msg = String::from_utf8_lossy(&o.stdout);
         assert!(
             msg.contains(&format!(
-                "1 net(s), {places} places, {transitions} transitions"
+                "1 net, {places} places, {transitions} transitions"
             )),
             "{model}: {msg}"
         );

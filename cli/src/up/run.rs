@@ -215,10 +215,10 @@ pub fn run(plan: Plan, t0: Instant) -> Outcome {
         None => String::new(),
     };
     display.message(&format!(
-        "petrel up: vehicle `{}` (project `{}`), {} processes{on}; run directory {}",
+        "petrel up: vehicle `{}` (project `{}`), {}{on}; run directory {}",
         plan.vehicle.name(),
         plan.project.name,
-        plan.processes.len(),
+        petrel_nets::plural::count(plan.processes.len(), "process"),
         plan.run_dir.display()
     ));
     let procs = plan
@@ -297,9 +297,9 @@ impl Supervisor {
                 {
                     if let Some(s) = &self.player {
                         text.push_str(&format!(
-                            "  mission {:.1} s, {} events, {} marked{}",
+                            "  mission {:.1} s, {}, {} marked{}",
                             s.time,
-                            s.processed,
+                            petrel_nets::plural::count(s.processed, "event"),
                             s.marked.len(),
                             if s.over { ", OVER" } else { "" }
                         ));
@@ -486,7 +486,8 @@ impl Supervisor {
             let failure = match p.plan.spec.restart {
                 Restart::Never => format!("{why} (restart = \"never\")"),
                 Restart::OnFailure { max, .. } if p.restarts >= max => {
-                    format!("{why}, after {max} restarts: none left")
+                    let restarts = petrel_nets::plural::count(max, "restart");
+                    format!("{why}, after {restarts}: none left")
                 }
                 Restart::OnFailure { .. } => why.clone(),
             };
@@ -923,8 +924,10 @@ impl Supervisor {
         }
         if let Some(s) = &self.player {
             text.push_str(&format!(
-                "  last player status: mission time {:.1} s, {} events processed, marking {}\n",
-                s.time, s.processed, s.doc["marking"]
+                "  last player status: mission time {:.1} s, {} processed, marking {}\n",
+                s.time,
+                petrel_nets::plural::count(s.processed, "event"),
+                s.doc["marking"]
             ));
         }
         text.push_str(&format!("logs: {}\n", self.plan.run_dir.display()));
