@@ -6,11 +6,13 @@
 //!   their executables and arguments expanded, the run directory);
 //! - [`run`]: the supervisor that starts, watches, restarts and stops the processes;
 //! - [`display`]: the status lines; [`signals`]: stop requests and children's ends;
-//!   `build_hint`: the cargo command for a missing executable of the running petrel's build.
+//!   `build_hint`: the cargo command for a missing executable of the running petrel's build;
+//!   [`notify`]: systemd's readiness and watchdog notifications.
 
 mod build_hint;
 pub mod display;
 pub mod file;
+pub mod notify;
 pub mod run;
 pub mod signals;
 

@@ -9,6 +9,7 @@
 
 use super::display::{Display, Line};
 use super::file::{Kind, Restart};
+use super::notify::{Notifier, VARIABLES};
 use super::signals::Signals;
 use super::{Plan, Planned, Until};
 use crate::common::Outcome;
@@ -163,6 +164,8 @@ struct Supervisor {
     origin: String,
     /// The running petrel, which starts each process (`petrel __exec`).
     petrel: std::path::PathBuf,
+    /// systemd's notifications (readiness, watchdog), when it runs us.
+    notify: Notifier,
 }
 
 /// Runs the plan; prints the summary; the outcome gives the exit code.
@@ -221,6 +224,11 @@ pub fn run(plan: Plan, t0: Instant) -> Outcome {
         petrel_nets::plural::count(plan.processes.len(), "process"),
         plan.run_dir.display()
     ));
+    let mut notify = Notifier::from_env();
+    notify.status(&format!(
+        "starting {}",
+        petrel_nets::plural::count(plan.processes.len(), "process")
+    ));
     let procs = plan
         .processes
         .iter()
@@ -252,6 +260,7 @@ pub fn run(plan: Plan, t0: Instant) -> Outcome {
         acks: Vec::new(),
         origin,
         petrel,
+        notify,
     };
     let end = sup.supervise(&signals, &beats, &deltas, &events);
     sup.stop_all(&signals, &beats, &deltas);
@@ -357,6 +366,10 @@ impl Supervisor {
             .env("PETREL_LOGS", &self.plan.run_dir)
             .env("PETREL_PROCESS", &plan.spec.name)
             .env("PETREL_RESTARTS", p.restarts.to_string())
+            // systemd's notifications are ours alone (notify.rs).
+            .env_remove(VARIABLES[0])
+            .env_remove(VARIABLES[1])
+            .env_remove(VARIABLES[2])
             .current_dir(&self.plan.run_dir)
             .stdin(Stdio::null())
             .stdout(log)
@@ -766,6 +779,8 @@ impl Supervisor {
     ) -> End {
         loop {
             self.display.update(&self.lines());
+            // The watchdog watches this loop: fed every round it turns.
+            self.notify.watchdog(Instant::now());
             if let Some(s) = signals.wait(ROUND) {
                 return End::Signal(s);
             }
@@ -788,6 +803,12 @@ impl Supervisor {
                 }
                 self.display
                     .message(&format!("vehicle up in {:.2} s", self.elapsed()));
+                let status = format!(
+                    "vehicle `{}` up: {} running",
+                    self.plan.vehicle.name(),
+                    petrel_nets::plural::count(self.procs.len(), "process")
+                );
+                self.notify.ready(&status);
             }
             if self.up_at.is_some() {
                 if let Some(why) = self.send_due(events) {
@@ -821,6 +842,7 @@ impl Supervisor {
         beats: &petrel_ipc::HeartbeatSubscriber,
         deltas: &petrel_ipc::MarkingSubscriber,
     ) {
+        self.notify.stopping("stopping the vehicle");
         for p in &mut self.procs {
             match p.state {
                 State::Waiting => p.state = State::NotStarted,
@@ -854,6 +876,7 @@ impl Supervisor {
             }
             while members.iter().any(|&i| self.procs[i].alive()) {
                 self.display.update(&self.lines());
+                self.notify.watchdog(Instant::now());
                 if let Some(s) = signals.wait(ROUND) {
                     if !hurry {
                         self.display
