@@ -606,7 +606,7 @@ args = ["-c", "echo vehicle $PETREL_VEHICLE process $PETREL_PROCESS > {logs}/log
     let out = up.stdout();
     assert_eq!(status.code(), Some(0), "{out}\n{}", up.stderr());
     assert!(
-        out.contains("1 processes on computer `ground` (10.0.0.1), ground station"),
+        out.contains("1 process on computer `ground` (10.0.0.1), ground station"),
         "{out}"
     );
     assert!(out.contains("every process ended"), "{out}");
