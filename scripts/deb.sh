@@ -85,6 +85,12 @@ EOF
     echo "$deb"
 }
 
+# Unmounts whatever is mounted under $1 (the deepest first).
+unmount_under() {
+    findmnt -n -l -o TARGET | awk -v p="$1/" 'index($0, p) == 1' | sort -r |
+        xargs -r -d '\n' umount -l || true
+}
+
 chroot_dir() {
     [ $# -eq 1 ] || die "usage: scripts/deb.sh chroot DIR"
     local dir="$1"
@@ -94,11 +100,17 @@ chroot_dir() {
     [ "$(id -u)" -eq 0 ] || die "debootstrap needs root"
     local suite
     suite="$(. /etc/os-release && echo "$VERSION_CODENAME")"
-    rm -rf "$dir.partial"
+    # What an interrupted debootstrap left: its mounts first, then the tree (never across a
+    # mount into the host's /proc or /sys).
+    if [ -d "$dir.partial" ]; then
+        unmount_under "$dir.partial"
+        rm -rf --one-file-system "$dir.partial"
+    fi
     debootstrap --variant=minbase --include=adduser,systemd "$suite" "$dir.partial" \
         http://deb.debian.org/debian >"$dir.log" 2>&1 || {
         tail -n 20 "$dir.log" >&2
-        rm -rf "$dir.partial"
+        unmount_under "$dir.partial"
+        rm -rf --one-file-system "$dir.partial"
         die "debootstrap failed (its log: $dir.log)"
     }
     touch "$dir.partial/.petrel-chroot"

@@ -1,7 +1,7 @@
 //! Commands that run a vehicle or talk to one: `play`, `send`, `status`.
 
 use crate::common::{compiled, out, vehicle_of, wait_strategy, Outcome};
-use petrel_nets::plural::count;
+use petrel_nets::plural::{self, count};
 use std::path::PathBuf;
 
 /// `petrel play`.
@@ -101,8 +101,10 @@ pub fn play(a: PlayArgs) -> Outcome {
         return match petrel_player::shadow::shadow(&c, &opts) {
             Ok(r) => {
                 eprintln!(
-                    "shadow stopped: {} vehicle steps followed, {} reload(s) followed, {} divergence alarm(s)",
-                    r.steps, r.reloads, r.alarms
+                    "shadow stopped: {} followed, {} followed, {}",
+                    count(r.steps, "vehicle step"),
+                    count(r.reloads, "reload"),
+                    count(r.alarms, "divergence alarm")
                 );
                 if r.alarms == 0 {
                     Outcome::Clean
@@ -252,25 +254,28 @@ pub fn send(a: SendArgs) -> Outcome {
             _ => "the flight recorder had not written them".to_string(),
         };
         eprintln!(
-            "{} event(s) were taken by the player but are not on record ({why}): they would not survive a crash of the player",
-            verdict.not_on_record
+            "taken by the player but not on record: {} ({why}); they would not survive a crash of the player",
+            plural::count(verdict.not_on_record, "event")
         );
     }
     if verdict.unacknowledged > 0 {
         eprintln!(
-            "the player did not acknowledge {} event(s) within {:.1} s: they may be lost",
-            verdict.unacknowledged,
+            "the player did not acknowledge {} within {:.1} s: they may be lost",
+            plural::count(verdict.unacknowledged, "event"),
             timeout.as_secs_f64()
         );
     }
     if verdict.refused > 0 {
         eprintln!(
-            "the player refused {} event(s): see the reasons above",
-            verdict.refused
+            "the player refused {}: see the reasons above",
+            plural::count(verdict.refused, "event")
         );
     }
     if refused > 0 {
-        eprintln!("{refused} event(s) were refused by the transport: the player's buffer was full");
+        eprintln!(
+            "refused by the transport (the player's buffer was full): {}",
+            plural::count(refused, "event")
+        );
         safe = false;
     }
     if safe {
@@ -333,8 +338,8 @@ impl Verdict {
     /// One line per event for a single event; a summary and the refusals otherwise.
     fn text(&self, origin: &str, event: &str) -> String {
         let mut text = format!(
-            "verdict of the player on the {} event(s) of {origin}: {} taken and on record, {} refused, {} taken but not on record, {} unacknowledged\n",
-            self.delivered, self.on_record, self.refused, self.not_on_record, self.unacknowledged
+            "verdict of the player on the {} of {origin}: {} taken and on record, {} refused, {} taken but not on record, {} unacknowledged\n",
+            count(self.delivered, "event"), self.on_record, self.refused, self.not_on_record, self.unacknowledged
         );
         for (seq, reason) in &self.refusals {
             text.push_str(&format!(
