@@ -28,6 +28,9 @@ pub struct GatewayArgs {
 /// The default detection bound of a lost computer.
 pub const DEFAULT_DETECTION: Duration = Duration::from_secs(1);
 
+/// The default retention bound of a carried event or call (docs/gateway.md).
+pub const DEFAULT_RETENTION: Duration = Duration::from_secs(30);
+
 /// Runs the gateway until SIGINT or SIGTERM; prints its final counters as JSON.
 pub fn gateway(a: GatewayArgs) -> Outcome {
     let checked = match require_clean(
@@ -188,6 +191,11 @@ pub fn gateway(a: GatewayArgs) -> Outcome {
             hosts,
             signals_computer,
             detection_us: detection.as_micros() as u64,
+            retention_us: file
+                .link
+                .retention
+                .unwrap_or(DEFAULT_RETENTION.max(2 * detection))
+                .as_micros() as u64,
         },
         listen,
         connect,

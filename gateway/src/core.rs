@@ -1,13 +1,16 @@
 //! The gateway's decisions, sans I/O: which local messages go on the link, which link messages
 //! are for this computer, the state of each peer computer (heard within the detection bound or
-//! lost), which of the peers' nodes this computer mirrors, and the counters that account for
-//! every message. Time is injected (microseconds since the gateway started).
+//! lost), which of the peers' nodes this computer mirrors, the carried messages (events and
+//! calls: `crate::reliable`'s streams, acknowledged, sent again, or given up and their senders
+//! told), and the counters that account for every message. Time is injected (microseconds
+//! since the gateway started).
 
 use std::collections::{BTreeMap, BTreeSet};
 
 use serde::Serialize;
 
-use crate::link::{LinkKind, LinkMsg};
+use crate::link::{LinkKind, LinkMsg, StreamAck};
+use crate::reliable::{Accept, Bounds, Failure, Incoming, Outgoing};
 
 /// Where things live: the vehicle's computers, the player's, and the host of each program.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -26,6 +29,9 @@ pub struct Plan {
     pub signals_computer: Option<String>,
     /// A peer silent for this long is lost, microseconds.
     pub detection_us: u64,
+    /// A carried message (an event, a call) its destination has not acknowledged within this
+    /// long is given up and its sender told, microseconds (longer than `detection_us`).
+    pub retention_us: u64,
 }
 
 impl Plan {
@@ -75,6 +81,27 @@ impl Plan {
     pub fn beacon_period_us(&self) -> u64 {
         (self.detection_us / 4).clamp(10_000, 250_000)
     }
+
+    /// The computer that delivers a message of `kind`, when it is carried (events go to the
+    /// player's computer, calls to the program's); `None` for news (heartbeats, markings,
+    /// signals, beacons, acknowledgements), which is not.
+    pub fn destination(&self, kind: &LinkKind) -> Option<&str> {
+        match kind {
+            LinkKind::Event => Some(&self.player_computer),
+            LinkKind::Call { program } => Some(self.host_of(program)),
+            _ => None,
+        }
+    }
+}
+
+/// Microseconds as people read them: `10 s`, `1.5 s`, `250 ms`.
+pub fn seconds(us: u64) -> String {
+    if us >= 1_000_000 {
+        let s = us as f64 / 1e6;
+        format!("{} s", (s * 10.0).round() / 10.0)
+    } else {
+        format!("{} ms", us / 1000)
+    }
 }
 
 /// The state of a peer computer as this gateway sees it.
@@ -122,6 +149,8 @@ pub struct Peer {
     pub restorations: u64,
     /// Restarts of its gateway seen (new incarnations after the first).
     pub restarts: u64,
+    /// Carried messages for it waiting for its acknowledgement (at the latest tick).
+    pub buffered: usize,
 }
 
 impl Peer {
@@ -136,6 +165,7 @@ impl Peer {
             losses: 0,
             restorations: 0,
             restarts: 0,
+            buffered: 0,
         }
     }
 }
@@ -162,10 +192,22 @@ pub struct Counts {
     /// Broadcast news (heartbeats, marking deltas, signals) for this computer that no process
     /// here follows (no status, monitor, shadow or program reading signals): not a loss.
     pub unheard: u64,
+    /// Carried messages (events, calls) sent again, unacknowledged.
+    pub retransmitted: u64,
+    /// Carried messages the destination's gateway acknowledged having taken.
+    pub carried: u64,
+    /// Carried messages given up (their senders told): unacknowledged within the retention
+    /// bound, refused by the destination, for a destination that restarted, or refused at once
+    /// by a full buffer.
+    pub given_up: u64,
+    /// Copies of carried messages for this computer not taken: already taken, out of order,
+    /// too late, or for an earlier gateway of this computer (see `crate::reliable::Discarded`).
+    pub discarded: u64,
 }
 
 /// The gateway's counters, by message kind; `from_link = delivered + refused + not_mine +
-/// unheard`.
+/// unheard + discarded` (once the held messages are delivered), and the carried messages taken
+/// here are `carried + given_up` plus those still buffered.
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct Counters {
     /// By kind (`event`, `call`, `heartbeat`, `marking`, `signals`, `beacon`).
@@ -273,12 +315,17 @@ pub enum Route {
     Own,
     /// Not a computer of the vehicle, or damaged: counted, dropped.
     Foreign(String),
-    /// A beacon: nothing to deliver.
+    /// A beacon or an acknowledgement: nothing to deliver.
     Beacon,
     /// For another computer.
     NotMine,
-    /// To be delivered here.
+    /// To be delivered here (a carried message: then [`Core::taken`]).
     Deliver,
+    /// Carried, for this computer, but its computer came back and the player has not taken the
+    /// restored event yet: delivered later, from [`Core::take_released`].
+    Held,
+    /// A copy of a carried message not taken (counted `discarded`).
+    Discarded,
 }
 
 /// The gateway's state.
@@ -290,6 +337,18 @@ pub struct Core {
     pub counters: Counters,
     incarnation: u64,
     next_seq: u64,
+    outgoing: Outgoing,
+    incoming: Incoming,
+    /// Whether a returning computer's carried messages wait for the player to take its
+    /// restored event (on the player's computer, with link events).
+    hold_on_restore: bool,
+    failures: Vec<Failure>,
+    released: Vec<LinkMsg>,
+    /// The clock carried messages age by: the injected one, without the time this gateway
+    /// itself stood still (stopped, or starved past two beacon periods), so that it judges
+    /// the link only while it listens to it.
+    judged_us: u64,
+    last_now_us: u64,
 }
 
 impl Core {
@@ -300,13 +359,36 @@ impl Core {
             .iter()
             .map(|p| (p.clone(), Peer::new()))
             .collect();
+        let bounds = Bounds::new(plan.detection_us, plan.retention_us);
         Core {
             plan,
             peers,
             counters: Counters::default(),
             incarnation,
             next_seq: 1,
+            outgoing: Outgoing::new(bounds),
+            incoming: Incoming::new(bounds),
+            hold_on_restore: false,
+            failures: Vec::new(),
+            released: Vec::new(),
+            judged_us: 0,
+            last_now_us: 0,
         }
+    }
+
+    /// A returning computer's carried messages wait until the player took its restored event
+    /// ([`link_event_sent`](Self::link_event_sent), [`player_took`](Self::player_took)).
+    pub fn set_hold_on_restore(&mut self, on: bool) {
+        self.hold_on_restore = on;
+    }
+
+    /// Advances the judging clock to the injected `now_us`: a step longer than two beacon
+    /// periods counts as two.
+    fn judge(&mut self, now_us: u64) -> u64 {
+        let step = now_us.saturating_sub(self.last_now_us);
+        self.judged_us += step.min(2 * self.plan.beacon_period_us());
+        self.last_now_us = self.last_now_us.max(now_us);
+        self.judged_us
     }
 
     /// The plan.
@@ -319,27 +401,180 @@ impl Core {
         &self.peers
     }
 
-    /// A message of this gateway for the link, numbered; `sender` and `seq` are the ipc
-    /// header's of the message it carries (0 for the gateway's own).
+    /// A message of this gateway for the link, numbered and stamped at `now_us`; `sender` and
+    /// `seq` are the ipc header's of the message it carries (0 for the gateway's own).
     pub fn outgoing(
         &mut self,
+        origin: &str,
+        header: (u64, u64),
+        kind: LinkKind,
+        body: Vec<u8>,
+        now_us: u64,
+    ) -> LinkMsg {
+        let mut msg = self.unnumbered(origin, header, kind, body);
+        self.number(&mut msg, now_us);
+        msg
+    }
+
+    fn unnumbered(
+        &self,
         origin: &str,
         (sender, seq): (u64, u64),
         kind: LinkKind,
         body: Vec<u8>,
     ) -> LinkMsg {
-        let link_seq = self.next_seq;
-        self.next_seq += 1;
         LinkMsg {
             from: self.plan.computer.clone(),
             incarnation: self.incarnation,
-            link_seq,
+            link_seq: 0,
             origin: origin.to_owned(),
             sender,
             seq,
             kind,
             body,
+            sent_us: 0,
+            carried: None,
         }
+    }
+
+    fn number(&mut self, msg: &mut LinkMsg, now_us: u64) {
+        msg.link_seq = self.next_seq;
+        self.next_seq += 1;
+        msg.sent_us = now_us;
+    }
+
+    /// Takes a local event or call for the link at `now_us`: kept until its destination's
+    /// gateway acknowledges it ([`due`](Self::due) sends it). `false`: refused at once (the
+    /// buffer for that destination is full, or the kind is not carried): its failure is in
+    /// [`take_failures`](Self::take_failures).
+    pub fn carry(
+        &mut self,
+        origin: &str,
+        header: (u64, u64),
+        kind: LinkKind,
+        body: Vec<u8>,
+        now_us: u64,
+    ) -> bool {
+        let Some(to) = self.plan.destination(&kind).map(str::to_owned) else {
+            return false;
+        };
+        let now = self.judge(now_us);
+        let msg = self.unnumbered(origin, header, kind, body);
+        match self.outgoing.queue(&to, msg, now) {
+            Ok(()) => true,
+            Err(f) => {
+                self.give_up(vec![*f]);
+                false
+            }
+        }
+    }
+
+    fn give_up(&mut self, failures: Vec<Failure>) {
+        for f in failures {
+            self.counters.of(f.msg.kind.name()).given_up += 1;
+            self.counters.remember(format!(
+                "{} from {} given up: {}",
+                f.msg.kind.name(),
+                f.msg.origin,
+                f.reason
+            ));
+            self.failures.push(f);
+        }
+    }
+
+    /// The carried messages given up since the last call: their senders must be told.
+    pub fn take_failures(&mut self) -> Vec<Failure> {
+        std::mem::take(&mut self.failures)
+    }
+
+    /// The held messages released since the last call, in order: to deliver now (then
+    /// [`taken`](Self::taken)).
+    pub fn take_released(&mut self) -> Vec<LinkMsg> {
+        std::mem::take(&mut self.released)
+    }
+
+    /// The copies of carried messages to put on the link at `now_us`, numbered and stamped:
+    /// the new ones and those unacknowledged for a while, for the peers up; with, for each,
+    /// whether it is a retransmission.
+    pub fn due(&mut self, now_us: u64) -> Vec<(LinkMsg, bool)> {
+        let now = self.judge(now_us);
+        let mut out = Vec::new();
+        for (name, peer) in &self.peers {
+            let (PeerState::Up, Some(inc)) = (peer.state, peer.incarnation) else {
+                continue;
+            };
+            let due = self.outgoing.due(name, inc, now);
+            out.extend(due.copies.into_iter().zip(due.again));
+        }
+        for (msg, _) in out.iter_mut() {
+            self.number(msg, now_us);
+        }
+        out
+    }
+
+    /// The acknowledgement of what this gateway took since the last one, if any, to put on the
+    /// link at `now_us`.
+    pub fn acks_due(&mut self, now_us: u64) -> Option<LinkMsg> {
+        let streams = self.incoming.acks_due();
+        if streams.is_empty() {
+            return None;
+        }
+        Some(self.outgoing(
+            "gateway",
+            (0, 0),
+            LinkKind::Ack { streams },
+            Vec::new(),
+            now_us,
+        ))
+    }
+
+    /// The carried `msg` (from [`on_link`](Self::on_link)'s `Deliver` or
+    /// [`take_released`](Self::take_released)) was delivered here, or refused for a reason the
+    /// acknowledgement carries back to its sender.
+    pub fn taken(&mut self, msg: &LinkMsg, refusal: Option<String>) {
+        self.incoming.taken(msg, refusal);
+    }
+
+    /// The restored event for `peer` went to the player as this gateway's message `seq`; `None`
+    /// when it could not be sent: then nothing waits for it.
+    pub fn link_event_sent(&mut self, peer: &str, seq: Option<u64>) {
+        match seq {
+            Some(seq) => self.incoming.told(peer, seq),
+            None => self.release(peer),
+        }
+    }
+
+    /// The player's heartbeat says it took this gateway's messages up to `seq`.
+    pub fn player_took(&mut self, seq: u64) {
+        for peer in self.incoming.player_took(seq) {
+            self.release(&peer);
+        }
+    }
+
+    fn release(&mut self, peer: &str) {
+        let msgs = self.incoming.release(peer);
+        self.released.extend(msgs);
+    }
+
+    /// Messages waiting for `peer`'s acknowledgement.
+    pub fn buffered(&self, peer: &str) -> usize {
+        self.outgoing.buffered(peer)
+    }
+
+    fn on_acks(&mut self, from: &str, incarnation: u64, streams: &[StreamAck]) -> bool {
+        let mut mine = false;
+        for ack in streams {
+            if ack.from != self.plan.computer || ack.from_incarnation != self.incarnation {
+                continue;
+            }
+            mine = true;
+            let (taken, failures) = self.outgoing.acknowledged(from, incarnation, ack);
+            for m in taken {
+                self.counters.of(m.kind.name()).carried += 1;
+            }
+            self.give_up(failures);
+        }
+        mine
     }
 
     /// Whether a local message of `kind` from `origin` goes on the link. `own` says this
@@ -366,7 +601,7 @@ impl Core {
             LinkKind::Heartbeat | LinkKind::Marking => self.plan.has_player() && origin == "player",
             // The data server's signals, for the programs of the other computers.
             LinkKind::Signals => self.plan.has_signals(),
-            LinkKind::Beacon { .. } => false,
+            LinkKind::Beacon { .. } | LinkKind::Ack { .. } => false,
         }
     }
 
@@ -389,9 +624,11 @@ impl Core {
             self.counters.remember(why.clone());
             return Route::Foreign(why);
         };
+        let mut restarted = false;
         if peer.incarnation != Some(msg.incarnation) {
             if peer.incarnation.is_some() {
                 peer.restarts += 1;
+                restarted = true;
             }
             peer.incarnation = Some(msg.incarnation);
             peer.expected_seq = msg.link_seq;
@@ -401,23 +638,53 @@ impl Core {
         }
         peer.expected_seq = msg.link_seq.max(peer.expected_seq) + 1;
         peer.last_heard_us = Some(now_us);
+        let back = peer.state != PeerState::Up;
         match peer.state {
             PeerState::Unknown => changes.push(PeerChange::Joined(msg.from.clone())),
             PeerState::Lost => {
                 peer.restorations += 1;
                 changes.push(PeerChange::Restored(msg.from.clone()));
+                if self.hold_on_restore {
+                    // Its messages wait until the player took its restored event.
+                    self.incoming.hold(&msg.from, now_us);
+                }
             }
             PeerState::Up => {}
         }
         peer.state = PeerState::Up;
+        if let LinkKind::Beacon { alive } = &msg.kind {
+            peer.alive = alive.iter().cloned().collect();
+        }
+        if restarted {
+            // What was numbered for its predecessor may or may not have been delivered.
+            let failures = self.outgoing.restarted(&msg.from, msg.incarnation);
+            self.give_up(failures);
+        }
+        if back || restarted {
+            self.outgoing.resend(&msg.from);
+        }
+        self.incoming
+            .heard(&msg.from, msg.incarnation, msg.sent_us, now_us);
         let kind = msg.kind.name();
         self.counters.of(kind).from_link += 1;
         let mine = match &msg.kind {
-            LinkKind::Beacon { alive } => {
-                peer.alive = alive.iter().cloned().collect();
+            LinkKind::Beacon { .. } => {
                 self.counters.of(kind).delivered += 1;
                 return Route::Beacon;
             }
+            LinkKind::Ack { streams } => {
+                if self.on_acks(&msg.from, msg.incarnation, streams) {
+                    self.counters.of(kind).delivered += 1;
+                } else {
+                    self.counters.of(kind).not_mine += 1;
+                }
+                return Route::Beacon;
+            }
+            // Carried: its destination says.
+            _ if msg.carried.is_some() => msg
+                .carried
+                .as_ref()
+                .is_some_and(|c| c.to == self.plan.computer),
             LinkKind::Event => self.plan.has_player(),
             LinkKind::Call { program } => self.plan.host_of(program) == self.plan.computer,
             LinkKind::Heartbeat | LinkKind::Marking => !self.plan.has_player(),
@@ -428,18 +695,28 @@ impl Core {
                     && !self.plan.has_signals()
             }
         };
-        if mine {
-            Route::Deliver
-        } else {
+        if !mine {
             self.counters.of(kind).not_mine += 1;
-            Route::NotMine
+            return Route::NotMine;
+        }
+        match self.incoming.accept(msg, self.incarnation, now_us) {
+            Accept::Take => Route::Deliver,
+            Accept::Held => Route::Held,
+            Accept::Discard(_) => {
+                self.counters.of(kind).discarded += 1;
+                Route::Discarded
+            }
         }
     }
 
-    /// Peers silent past the detection bound at `now_us` become lost.
+    /// Peers silent past the detection bound at `now_us` become lost (a held one's messages
+    /// are released first: they came before the loss); carried messages unacknowledged within
+    /// the retention bound are given up; holds that waited too long for the player end.
     pub fn tick(&mut self, now_us: u64) -> Vec<PeerChange> {
+        let now = self.judge(now_us);
         let mut changes = Vec::new();
         for (name, peer) in self.peers.iter_mut() {
+            peer.buffered = self.outgoing.buffered(name);
             if peer.state != PeerState::Up {
                 continue;
             }
@@ -450,6 +727,26 @@ impl Core {
                 peer.alive.clear();
                 changes.push(PeerChange::Lost(name.clone()));
             }
+        }
+        for change in &changes {
+            if let PeerChange::Lost(name) = change {
+                if self.incoming.is_held(name) {
+                    self.release(name);
+                }
+            }
+        }
+        let failures = self.outgoing.expire(now);
+        self.give_up(failures);
+        // The player acknowledges within a few heartbeats: one that does not (it stopped, or
+        // restarted and never heard of the restored event) does not keep the link closed.
+        for peer in self
+            .incoming
+            .overdue(now_us, self.plan.detection_us.max(1_000_000))
+        {
+            self.counters.remember(format!(
+                "the player did not take the restored event of `{peer}` in time: its messages go on"
+            ));
+            self.release(&peer);
         }
         changes
     }
@@ -498,6 +795,7 @@ mod tests {
             hosts: [("PLN".to_string(), "B".to_string())].into(),
             signals_computer: Some("A".into()),
             detection_us: 1_000_000,
+            retention_us: 10_000_000,
         }
     }
 
@@ -511,6 +809,8 @@ mod tests {
             seq: 0,
             kind,
             body: vec![],
+            sent_us: 0,
+            carried: None,
         }
     }
 
@@ -673,8 +973,8 @@ mod tests {
     #[test]
     fn outgoing_messages_are_numbered() {
         let mut b = Core::new(plan("B"), 5);
-        let m1 = b.outgoing("program/PLN", (1, 1), LinkKind::Event, vec![1]);
-        let m2 = b.outgoing("program/PLN", (1, 2), LinkKind::Event, vec![2]);
+        let m1 = b.outgoing("program/PLN", (1, 1), LinkKind::Event, vec![1], 0);
+        let m2 = b.outgoing("program/PLN", (1, 2), LinkKind::Event, vec![2], 0);
         assert_eq!((m1.link_seq, m2.link_seq, m2.from.as_str()), (1, 2, "B"));
     }
 }

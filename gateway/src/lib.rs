@@ -13,6 +13,9 @@
 //! - [`link`]: the one message type on the link and its keys (`petrel/<vehicle>/link/<computer>`).
 //! - [`core`]: the decisions, sans I/O: routing, peers lost and restored within the detection
 //!   bound, which stand-ins to keep, counters accounting for every message.
+//! - [`reliable`]: events and calls carried on numbered streams, acknowledged, sent again, or
+//!   given up with their senders told; [`ledger`]: the verdicts this computer's senders wait for
+//!   on the events the link gave up.
 //! - [`runtime`]: the process: one thread, a reactor over the iceoryx2 ports and the zenoh
 //!   subscriber's wake-ups.
 //!
@@ -21,7 +24,9 @@
 #![warn(missing_docs)]
 
 pub mod core;
+pub mod ledger;
 pub mod link;
+pub mod reliable;
 pub mod runtime;
 
 pub use crate::core::{Core, Counts, PeerChange, PeerState, Plan};

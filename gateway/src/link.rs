@@ -5,6 +5,10 @@
 //! messages in order, tells a gap (a message lost) from a restart (a new incarnation), and
 //! recognises its own messages coming back (zenoh delivers a session's puts to its own matching
 //! subscribers): nothing crosses twice.
+//!
+//! Events and calls are also *carried* ([`Carried`]): numbered again on a stream from this
+//! gateway to the one destination gateway that delivers them, kept until that gateway
+//! acknowledges them ([`LinkKind::Ack`]) and sent again when it does not (`crate::reliable`).
 
 use bincode::{Decode, Encode};
 
@@ -33,7 +37,45 @@ pub enum LinkKind {
         /// Node names alive on the sender's computer.
         alive: Vec<String>,
     },
+    /// The sending gateway has taken the carried messages of other gateways' streams up to a
+    /// point (delivered here, or refused here for the reasons listed). No body.
+    Ack {
+        /// One per stream, by the gateway that sent it.
+        streams: Vec<StreamAck>,
+    },
 }
+
+/// A carried message's place on its stream: from the sending gateway's incarnation to one
+/// incarnation of the destination's gateway, numbered from 1.
+#[derive(Debug, Clone, PartialEq, Eq, Encode, Decode)]
+pub struct Carried {
+    /// The computer whose gateway delivers it.
+    pub to: String,
+    /// The incarnation of that gateway the stream goes to: a copy for another one (a gateway
+    /// that restarted since) is not taken.
+    pub to_incarnation: u64,
+    /// Its number on the stream.
+    pub seq: u64,
+    /// The oldest number the sender still holds: the ones before it were acknowledged or given
+    /// up (and their senders told), so the receiver waits for none of them.
+    pub floor: u64,
+}
+
+/// What a gateway took of one stream sent to it.
+#[derive(Debug, Clone, PartialEq, Eq, Encode, Decode)]
+pub struct StreamAck {
+    /// The computer whose gateway sent the stream.
+    pub from: String,
+    /// That gateway's incarnation.
+    pub from_incarnation: u64,
+    /// Every message of the stream up to this number was taken (delivered or refused here).
+    pub taken: u64,
+    /// The latest refusals among them (at most [`MAX_STREAM_REFUSALS`]): number and reason.
+    pub refused: Vec<(u64, String)>,
+}
+
+/// Refusals a [`StreamAck`] repeats at most (the latest).
+pub const MAX_STREAM_REFUSALS: usize = 16;
 
 impl LinkKind {
     /// The kind as counters name it.
@@ -45,6 +87,7 @@ impl LinkKind {
             LinkKind::Marking => "marking",
             LinkKind::Signals => "signals",
             LinkKind::Beacon { .. } => "beacon",
+            LinkKind::Ack { .. } => "ack",
         }
     }
 }
@@ -71,6 +114,11 @@ pub struct LinkMsg {
     pub kind: LinkKind,
     /// The ipc body, exactly as the ipc crate encodes it.
     pub body: Vec<u8>,
+    /// When it was put on the link, microseconds on the sending gateway's clock (its start is
+    /// 0): the receiver tells a copy that waited long in a buffer (see `crate::reliable`).
+    pub sent_us: u64,
+    /// For an event or a call: its place on the stream to its destination.
+    pub carried: Option<Carried>,
 }
 
 type LinkConfig = bincode::config::Configuration<
@@ -129,6 +177,13 @@ mod tests {
                 program: "GUI".into(),
             },
             body: vec![1, 2, 3],
+            sent_us: 12,
+            carried: Some(Carried {
+                to: "A".into(),
+                to_incarnation: 5,
+                seq: 4,
+                floor: 2,
+            }),
         };
         let bytes = m.encode().unwrap();
         assert_eq!(LinkMsg::decode(&bytes).unwrap(), m);

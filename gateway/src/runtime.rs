@@ -8,6 +8,12 @@
 //! within the detection bound, so the player's own liveness check turns a lost computer's
 //! programs into `program_lost`, and programs whose player is out of reach keep their events in
 //! their outbox, exactly as when the player is not running.
+//!
+//! Events and calls are carried ([`crate::reliable`]): each loop puts on the link the copies
+//! due and the acknowledgements of what it took, tells the senders of what was given up (a
+//! call's `call_failed` to the player, an event's refusal in this gateway's heartbeat, where its
+//! sender waits for it: [`crate::ledger`]), and delivers the held messages the player's
+//! acknowledgement of a restored event released.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::{Read, Write};
@@ -27,7 +33,9 @@ use petrel_ipc::{
 use zenoh::Wait;
 
 use crate::core::{AckMap, Core, PeerChange, Plan, Route};
+use crate::ledger::Senders;
 use crate::link::{key_all, key_of, LinkKind, LinkMsg};
+use crate::reliable::Failure;
 
 /// The events the player's computer raises when a peer computer is lost or comes back, each
 /// with one parameter, the computer's name (`computer: text`).
@@ -185,7 +193,7 @@ pub fn run(settings: Settings) -> Result<serde_json::Value, GatewayError> {
         ..
     } = settings.clone();
     let me = plan.computer.clone();
-    let role = Role::tool(&format!("gw-{me}")).map_err(|e| err("the gateway's node name", e))?;
+    let role = Role::gateway(&me).map_err(|e| err("the gateway's node name", e))?;
     let participant =
         Participant::join(&vehicle, role).map_err(|e| err("cannot join the vehicle", e))?;
     // A gateway killed before this one left its stand-ins' nodes dead: a dead `player` would
@@ -283,13 +291,17 @@ pub fn run(settings: Settings) -> Result<serde_json::Value, GatewayError> {
             .unwrap_or(0);
         t ^ (u64::from(std::process::id()) << 32)
     };
+    let mut core = Core::new(plan, incarnation);
+    // The nets must see a returning computer come back before they see its messages.
+    core.set_hold_on_restore(has_player && link_events.is_some());
     let mut gw = Gateway {
-        core: Core::new(plan, incarnation),
+        core,
         vehicle,
         own,
         ids,
         mirrors: BTreeMap::new(),
         acks: AckMap::default(),
+        senders: Senders::default(),
         link_events,
         publisher,
         start: Instant::now(),
@@ -307,7 +319,11 @@ pub fn run(settings: Settings) -> Result<serde_json::Value, GatewayError> {
         let now = Instant::now();
         if now >= next_beacon {
             gw.beacon();
-            let changes = gw.core.tick(gw.now_us());
+            let now_us = gw.now_us();
+            let changes = gw.core.tick(now_us);
+            gw.senders.prune(now_us);
+            // A lost computer's held messages came before its loss: delivered first.
+            gw.flush();
             gw.on_changes(changes);
             next_beacon = now + beacon_period;
         }
@@ -349,9 +365,63 @@ pub fn run(settings: Settings) -> Result<serde_json::Value, GatewayError> {
         }
         gw.on_changes(changes);
         gw.take_local();
+        gw.flush();
     }
     gw.publish_status();
     Ok(gw.status_json())
+}
+
+/// Local messages for the link: origin, ipc header, kind, body.
+type Out = Vec<(String, (u64, u64), LinkKind, Vec<u8>)>;
+
+/// Local messages that could not be taken: kind, why.
+type Failed = Vec<(&'static str, String)>;
+
+/// The calls waiting in the receiver of stand-in `node`, for the link.
+fn take_calls(
+    node: &str,
+    m: &Mirror,
+    core: &mut Core,
+    ids: &OwnIds,
+    out: &mut Out,
+    failed: &mut Failed,
+) {
+    if let (Some(r), Some(program)) = (&m.calls_in, node.strip_prefix("program/")) {
+        let kind = LinkKind::Call {
+            program: program.to_owned(),
+        };
+        take(r, &kind, core, ids, out, failed, &|_| {});
+    }
+}
+
+/// Drains `r`: the messages of `kind` that leave this computer go to `out` (after `edit`),
+/// those that cannot be read or encoded to `failed`.
+fn take<M: Message>(
+    r: &petrel_ipc::Receiver<M>,
+    kind: &LinkKind,
+    core: &mut Core,
+    ids: &OwnIds,
+    out: &mut Out,
+    failed: &mut Failed,
+    edit: &dyn Fn(&mut M),
+) {
+    let drained = r.drain(|r: Result<Received<M>, petrel_ipc::RecvError>| match r {
+        Ok(mut rcv) => {
+            let origin = rcv.origin.as_str().to_owned();
+            let own = ids.0.contains(&rcv.sender);
+            if core.forward_local(kind, &origin, own) {
+                edit(&mut rcv.msg);
+                match body_of(&rcv.msg) {
+                    Ok(body) => out.push((origin, (rcv.sender, rcv.seq), kind.clone(), body)),
+                    Err(e) => failed.push((kind.name(), e)),
+                }
+            }
+        }
+        Err(e) => failed.push((kind.name(), format!("local {}: {e}", kind.name()))),
+    });
+    if let Err(e) = drained {
+        failed.push((kind.name(), format!("local {}: {e}", kind.name())));
+    }
 }
 
 struct Gateway {
@@ -361,6 +431,8 @@ struct Gateway {
     ids: OwnIds,
     mirrors: BTreeMap<String, Mirror>,
     acks: AckMap,
+    /// This computer's senders whose events the link gave up: their verdicts.
+    senders: Senders,
     link_events: Option<LinkEvents>,
     publisher: zenoh::pubsub::Publisher<'static>,
     start: Instant,
@@ -372,9 +444,17 @@ impl Gateway {
         self.start.elapsed().as_micros() as u64
     }
 
+    /// Puts news (not carried) on the link.
     fn put(&mut self, origin: &str, header: (u64, u64), kind: LinkKind, body: Vec<u8>) {
-        let name = kind.name();
-        let msg = self.core.outgoing(origin, header, kind, body);
+        let msg = self
+            .core
+            .outgoing(origin, header, kind, body, self.now_us());
+        self.put_msg(&msg, false);
+    }
+
+    /// Puts `msg` on the link; `again`: a carried message sent before.
+    fn put_msg(&mut self, msg: &LinkMsg, again: bool) {
+        let (name, origin) = (msg.kind.name(), &msg.origin);
         let bytes = match msg.encode() {
             Ok(b) => b,
             Err(e) => {
@@ -385,11 +465,95 @@ impl Gateway {
             }
         };
         match self.publisher.put(bytes).wait() {
+            Ok(()) if again => self.core.counters.of(name).retransmitted += 1,
             Ok(()) => self.core.counters.of(name).to_link += 1,
+            // A carried message stays in its buffer: it is sent again.
             Err(e) => self
                 .core
                 .counters
                 .refuse_to_link(name, format!("{name} from {origin}: zenoh: {e}")),
+        }
+    }
+
+    /// Takes a local message for the link: carried (an event, a call) or put at once (news).
+    fn forward(&mut self, origin: &str, header: (u64, u64), kind: LinkKind, body: Vec<u8>) {
+        if self.core.plan().destination(&kind).is_none() {
+            self.put(origin, header, kind, body);
+            return;
+        }
+        let now = self.now_us();
+        if matches!(kind, LinkKind::Event) && header.0 != 0 {
+            self.senders.carried(header.0, header.1, origin, now);
+        }
+        // Refused at once (a full buffer): its failure is told at the next flush.
+        self.core.carry(origin, header, kind, body, now);
+    }
+
+    /// After each step of the loop: tells the senders of what was given up, delivers what was
+    /// released, puts the copies due and the acknowledgements on the link.
+    fn flush(&mut self) {
+        let failures = self.core.take_failures();
+        for f in failures {
+            self.tell(f);
+        }
+        for msg in self.core.take_released() {
+            self.deliver_counted(&msg);
+        }
+        let now = self.now_us();
+        for (msg, again) in self.core.due(now) {
+            self.put_msg(&msg, again);
+        }
+        if let Some(ack) = self.core.acks_due(now) {
+            self.put_msg(&ack, false);
+        }
+    }
+
+    /// Tells the sender of a carried message that the link gave it up: a call's caller gets
+    /// `call_failed(program, function)` (through the player: sent here on its computer, carried
+    /// to it from the others); an event's sender its refusal, in this gateway's heartbeat.
+    fn tell(&mut self, f: Failure) {
+        let Failure { to, msg, reason } = f;
+        tracing::warn!(
+            "{} from {} for computer `{to}` given up: {reason}",
+            msg.kind.name(),
+            msg.origin
+        );
+        match &msg.kind {
+            LinkKind::Call { program } => {
+                let function = wire::decode::<petrel_ipc::CallMsg>(&msg.body)
+                    .map(|c| c.function)
+                    .unwrap_or_default();
+                let event = EventMsg::new(
+                    "call_failed",
+                    vec![Value::Text(program.clone()), Value::Text(function)],
+                );
+                if self.core.plan().has_player() {
+                    if let Err(e) = self.own.events_out.send(&event) {
+                        self.core
+                            .counters
+                            .refuse("call_failed", format!("call_failed({program}): {e}"));
+                    } else {
+                        self.core.counters.of("call_failed").delivered += 1;
+                    }
+                } else {
+                    match body_of(&event) {
+                        Ok(body) => {
+                            let origin = self.own.participant.role().node_name();
+                            self.forward(&origin, (0, 0), LinkKind::Event, body);
+                        }
+                        Err(e) => self
+                            .core
+                            .counters
+                            .refuse("call_failed", format!("call_failed({program}): {e}")),
+                    }
+                }
+            }
+            LinkKind::Event if msg.sender != 0 => {
+                let now = self.now_us();
+                self.senders
+                    .given_up(msg.sender, msg.seq, &msg.origin, &reason, now);
+            }
+            _ => {}
         }
     }
 
@@ -424,39 +588,19 @@ impl Gateway {
         self.put("gateway", (0, 0), LinkKind::Beacon { alive }, Vec::new());
     }
 
-    fn take_local(&mut self) {
-        type Out = Vec<(String, (u64, u64), LinkKind, Vec<u8>)>;
-        let mut out: Out = Vec::new();
-        let mut failed: Vec<(&'static str, String)> = Vec::new();
-        fn take<M: Message>(
-            r: &petrel_ipc::Receiver<M>,
-            kind: &LinkKind,
-            core: &mut Core,
-            ids: &OwnIds,
-            out: &mut Out,
-            failed: &mut Vec<(&'static str, String)>,
-            edit: &dyn Fn(&mut M),
-        ) {
-            let drained = r.drain(|r: Result<Received<M>, petrel_ipc::RecvError>| match r {
-                Ok(mut rcv) => {
-                    let origin = rcv.origin.as_str().to_owned();
-                    let own = ids.0.contains(&rcv.sender);
-                    if core.forward_local(kind, &origin, own) {
-                        edit(&mut rcv.msg);
-                        match body_of(&rcv.msg) {
-                            Ok(body) => {
-                                out.push((origin, (rcv.sender, rcv.seq), kind.clone(), body))
-                            }
-                            Err(e) => failed.push((kind.name(), e)),
-                        }
-                    }
-                }
-                Err(e) => failed.push((kind.name(), format!("local {}: {e}", kind.name()))),
-            });
-            if let Err(e) = drained {
-                failed.push((kind.name(), format!("local {}: {e}", kind.name())));
-            }
+    /// Counts what could not be taken, and forwards what was.
+    fn forward_all(&mut self, out: Out, failed: Failed) {
+        for (kind, why) in failed {
+            self.core.counters.refuse_to_link(kind, why);
         }
+        for (origin, header, kind, body) in out {
+            self.forward(&origin, header, kind, body);
+        }
+    }
+
+    fn take_local(&mut self) {
+        let mut out: Out = Vec::new();
+        let mut failed: Failed = Vec::new();
         if let Some(r) = &self.own.events_in {
             take(
                 r,
@@ -468,11 +612,17 @@ impl Gateway {
                 &|_| {},
             );
         }
+        // The player's account of this gateway's own messages (its link events).
+        let own_taken = std::cell::Cell::new(None::<u64>);
         if let Some(r) = &self.own.beats_in {
             let acks = &self.acks;
+            let own_sender = self.own.events_out.sender_id();
             // The other computers' senders wait for their own ids: theirs first, since a
             // heartbeat carries at most 64 acknowledgements.
             let translate = |beat: &mut Heartbeat| {
+                if let Some(a) = beat.ack_for(own_sender) {
+                    own_taken.set(Some(a.last_seq));
+                }
                 let mut translated = acks.translate(&beat.acks);
                 if !translated.is_empty() {
                     translated.append(&mut beat.acks);
@@ -513,27 +663,12 @@ impl Gateway {
             );
         }
         for (node, m) in &self.mirrors {
-            if let (Some(r), Some(program)) = (&m.calls_in, node.strip_prefix("program/")) {
-                let kind = LinkKind::Call {
-                    program: program.to_owned(),
-                };
-                take(
-                    r,
-                    &kind,
-                    &mut self.core,
-                    &self.ids,
-                    &mut out,
-                    &mut failed,
-                    &|_| {},
-                );
-            }
+            take_calls(node, m, &mut self.core, &self.ids, &mut out, &mut failed);
         }
-        for (kind, why) in failed {
-            self.core.counters.refuse_to_link(kind, why);
+        if let Some(seq) = own_taken.get() {
+            self.core.player_took(seq);
         }
-        for (origin, header, kind, body) in out {
-            self.put(&origin, header, kind, body);
-        }
+        self.forward_all(out, failed);
     }
 
     fn take_link(&mut self, bytes: &[u8], changes: &mut Vec<PeerChange>) {
@@ -547,30 +682,46 @@ impl Gateway {
         };
         let now = self.now_us();
         match self.core.on_link(&msg, now, changes) {
-            Route::Own | Route::NotMine | Route::Beacon => {}
+            Route::Own | Route::NotMine | Route::Beacon | Route::Held | Route::Discarded => {}
             Route::Foreign(why) => tracing::warn!("link message refused: {why}"),
-            Route::Deliver => {
-                // A stand-in may be needed before the message is delivered (a beacon that
-                // listed it came just before): make them match only when it is missing.
-                let needed = match msg.kind {
-                    LinkKind::Heartbeat | LinkKind::Marking => Some("player"),
-                    // The gateway republishes signals itself, under no stand-in.
-                    LinkKind::Signals => None,
-                    _ => Some(msg.origin.as_str()),
-                };
-                if needed.is_some_and(|n| !self.mirrors.contains_key(n)) {
-                    self.sync_mirrors();
-                }
-                let name = msg.kind.name();
-                match self.deliver(&msg) {
-                    Ok(()) => self.core.counters.of(name).delivered += 1,
-                    Err(why) if why == UNHEARD => self.core.counters.of(name).unheard += 1,
-                    Err(why) => self.core.counters.refuse(
-                        name,
-                        format!("{name} from {} ({}): {why}", msg.from, msg.origin),
-                    ),
-                }
+            Route::Deliver => self.deliver_counted(&msg),
+        }
+    }
+
+    /// Delivers a link message for this computer, counts what became of it, and, for a
+    /// carried one, tells the link (its acknowledgement carries a refusal back to the sender).
+    fn deliver_counted(&mut self, msg: &LinkMsg) {
+        // A stand-in may be needed before the message is delivered (a beacon that listed it
+        // came just before): make them match only when it is missing.
+        let needed = match msg.kind {
+            LinkKind::Heartbeat | LinkKind::Marking => Some("player"),
+            // The gateway republishes signals itself, under no stand-in.
+            LinkKind::Signals => None,
+            _ => Some(msg.origin.as_str()),
+        };
+        if needed.is_some_and(|n| !self.mirrors.contains_key(n)) {
+            self.sync_mirrors();
+        }
+        let name = msg.kind.name();
+        let refusal = match self.deliver(msg) {
+            Ok(()) => {
+                self.core.counters.of(name).delivered += 1;
+                None
             }
+            Err(why) if why == UNHEARD => {
+                self.core.counters.of(name).unheard += 1;
+                None
+            }
+            Err(why) => {
+                self.core.counters.refuse(
+                    name,
+                    format!("{name} from {} ({}): {why}", msg.from, msg.origin),
+                );
+                Some(why)
+            }
+        };
+        if msg.carried.is_some() {
+            self.core.taken(msg, refusal);
         }
     }
 
@@ -623,6 +774,11 @@ impl Gateway {
                     return Err("the player is not mirrored here (its computer is not up)".into());
                 };
                 if matches!(msg.kind, LinkKind::Heartbeat) {
+                    // The player's verdicts on this computer's senders, for those whose events
+                    // the link gave up (their verdict merges both).
+                    if let Ok(beat) = wire::decode::<Heartbeat>(&msg.body) {
+                        self.senders.player_acks(&beat.acks);
+                    }
                     // Sized from the player's heartbeats as they come (twice the largest seen),
                     // as the player sizes its own from the project: a publisher sized for the
                     // largest body possible takes long to set up and holds memory for nothing.
@@ -667,7 +823,7 @@ impl Gateway {
                     .as_ref()
                     .map(|s| s.send_encoded(&msg.body))
             }
-            LinkKind::Beacon { .. } => return Ok(()),
+            LinkKind::Beacon { .. } | LinkKind::Ack { .. } => return Ok(()),
         };
         match sent {
             Some(Ok(_)) => Ok(()),
@@ -705,13 +861,24 @@ impl Gateway {
             // The player's computer tells the nets; the others have no player to tell.
             if let (Some(event), true) = (event, self.core.plan().has_player()) {
                 let msg = EventMsg::new(event.clone(), vec![Value::Text(computer.clone())]);
-                if let Err(e) = self.own.events_out.send(&msg) {
-                    tracing::warn!("the link event `{event}({computer})` was not delivered: {e}");
-                    self.core
-                        .counters
-                        .refuse("link_event", format!("{event}({computer}): {e}"));
-                } else {
-                    self.core.counters.of("link_event").delivered += 1;
+                let sent = match self.own.events_out.send(&msg) {
+                    Err(e) => {
+                        tracing::warn!(
+                            "the link event `{event}({computer})` was not delivered: {e}"
+                        );
+                        self.core
+                            .counters
+                            .refuse("link_event", format!("{event}({computer}): {e}"));
+                        None
+                    }
+                    Ok(sent) => {
+                        self.core.counters.of("link_event").delivered += 1;
+                        Some(sent.seq)
+                    }
+                };
+                if matches!(change, PeerChange::Restored(_)) {
+                    // The computer's held messages go once the player took this one.
+                    self.core.link_event_sent(computer, sent);
                 }
             }
         }
@@ -729,7 +896,13 @@ impl Gateway {
             .collect();
         for node in gone {
             tracing::info!("stand-in `{node}` leaves");
-            self.mirrors.remove(&node);
+            if let Some(m) = self.mirrors.remove(&node) {
+                // Calls the player sent it before it left are carried like the others (their
+                // destination tells, or the link gives them up): none dropped with the port.
+                let (mut out, mut failed) = (Vec::new(), Vec::new());
+                take_calls(&node, &m, &mut self.core, &self.ids, &mut out, &mut failed);
+                self.forward_all(out, failed);
+            }
         }
         for node in wanted.keys() {
             if self.mirrors.contains_key(node) {
@@ -796,13 +969,17 @@ impl Gateway {
             .values()
             .map(|c| c.to_link + c.from_link)
             .sum();
-        let beat = Heartbeat {
+        let mut beat = Heartbeat {
             uptime_ms: self.start.elapsed().as_millis() as u64,
             period_ms: self.status_period.as_millis() as u32,
             progress,
             status,
+            // The verdicts of this computer's senders whose events the link gave up
+            // (`petrel_ipc::wait_acknowledged` reads them with the player's).
+            acks: self.senders.acks(),
             ..Heartbeat::default()
         };
+        beat.bound();
         if let Err(e) = self.own.status.send(&beat) {
             // Nobody listens (no `petrel status` running): the usual case.
             tracing::trace!("status heartbeat: {e}");

@@ -414,6 +414,11 @@ impl Acknowledgement {
 /// [`Ack`](crate::wire::Ack) the player's heartbeat carries for each sender, and a message is
 /// settled only once the player's flight recorder holds it (or, when the recorder had to drop
 /// it, counts it as unrecorded): [`Acknowledgement::is_safe`] tells the two apart.
+///
+/// On a computer without the player, the events go through the computer's `petrel gateway`,
+/// and the player never hears of those the link gave up: for a sender with such events, the
+/// gateway's own heartbeat carries its verdict, the player's acknowledgement (as the gateway
+/// heard it) with the gateway's refusals merged in. That one is then the verdict.
 pub fn wait_acknowledged(
     beats: &crate::HeartbeatSubscriber,
     sender: u64,
@@ -422,21 +427,35 @@ pub fn wait_acknowledged(
 ) -> Acknowledgement {
     let deadline = std::time::Instant::now() + grace;
     let mut heard = Acknowledgement::default();
+    let (mut player, mut gateway): (Option<crate::wire::Ack>, Option<crate::wire::Ack>) =
+        (None, None);
     loop {
         // A heartbeat that cannot be read is one acknowledgement fewer: the next one comes
         // 100 ms later.
         let _ = beats.drain(|r| {
             if let Ok(rcv) = r {
-                if rcv.origin.as_str() == "player" {
+                let origin = rcv.origin.as_str();
+                if origin == "player" {
                     heard.heard = true;
                     heard.recorder = rcv.msg.recorder.clone();
                     if let Some(a) = rcv.msg.ack_for(sender) {
-                        heard.ack = Some(a.clone());
+                        player = Some(a.clone());
+                    }
+                } else if crate::Role::is_gateway_node(origin) {
+                    if let Some(a) = rcv.msg.ack_for(sender) {
+                        gateway = Some(a.clone());
                     }
                 }
             }
         });
-        if heard.settled(seq) || std::time::Instant::now() >= deadline {
+        // The gateway's verdict, once it has one, includes the player's: wait for it to settle
+        // (it lags the player's by one of its heartbeats at most).
+        let settled = match &gateway {
+            Some(g) => g.settles(seq),
+            None => player.as_ref().is_some_and(|p| p.settles(seq)),
+        };
+        heard.ack = gateway.clone().or_else(|| player.clone());
+        if settled || std::time::Instant::now() >= deadline {
             return heard;
         }
         std::thread::sleep(Duration::from_millis(5));

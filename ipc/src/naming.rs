@@ -323,6 +323,18 @@ impl Role {
         Ok(Role::Tool(name.to_owned()))
     }
 
+    /// The role of the `petrel gateway` of computer `computer` (node `tool/gw-<COMPUTER>`).
+    pub fn gateway(computer: &str) -> Result<Self, NameError> {
+        Role::tool(&format!("gw-{computer}"))
+    }
+
+    /// Whether `node` (a node name, or a message's origin) is a `petrel gateway`'s: it stands in
+    /// for the senders and callers of other computers, and gives the verdict on the events it
+    /// could not carry to the player (docs/gateway.md).
+    pub fn is_gateway_node(node: &str) -> bool {
+        node.starts_with("tool/gw-")
+    }
+
     /// Checks the names a role holds.
     pub fn check(&self) -> Result<(), NameError> {
         match self {

@@ -396,9 +396,10 @@ fn engine_version(entries: &[Entry]) -> String {
 /// Built-in events (`program_lost`, `call_failed`, `safety_violation`, `livelock`,
 /// `bad_message`) tell the nets what the player itself saw, and the player raises them without
 /// the events service: one arriving there comes from another process, whatever origin it
-/// claims (`player` included), and is refused. The one exception is `call_failed` from the CAN
+/// claims (`player` included), and is refused. The exceptions are `call_failed` from the CAN
 /// data server, which reports the CAN commands it could not carry out as the failed calls they
-/// are (see `petrel_can_bridge::runtime`).
+/// are (see `petrel_can_bridge::runtime`), and `call_failed` from a gateway, which reports the
+/// calls the link to another computer could not carry (docs/gateway.md).
 fn builtin_refusal(name: &str, origin: &str) -> Option<String> {
     if !petrel_nets::model::builtin_events()
         .iter()
@@ -406,7 +407,9 @@ fn builtin_refusal(name: &str, origin: &str) -> Option<String> {
     {
         return None;
     }
-    if name == "call_failed" && origin == Role::CanBridge.node_name() {
+    if name == "call_failed"
+        && (origin == Role::CanBridge.node_name() || Role::is_gateway_node(origin))
+    {
         return None;
     }
     Some(format!(

@@ -150,6 +150,9 @@ pub struct Computer {
 pub struct LinkSpec {
     /// A computer silent for this long is lost (default 1 s).
     pub detection: Option<Duration>,
+    /// An event or a call the link could not carry within this long is given up and its sender
+    /// told (default 30 s; longer than `detection`).
+    pub retention: Option<Duration>,
     /// The event (category communication, one `text` parameter) raised on the player's
     /// computer when a computer is lost.
     pub lost_event: Option<String>,
@@ -214,6 +217,7 @@ struct RawFile {
 #[serde(deny_unknown_fields)]
 struct RawLink {
     detection: Option<Spanned<String>>,
+    retention: Option<Spanned<String>>,
     lost_event: Option<Spanned<String>>,
     restored_event: Option<Spanned<String>>,
     user: Option<Spanned<String>>,
@@ -365,6 +369,25 @@ impl Checker<'_> {
             .detection
             .as_ref()
             .and_then(|d| self.duration(d, "[link] detection"));
+        let retention = l.retention.as_ref().and_then(|r| {
+            let retention = self.duration(r, "[link] retention")?;
+            let bound = detection.unwrap_or(crate::gateway::DEFAULT_DETECTION);
+            if retention <= bound {
+                self.error(
+                    "E0812",
+                    self.span(r),
+                    format!(
+                        "[link] retention ({}) must be longer than the detection bound ({:?})",
+                        r.get_ref(),
+                        bound
+                    ),
+                    "not longer than detection",
+                    "a carried message is sent again while it is younger than retention - detection: give retention several detection bounds (default 30s)",
+                );
+                return None;
+            }
+            Some(retention)
+        });
         let mut event = |e: &Option<Spanned<String>>, what: &str| -> Option<String> {
             let e = e.as_ref()?;
             let name = e.get_ref();
@@ -424,6 +447,7 @@ impl Checker<'_> {
         }
         LinkSpec {
             detection,
+            retention,
             lost_event,
             restored_event,
             user: l.user.as_ref().map(|u| u.get_ref().clone()),
@@ -1446,6 +1470,18 @@ after = ["a"]
         ));
         let v = v.unwrap_or_else(|| panic!("{d:?}"));
         assert_eq!(v.link.detection, Some(Duration::from_millis(250)));
+        let (v, d, _) = check(&format!("{base}[link]\nretention = \"1s\"\n"));
+        assert!(v.is_none());
+        assert_eq!(
+            codes(&d),
+            vec!["E0812"],
+            "retention not longer than detection"
+        );
+        let (v, d, _) = check(&format!(
+            "{base}[link]\ndetection = \"250ms\"\nretention = \"10s\"\n"
+        ));
+        let v = v.unwrap_or_else(|| panic!("{d:?}"));
+        assert_eq!(v.link.retention, Some(Duration::from_secs(10)));
         assert_eq!(
             v.computers[0].gateway.as_deref(),
             Some("tcp/127.0.0.1:7447")
