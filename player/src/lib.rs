@@ -27,3 +27,4 @@ pub mod replay;
 pub mod runtime;
 pub mod script;
 pub mod shadow;
+pub mod time;

@@ -80,7 +80,7 @@ fn reload_engine<'p>(
     let dir = kept.ok_or_else(|| {
         format!("a reload to version {hash}: the journal directory is needed to find its files")
     })?;
-    let new = crate::reload::load_kept(dir, hash)?;
+    let new = crate::reload::version::load_kept(dir, hash)?;
     let mapping = petrel_nets::reload::Mapping::parse(mapping)
         .map_err(|e| format!("the reload's mapping does not read: {e}"))?;
     let from = petrel_nets::reload::OldState {
@@ -90,7 +90,7 @@ fn reload_engine<'p>(
     };
     let mapped = petrel_nets::reload::map_state(project, &from, &new, &mapping)
         .map_err(|r| format!("the reload does not map again: {}", r.reasons.join("; ")))?;
-    let new = crate::reload::leak(new);
+    let new = crate::reload::version::leak(new);
     let queued = engine.take_queue();
     let stats = engine.stats();
     let mut next = Engine::new(new);
@@ -139,7 +139,7 @@ pub fn last_reload(entries: &[Entry]) -> Option<usize> {
 }
 
 /// Replays `entries` as [`replay`] does, across reloads: the versions a reload brought are
-/// read from the journal directory `kept` ([`crate::reload::load_kept`]), the state is mapped
+/// read from the journal directory `kept` ([`crate::reload::version::load_kept`]), the state is mapped
 /// again and checked against the recorded one, and the replay goes on with the new version.
 /// With `from_last_reload`, the replay starts at the journal's last reload, on the version it
 /// brought (its recorded state restored like a checkpoint's): for `--resume`, and for a
@@ -167,12 +167,12 @@ pub fn replay_in<'p>(
         } = &entries[k]
         {
             let loaded = match kept {
-                Some(dir) => crate::reload::load_kept(dir, source_hash),
+                Some(dir) => crate::reload::version::load_kept(dir, source_hash),
                 None => Err("the journal directory is needed to find the reloaded version".into()),
             };
             match loaded {
                 Ok(p) => {
-                    project = crate::reload::leak(p);
+                    project = crate::reload::version::leak(p);
                     engine = Engine::new(project);
                     let renamed = petrel_nets::reload::Mapping::parse(mapping)
                         .map(|m| m.nets)

@@ -104,9 +104,13 @@ fn follow_reloads<'p>(
         if *lost {
             return swapped;
         }
-        match crate::reload::load_candidate(std::path::Path::new(&a.dir), &a.source_hash, "") {
+        match crate::reload::version::load_candidate(
+            std::path::Path::new(&a.dir),
+            &a.source_hash,
+            "",
+        ) {
             Ok(c) => {
-                let new = crate::reload::leak(c.project);
+                let new = crate::reload::version::leak(c.project);
                 *project = new;
                 *engine = Engine::new(new);
                 engine.start(0, &mut NullSink);

@@ -485,7 +485,7 @@ struct PendingReload {
     sender: u64,
     seq: u64,
     received: Instant,
-    candidate: crate::reload::Candidate,
+    candidate: crate::reload::version::Candidate,
     summary: Vec<String>,
     verdict: std::thread::JoinHandle<Result<u64, petrel_nets::reload::Finding>>,
 }
@@ -1173,7 +1173,7 @@ impl<'p> PlayerLoop<'p> {
     /// The old version's state, mapped onto `candidate`.
     fn map_onto(
         &self,
-        candidate: &crate::reload::Candidate,
+        candidate: &crate::reload::version::Candidate,
     ) -> Result<petrel_nets::reload::Mapped, petrel_nets::reload::MapRefusal> {
         let from = petrel_nets::reload::OldState {
             state: self.engine.state(),
@@ -1189,7 +1189,7 @@ impl<'p> PlayerLoop<'p> {
             let why = "another reload is being verified: ask again when it is answered".to_string();
             return self.refuse_reload(sender, seq, &request, since, vec![why]);
         }
-        let candidate = match crate::reload::load_candidate(
+        let candidate = match crate::reload::version::load_candidate(
             std::path::Path::new(&request.dir),
             &request.source_hash,
             &request.mapping,
@@ -1306,19 +1306,18 @@ impl<'p> PlayerLoop<'p> {
     /// calls and the liveness watch of the new version.
     fn swap(
         &mut self,
-        candidate: crate::reload::Candidate,
+        candidate: crate::reload::version::Candidate,
         dir: &str,
     ) -> Result<String, Vec<String>> {
         let mapped = self.map_onto(&candidate).map_err(|r| r.reasons)?;
         if let Some(journal) = &self.opts.journal {
-            crate::reload::keep(journal, &candidate.source_hash, &candidate.files).map_err(
-                |e| {
+            crate::reload::version::keep(journal, &candidate.source_hash, &candidate.files)
+                .map_err(|e| {
                     vec![format!(
                         "cannot keep the new version beside the journal in {}: {e}",
                         journal.display()
                     )]
-                },
-            )?;
+                })?;
         }
         let setup =
             |e: petrel_ipc::SetupError| vec![format!("cannot open the new version's calls: {e}")];
@@ -1361,7 +1360,7 @@ impl<'p> PlayerLoop<'p> {
             return Err(reasons);
         }
         let time = self.engine.now();
-        let new = crate::reload::leak(candidate.project);
+        let new = crate::reload::version::leak(candidate.project);
         let queued = self.engine.take_queue();
         let carried = queued.clone();
         let carried_len = carried.len();

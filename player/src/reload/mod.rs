@@ -1,0 +1,3 @@
+//! A reload of the running project (`petrel reload`, docs/reload.md).
+
+pub mod version;
