@@ -27,4 +27,6 @@ pub mod replay;
 pub mod runtime;
 pub mod script;
 pub mod shadow;
+mod sizing;
+mod status;
 pub mod time;
