@@ -55,7 +55,7 @@ impl PlayerLoop<'_> {
         hb.bound();
         let snapshot = StatusSnapshot {
             version: self.version.clone(),
-            reloading: self.pending.is_some(),
+            reloading: self.reload.is_verifying(),
             ..StatusSnapshot::of(&self.engine, &self.report, &self.ledger, &self.journal)
         };
         hb.status = status_json(&snapshot);

@@ -2,7 +2,6 @@
 
 use super::options::{PlayError, PlayOptions, PlayReport};
 use super::ports::{Builtins, Ports};
-use super::reload::PendingReload;
 use super::sink::RuntimeSink;
 use crate::ack::Ledger;
 use crate::engine::{Engine, Micros};
@@ -12,6 +11,7 @@ use crate::journal::{
     Entry, Journal, JournalLock, RecorderChange, Settlement, StepParts, BATCH_DELAY,
 };
 use crate::record::{outcome_name, StepRecord};
+use crate::reload::{ReloadJob, Verdict};
 use petrel_ipc::{ProgramWatch, Reactor, RecvError, WaitStrategy};
 use petrel_nets::compiled::{CompiledProject, EventId, Value};
 use std::time::{Duration, Instant};
@@ -50,8 +50,9 @@ pub struct PlayerLoop<'p> {
     pub(super) next_liveness: Instant,
     /// The next marking message is a snapshot (after a reload, or steps no monitor saw).
     pub(super) snapshot_next: bool,
-    /// The reload under verification, if any.
-    pub(super) pending: Option<PendingReload>,
+    /// The reloads: their decisions, and the thread verifying one.
+    pub(super) reload: ReloadJob,
+    pub(super) verifier: Option<std::thread::JoinHandle<Verdict>>,
     /// The content hash of the version running, once a reload brought one.
     pub(super) version: Option<String>,
     /// The hold on the journal directory: released last, after the journal is closed.
@@ -116,7 +117,7 @@ impl<'p> PlayerLoop<'p> {
                     d.saturating_sub(self.mission_time(now)),
                 ));
             }
-            if self.pending.is_some() {
+            if self.reload.is_verifying() {
                 // The verifier's thread says nothing when it is done: look again soon.
                 timeout = timeout.min(Duration::from_millis(2));
             }
@@ -184,7 +185,7 @@ impl<'p> PlayerLoop<'p> {
         // that the loop does not come back here for them before it waits.
         self.raise_recorder_changes();
         // A reload under way holds the steps: the new version starts from the state it maps.
-        if self.pending.as_ref().is_some_and(|p| !p.request.dry_run) {
+        if self.reload.holds_steps() {
             return;
         }
         // The start's calls not delivered, then the held calls whose program now receives.
@@ -320,7 +321,8 @@ impl<'p> PlayerLoop<'p> {
             engine: &mut self.engine,
             journal: &mut self.journal,
             ledger: &mut self.ledger,
-            report: &mut self.report,
+            messages: &mut self.report.messages,
+            bad_messages: &mut self.report.bad_messages,
             bad_message: self.builtins.bad_message,
             leaves: &mut self.leaves,
         };

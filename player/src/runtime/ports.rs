@@ -4,7 +4,7 @@ use petrel_ipc::{
     CallSender, EventReceiver, HeartbeatPublisher, MarkingPublisher, Participant,
     ReloadAnswerPublisher, ReloadReceiver,
 };
-use petrel_nets::compiled::EventId;
+use petrel_nets::compiled::{CompiledProject, EventId};
 
 /// The ports of the player on the vehicle's services.
 pub(super) struct Ports {
@@ -25,4 +25,17 @@ pub(super) struct Builtins {
     pub(super) bad_message: Option<EventId>,
     pub(super) recorder_failed: Option<EventId>,
     pub(super) recorder_restored: Option<EventId>,
+}
+
+impl Builtins {
+    /// The built-in events of `project`.
+    pub(super) fn of(project: &CompiledProject) -> Self {
+        Builtins {
+            program_lost: project.event_id("program_lost"),
+            call_failed: project.event_id("call_failed"),
+            bad_message: project.event_id("bad_message"),
+            recorder_failed: project.event_id("recorder_failed"),
+            recorder_restored: project.event_id("recorder_restored"),
+        }
+    }
 }

@@ -1,32 +1,35 @@
-//! The runtime's side of a reload: requests taken from the reload service, verified in a thread
-//! of their own, answered, and the swap between two steps.
+//! The runtime's side of a reload: the requests taken from the reload service, the
+//! verification in a thread of its own, the answers, and the swap between two steps. What is
+//! refused and what is swapped is [`ReloadJob`](crate::reload::ReloadJob)'s to decide.
+//!
+//! The swap maps the state again (a timer may have fallen due during the verification: its
+//! event is queued, and goes to the new version), keeps the new version's files beside the
+//! journal, opens the call senders the new version needs (a program both versions have keeps
+//! its sender, if the new version's calls fit it: it sees no interruption), hands the engine's
+//! queue and counters over (`Engine::take_queue`, `Engine::adopt`), journals a `reload` entry,
+//! and runs the new version's record, liveness watch, held calls, built-in events and, if it
+//! needs a larger one, heartbeat publisher. The answer goes out, then a snapshot of the new
+//! state. The new version's project is leaked on purpose ([`version::leak`]).
 
 use super::player_loop::PlayerLoop;
 use super::ports::Builtins;
 use crate::engine::Engine;
 use crate::journal::Entry;
 use crate::record::StepRecord;
+use crate::reload::version::{self, Candidate};
+use crate::reload::{map_onto, running_state, Begin, Requester, Settle};
 use crate::sizing::{call_bound, status_bound};
 use petrel_ipc::{CallSender, Heartbeat, ProgramWatch, ReloadAnswer, ReloadRequest};
+use petrel_nets::compiled::CompiledProject;
+use petrel_nets::reload::{Finding, Mapped, Mapping};
+use std::path::Path;
 use std::time::Instant;
 use tracing::{info, warn};
-
-/// A reload whose new version is being verified from the mapped state, in a thread of its
-/// own, while the loop goes on taking events (and, for a dry run, processing them).
-pub(super) struct PendingReload {
-    pub(super) request: ReloadRequest,
-    pub(super) sender: u64,
-    pub(super) seq: u64,
-    pub(super) received: Instant,
-    pub(super) candidate: crate::reload::version::Candidate,
-    pub(super) summary: Vec<String>,
-    pub(super) verdict: std::thread::JoinHandle<Result<u64, petrel_nets::reload::Finding>>,
-}
 
 /// The most stable states a reload's verification explores before it refuses the reload.
 const RELOAD_MAX_STATES: u64 = 2_000_000;
 
-impl PlayerLoop<'_> {
+impl<'p> PlayerLoop<'p> {
     /// Takes the reload requests that arrived: each is read, checked and mapped at once (the
     /// engine is between two steps), then verified in a thread of its own.
     pub(super) fn take_reload_requests(&mut self) {
@@ -40,12 +43,74 @@ impl PlayerLoop<'_> {
         }
         for (sender, seq, origin, request) in requests {
             info!(from = %origin, dir = %request.dir, hash = %request.source_hash, dry_run = request.dry_run, "reload requested");
-            self.begin_reload(sender, seq, request);
+            self.begin_reload(Requester { sender, seq }, request);
+        }
+    }
+
+    /// A request: refused, or its new version read, mapped and handed to a verifying thread.
+    fn begin_reload(&mut self, from: Requester, request: ReloadRequest) {
+        let admitted = match self.reload.request(from, request, Instant::now()) {
+            Ok(admitted) => admitted,
+            Err(answer) => return self.answer_reload(*answer),
+        };
+        let r = admitted.request();
+        let read = version::load_candidate(Path::new(&r.dir), &r.source_hash, &r.mapping);
+        let running = (self.project, &running_state(&self.engine));
+        let (project, mapped) = match self.reload.begin(admitted, read, running, Instant::now()) {
+            Begin::Refuse(answer) => return self.answer_reload(answer),
+            Begin::Verify { project, mapped } => (project, mapped),
+        };
+        let verifier = std::thread::Builder::new()
+            .name("reload-verify".into())
+            .spawn(move || {
+                petrel_nets::reload::verify_mapped(&project, &mapped, Some(RELOAD_MAX_STATES))
+            });
+        match verifier {
+            Ok(verifier) => self.verifier = Some(verifier),
+            Err(e) => {
+                let why = format!("cannot start the verification: {e}");
+                if let Some(answer) = self.reload.abandon(why, Instant::now()) {
+                    self.answer_reload(answer);
+                }
+            }
+        }
+    }
+
+    /// Answers the reload under verification once the verdict is in, and swaps versions if it
+    /// is accepted (between two steps: none was taken since the mapping).
+    pub(super) fn finish_reload(&mut self) {
+        let Some(verifier) = self.verifier.take_if(|v| v.is_finished()) else {
+            return;
+        };
+        let verdict = verifier.join().unwrap_or_else(|_| {
+            Err(Finding {
+                what: "the verification failed (its thread panicked): a bug in Petrel".into(),
+                trace: Vec::new(),
+            })
+        });
+        match self.reload.verdict(verdict, self.step_no, Instant::now()) {
+            None => {}
+            Some(Settle::Answer(answer)) => self.answer_reload(answer),
+            Some(Settle::Swap {
+                candidate,
+                dir,
+                answer,
+            }) => {
+                let swapped = self.swap(*candidate, &dir);
+                let answer = answer.after_swap(swapped, Instant::now());
+                let accepted = answer.accepted;
+                self.answer_reload(answer);
+                if accepted {
+                    // After the answer: a shadow reading the snapshot has the answer already,
+                    // and knows which version the snapshot's names are of.
+                    self.publish_delta();
+                }
+            }
         }
     }
 
     /// Answers a reload request (to every listener: the requester finds its own).
-    pub(super) fn answer_reload(&mut self, mut answer: ReloadAnswer) {
+    fn answer_reload(&mut self, mut answer: ReloadAnswer) {
         if !answer.accepted || answer.dry_run {
             self.report.reloads_refused += 1;
         }
@@ -60,221 +125,92 @@ impl PlayerLoop<'_> {
         }
     }
 
-    pub(super) fn refuse_reload(
-        &mut self,
-        sender: u64,
-        seq: u64,
-        request: &ReloadRequest,
-        since: Instant,
-        reasons: Vec<String>,
-    ) {
-        self.answer_reload(ReloadAnswer {
-            request_sender: sender,
-            request_seq: seq,
-            accepted: false,
-            dry_run: request.dry_run,
-            dir: request.dir.clone(),
-            source_hash: request.source_hash.clone(),
-            reasons,
-            millis: since.elapsed().as_millis() as u64,
-            ..ReloadAnswer::default()
-        });
-    }
-
-    /// The old version's state, mapped onto `candidate`.
-    pub(super) fn map_onto(
-        &self,
-        candidate: &crate::reload::version::Candidate,
-    ) -> Result<petrel_nets::reload::Mapped, petrel_nets::reload::MapRefusal> {
-        let from = petrel_nets::reload::OldState {
-            state: self.engine.state(),
-            deadlines: self.engine.deadlines(),
-            net_args: self.engine.all_net_args(),
-        };
-        petrel_nets::reload::map_state(self.project, &from, &candidate.project, &candidate.mapping)
-    }
-
-    pub(super) fn begin_reload(&mut self, sender: u64, seq: u64, request: ReloadRequest) {
-        let since = Instant::now();
-        if self.pending.is_some() {
-            let why = "another reload is being verified: ask again when it is answered".to_string();
-            return self.refuse_reload(sender, seq, &request, since, vec![why]);
-        }
-        let candidate = match crate::reload::version::load_candidate(
-            std::path::Path::new(&request.dir),
-            &request.source_hash,
-            &request.mapping,
-        ) {
-            Ok(c) => c,
-            Err(reasons) => return self.refuse_reload(sender, seq, &request, since, reasons),
-        };
-        let mapped = match self.map_onto(&candidate) {
-            Ok(m) => m,
-            Err(r) => return self.refuse_reload(sender, seq, &request, since, r.reasons),
-        };
-        // The verifier gets its own copy: a refused version is dropped whole.
-        let project = candidate.project.clone();
-        let state = mapped.clone();
-        let verdict = std::thread::Builder::new()
-            .name("reload-verify".into())
-            .spawn(move || {
-                petrel_nets::reload::verify_mapped(&project, &state, Some(RELOAD_MAX_STATES))
-            });
-        match verdict {
-            Ok(verdict) => {
-                self.pending = Some(PendingReload {
-                    request,
-                    sender,
-                    seq,
-                    received: since,
-                    candidate,
-                    summary: mapped.summary,
-                    verdict,
-                })
-            }
-            Err(e) => {
-                let why = format!("cannot start the verification: {e}");
-                self.refuse_reload(sender, seq, &request, since, vec![why])
-            }
-        }
-    }
-
-    /// Answers the reload under verification once the verdict is in, and swaps versions if it
-    /// is accepted (between two steps: none was taken since the mapping).
-    pub(super) fn finish_reload(&mut self) {
-        if !self
-            .pending
-            .as_ref()
-            .is_some_and(|p| p.verdict.is_finished())
-        {
-            return;
-        }
-        let Some(p) = self.pending.take() else { return };
-        let verdict = p.verdict.join().unwrap_or_else(|_| {
-            Err(petrel_nets::reload::Finding {
-                what: "the verification failed (its thread panicked): a bug in Petrel".into(),
-                trace: Vec::new(),
-            })
-        });
-        let states = match verdict {
-            Ok(states) => states,
-            Err(f) => {
-                let mut reasons = vec![format!("verification from the mapped state: {}", f.what)];
-                reasons.push(if f.trace.is_empty() {
-                    "in the mapped state itself".to_string()
-                } else {
-                    format!("from the mapped state by: {}", f.trace.join(", "))
-                });
-                return self.answer_reload(ReloadAnswer {
-                    request_sender: p.sender,
-                    request_seq: p.seq,
-                    accepted: false,
-                    dry_run: p.request.dry_run,
-                    dir: p.request.dir.clone(),
-                    source_hash: p.candidate.source_hash.clone(),
-                    summary: p.summary,
-                    reasons,
-                    trace: f.trace,
-                    millis: p.received.elapsed().as_millis() as u64,
-                    ..ReloadAnswer::default()
-                });
-            }
-        };
-        let mut answer = ReloadAnswer {
-            request_sender: p.sender,
-            request_seq: p.seq,
-            accepted: true,
-            dry_run: p.request.dry_run,
-            dir: p.request.dir.clone(),
-            source_hash: p.candidate.source_hash.clone(),
-            step: self.step_no,
-            summary: p.summary,
-            states,
-            ..ReloadAnswer::default()
-        };
-        if !p.request.dry_run {
-            match self.swap(p.candidate, &p.request.dir) {
-                Ok(handed) => answer.summary.push(handed),
-                Err(reasons) => {
-                    answer.accepted = false;
-                    answer.reasons = reasons;
-                }
-            }
-        }
-        answer.millis = p.received.elapsed().as_millis() as u64;
-        let swapped = answer.accepted && !answer.dry_run;
-        self.answer_reload(answer);
-        if swapped {
-            // After the answer: a shadow reading the snapshot has the answer already, and
-            // knows which version the snapshot's names are of.
-            self.publish_delta();
-        }
-    }
-
-    /// Swaps to the candidate version: the state mapped again (a timer may have fallen due
-    /// during the verification: its event is queued, and goes to the new version), its files
-    /// kept beside the journal and the reload journaled, then the engine, the record, the
-    /// calls and the liveness watch of the new version.
-    pub(super) fn swap(
-        &mut self,
-        candidate: crate::reload::version::Candidate,
-        dir: &str,
-    ) -> Result<String, Vec<String>> {
-        let mapped = self.map_onto(&candidate).map_err(|r| r.reasons)?;
+    /// Swaps to the candidate version (see the module's doc); what became of the queue, for
+    /// the answer, or why the swap could not be done (the old version runs on unchanged).
+    fn swap(&mut self, candidate: Candidate, dir: &str) -> Result<String, Vec<String>> {
+        let mapped = map_onto(self.project, &running_state(&self.engine), &candidate)
+            .map_err(|r| r.reasons)?;
         if let Some(journal) = &self.opts.journal {
-            crate::reload::version::keep(journal, &candidate.source_hash, &candidate.files)
-                .map_err(|e| {
-                    vec![format!(
-                        "cannot keep the new version beside the journal in {}: {e}",
-                        journal.display()
-                    )]
-                })?;
+            version::keep(journal, &candidate.source_hash, &candidate.files).map_err(|e| {
+                vec![format!(
+                    "cannot keep the new version beside the journal in {}: {e}",
+                    journal.display()
+                )]
+            })?;
         }
-        let setup =
-            |e: petrel_ipc::SetupError| vec![format!("cannot open the new version's calls: {e}")];
-        // The calls of programs both versions have are kept: no program sees an interruption.
-        let mut old_calls: Vec<Option<CallSender>> = std::mem::take(&mut self.ports.calls)
+        let calls = self.calls_for(&candidate.project)?;
+        let Candidate {
+            project,
+            source_hash,
+            mapping_text,
+            mapping,
+            ..
+        } = candidate;
+        let new = version::leak(project);
+        let reload = Reloaded {
+            dir,
+            source_hash: &source_hash,
+            mapping_text,
+            mapping: &mapping,
+        };
+        let handed = self.adopt(new, mapped, reload);
+        self.run_version(new, calls);
+        self.version = Some(source_hash);
+        Ok(handed)
+    }
+
+    /// The call senders of the new version's programs, in its order: a program both versions
+    /// have keeps its sender if the new version's calls fit it (it sees no interruption), the
+    /// others get one sized for them. On a failure the old senders stay as they were.
+    fn calls_for(&mut self, new: &CompiledProject) -> Result<Vec<CallSender>, Vec<String>> {
+        let mut old: Vec<Option<CallSender>> = std::mem::take(&mut self.ports.calls)
             .into_iter()
             .map(Some)
             .collect();
-        let mut calls = Vec::new();
-        let mut failed = None;
-        for prog in &candidate.project.programs {
-            // A sender sized for the old version is kept if the new version's calls fit.
+        // Each sender, and the index of the old one it is, if kept.
+        let mut calls: Vec<(Option<usize>, CallSender)> = Vec::new();
+        for prog in &new.programs {
             let bound = call_bound(prog);
+            let fits = |c: &CallSender| {
+                c.spec().max_body_len >= bound.unwrap_or(petrel_ipc::port::CALLS.max_body_len)
+            };
             let kept = self
                 .project
                 .programs
                 .iter()
                 .position(|p| p.name == prog.name)
-                .filter(|&i| {
-                    old_calls[i].as_ref().is_some_and(|c| {
-                        c.spec().max_body_len
-                            >= bound.unwrap_or(petrel_ipc::port::CALLS.max_body_len)
-                    })
-                })
-                .and_then(|i| old_calls[i].take());
-            match kept {
-                Some(c) => calls.push(c),
-                None => match self.ports._me.call_sender_sized(&prog.name, bound) {
-                    Ok(c) => calls.push(c),
-                    Err(e) => {
-                        failed = Some(setup(e));
-                        break;
+                .and_then(|i| Some((i, old[i].take_if(|c| fits(c))?)));
+            let opened = match kept {
+                Some((i, c)) => Ok((Some(i), c)),
+                None => self
+                    .ports
+                    ._me
+                    .call_sender_sized(&prog.name, bound)
+                    .map(|c| (None, c)),
+            };
+            match opened {
+                Ok(c) => calls.push(c),
+                Err(e) => {
+                    // Put the old senders back as they were.
+                    for (i, c) in calls {
+                        if let Some(i) = i {
+                            old[i] = Some(c);
+                        }
                     }
-                },
+                    self.ports.calls = old.into_iter().flatten().collect();
+                    return Err(vec![format!("cannot open the new version's calls: {e}")]);
+                }
             }
         }
-        if let Some(reasons) = failed {
-            // Put the old calls back as they were.
-            self.ports.calls = old_calls.into_iter().flatten().collect();
-            return Err(reasons);
-        }
+        Ok(calls.into_iter().map(|(_, c)| c).collect())
+    }
+
+    /// The engine of version `new`, from the `mapped` state, with the old one's queue and
+    /// counters; the reload journaled. Says what became of the queue.
+    fn adopt(&mut self, new: &'p CompiledProject, mapped: Mapped, reload: Reloaded) -> String {
         let time = self.engine.now();
-        let new = crate::reload::version::leak(candidate.project);
         let queued = self.engine.take_queue();
         let carried = queued.clone();
-        let carried_len = carried.len();
         let mut engine = Engine::new(new);
         let refused = engine
             .adopt(
@@ -284,29 +220,35 @@ impl PlayerLoop<'_> {
                 mapped.net_args,
                 self.engine.stats(),
                 queued,
-                &candidate.mapping.nets,
+                &reload.mapping.nets,
             )
             .unwrap_or_default();
+        let handed = format!(
+            "queue: {} event(s) handed over to the new version, {} refused",
+            carried.len(),
+            refused.len()
+        );
         self.journal.append(&Entry::Reload {
             time,
-            dir: dir.to_string(),
-            source_hash: candidate.source_hash.clone(),
+            dir: reload.dir.to_string(),
+            source_hash: reload.source_hash.to_string(),
             digest: crate::journal::project_digest(new),
-            mapping: candidate.mapping_text,
+            mapping: reload.mapping_text,
             state: mapped.state,
             deadlines: mapped.deadlines,
             queued: carried,
         });
-        let handed = format!(
-            "queue: {} event(s) handed over to the new version, {} refused",
-            carried_len,
-            refused.len()
-        );
         for (event, why) in refused {
             warn!(event, reason = %why, "a queued event refused at the reload");
         }
-        self.ports.calls = calls;
         self.engine = engine;
+        handed
+    }
+
+    /// Runs version `new` from now on: its calls, record, liveness watch, held calls, built-in
+    /// events, a heartbeat publisher large enough for its status, and a snapshot next.
+    fn run_version(&mut self, new: &'p CompiledProject, calls: Vec<CallSender>) {
+        self.ports.calls = calls;
         self.project = new;
         self.record = StepRecord::new(new).without_calls();
         match ProgramWatch::new(&self.ports._me, new.programs.iter().map(|p| p.name.clone())) {
@@ -319,14 +261,7 @@ impl PlayerLoop<'_> {
             warn!(error = %e, "liveness check failed");
         }
         self.held.refresh(new);
-        self.builtins = Builtins {
-            program_lost: new.event_id("program_lost"),
-            call_failed: new.event_id("call_failed"),
-            bad_message: new.event_id("bad_message"),
-            recorder_failed: new.event_id("recorder_failed"),
-            recorder_restored: new.event_id("recorder_restored"),
-        };
-        // A larger version gets a heartbeat publisher sized for it.
+        self.builtins = Builtins::of(new);
         let heartbeat_max = Heartbeat::max_encoded_len(status_bound(new));
         if heartbeat_max > self.ports.heartbeat.spec().max_body_len {
             match self.ports._me.heartbeat_publisher_sized(heartbeat_max) {
@@ -340,7 +275,13 @@ impl PlayerLoop<'_> {
         self.previous = vec![0; self.engine.state().len()];
         self.snapshot_next = true;
         self.report.reloads += 1;
-        self.version = Some(candidate.source_hash);
-        Ok(handed)
     }
+}
+
+/// What the journal's `reload` entry says besides the state: where the version came from.
+struct Reloaded<'a> {
+    dir: &'a str,
+    source_hash: &'a str,
+    mapping_text: String,
+    mapping: &'a Mapping,
 }

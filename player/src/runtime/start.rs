@@ -11,6 +11,7 @@ use crate::engine::{Engine, Micros};
 use crate::held::HeldCalls;
 use crate::journal::{Entry, Journal, JournalLock, JournalWriter};
 use crate::record::StepRecord;
+use crate::reload::ReloadJob;
 use crate::sizing::{call_bound, event_bound, marking_bound, status_bound};
 use petrel_ipc::{Heartbeat, Participant, ProgramWatch, Reactor, Vehicle, WaitStrategy};
 use petrel_nets::compiled::CompiledProject;
@@ -325,13 +326,7 @@ impl<'p> PlayerLoop<'p> {
             ports,
             watch,
             reactor,
-            builtins: Builtins {
-                program_lost: project.event_id("program_lost"),
-                call_failed: project.event_id("call_failed"),
-                bad_message: project.event_id("bad_message"),
-                recorder_failed: project.event_id("recorder_failed"),
-                recorder_restored: project.event_id("recorder_restored"),
-            },
+            builtins: Builtins::of(project),
             report,
             ledger: Ledger::new(),
             decoded: Vec::new(),
@@ -343,7 +338,8 @@ impl<'p> PlayerLoop<'p> {
             next_heartbeat: Instant::now(),
             next_liveness: Instant::now() + opts.liveness,
             snapshot_next: false,
-            pending: None,
+            reload: ReloadJob::default(),
+            verifier: None,
             version,
             _lock: lock,
         })
