@@ -1,4 +1,9 @@
-//! [`PlayerLoop`]: the player's loop (see the invariants in [`super`]).
+//! [`PlayerLoop`] and its rounds (the round and the loop's invariants are said in [`super`]):
+//! the queue processed (each step journaled from the record and the engine as they are, and
+//! published; the calls it could not deliver held or failed), the journal's batch written or
+//! held, the wait and its timeout, the events taken through [`crate::intake`], the programs'
+//! comings and goings, the recorder's changes raised (`recorder_failed`, `recorder_restored`),
+//! and the stop.
 
 use super::options::{PlayError, PlayOptions, PlayReport};
 use super::ports::{Builtins, Ports};
@@ -82,22 +87,7 @@ impl<'p> PlayerLoop<'p> {
             // heartbeat, the journal's hold, the wait's timeout), and when the wait ends.
             let now = Instant::now();
             self.heartbeat_if_due(now);
-            // Everything journaled reaches the operating system before the player sleeps.
-            // A spinning player holds a round's records while the next event may come (at
-            // most BATCH_DELAY), so that their write is not on that event's path.
-            let hold = match self.reactor.strategy() {
-                WaitStrategy::Block => None,
-                WaitStrategy::Spin => Some(None),
-                WaitStrategy::SpinThenBlock(window) => Some(Some(window)),
-            }
-            .and_then(|window| {
-                let since = self.journal.batch_since()?;
-                let left = BATCH_DELAY.saturating_sub(now.saturating_duration_since(since));
-                (!left.is_zero()).then(|| window.map_or(left, |w| w.min(left)))
-            });
-            if hold.is_none() {
-                self.journal.write_batch();
-            }
+            let hold = self.write_or_hold(now);
             if self.journal.has_changes() {
                 // The heartbeat's flush changed the recorder's state: tell the nets now.
                 continue;
@@ -108,27 +98,7 @@ impl<'p> PlayerLoop<'p> {
                     break;
                 }
             }
-            let mut timeout = self
-                .next_heartbeat
-                .min(self.next_liveness)
-                .saturating_duration_since(now);
-            if let Some(d) = self.engine.next_deadline() {
-                timeout = timeout.min(Duration::from_micros(
-                    d.saturating_sub(self.mission_time(now)),
-                ));
-            }
-            if self.reload.is_verifying() {
-                // The verifier's thread says nothing when it is done: look again soon.
-                timeout = timeout.min(Duration::from_millis(2));
-            }
-            if !self.held.is_empty() {
-                // Nothing says when a receiver connects: look for the held calls' programs.
-                timeout = timeout.min(HOLD_POLL);
-            }
-            if let Some(hold) = hold {
-                // Within a spin window, so that the wait ends before it could sleep.
-                timeout = timeout.min(hold);
-            }
+            let timeout = self.wait_timeout(now, hold);
             let ready = match self
                 .reactor
                 .wait(&[&self.ports.events, &self.ports.reload], Some(timeout))
@@ -144,16 +114,75 @@ impl<'p> PlayerLoop<'p> {
                 info!("termination requested: stopping");
                 break;
             }
-            let woke = Instant::now();
-            self.engine.advance_to(self.mission_time(woke));
-            self.ledger.set_clock(woke);
-            let someone_died = self.take_events();
-            if someone_died || woke >= self.next_liveness {
-                self.check_liveness();
-            }
-            self.take_reload_requests();
-            self.finish_reload();
+            self.take_inputs(Instant::now());
         }
+        self.stop()
+    }
+
+    /// Writes the journal's batch of records, unless a spinning player may still hold it: how
+    /// long it may, then. Everything journaled reaches the operating system before the player
+    /// sleeps; a spinning player holds a round's records while the next event may come (at most
+    /// [`BATCH_DELAY`]), so that their write is not on that event's path.
+    fn write_or_hold(&mut self, now: Instant) -> Option<Duration> {
+        let hold = match self.reactor.strategy() {
+            WaitStrategy::Block => None,
+            WaitStrategy::Spin => Some(None),
+            WaitStrategy::SpinThenBlock(window) => Some(Some(window)),
+        }
+        .and_then(|window| {
+            let since = self.journal.batch_since()?;
+            let left = BATCH_DELAY.saturating_sub(now.saturating_duration_since(since));
+            (!left.is_zero()).then(|| window.map_or(left, |w| w.min(left)))
+        });
+        if hold.is_none() {
+            self.journal.write_batch();
+        }
+        hold
+    }
+
+    /// How long the wait that starts `now` may last: until the next heartbeat, liveness check
+    /// or timer deadline, shorter while a reload is verified or calls are held, and within the
+    /// journal's `hold`.
+    fn wait_timeout(&self, now: Instant, hold: Option<Duration>) -> Duration {
+        let mut timeout = self
+            .next_heartbeat
+            .min(self.next_liveness)
+            .saturating_duration_since(now);
+        if let Some(d) = self.engine.next_deadline() {
+            timeout = timeout.min(Duration::from_micros(
+                d.saturating_sub(self.mission_time(now)),
+            ));
+        }
+        if self.reload.is_verifying() {
+            // The verifier's thread says nothing when it is done: look again soon.
+            timeout = timeout.min(Duration::from_millis(2));
+        }
+        if !self.held.is_empty() {
+            // Nothing says when a receiver connects: look for the held calls' programs.
+            timeout = timeout.min(HOLD_POLL);
+        }
+        if let Some(hold) = hold {
+            // Within a spin window, so that the wait ends before it could sleep.
+            timeout = timeout.min(hold);
+        }
+        timeout
+    }
+
+    /// After the wait, which ended at `woke`: time moves forward, then the events, the
+    /// programs' comings and goings, and the reloads are taken.
+    fn take_inputs(&mut self, woke: Instant) {
+        self.engine.advance_to(self.mission_time(woke));
+        self.ledger.set_clock(woke);
+        let someone_died = self.take_events();
+        if someone_died || woke >= self.next_liveness {
+            self.check_liveness();
+        }
+        self.take_reload_requests();
+        self.finish_reload();
+    }
+
+    /// The player stops: a last look at the programs, the journal flushed, the report.
+    fn stop(mut self) -> Result<PlayReport, PlayError> {
         // A last look at the programs: one gone since the last check (the programs of a
         // vehicle stop before its player) is journaled, a stop, or a loss as an input that a
         // resumed player takes.

@@ -79,12 +79,20 @@ fn take_journal(
     Ok((lock, start))
 }
 
-/// Rebuilds the engine from the journal (`--resume`): the mission time it reached, and the
-/// number of steps restored.
-fn resume<'p>(
-    project: &'p CompiledProject,
-    opts: &PlayOptions,
-) -> Result<(Engine<'p>, Micros, u64, Option<String>), PlayError> {
+/// A mission restored from its journal (`--resume`).
+struct Resumed<'p> {
+    /// The engine in the state the journal reached (on the version of its last reload).
+    engine: Engine<'p>,
+    /// The mission time of the journal's last entry.
+    last: Micros,
+    /// The steps restored.
+    steps: u64,
+    /// The content hash of the version running, if a reload brought it.
+    version: Option<String>,
+}
+
+/// Rebuilds the engine from the journal (`--resume`).
+fn resume<'p>(project: &'p CompiledProject, opts: &PlayOptions) -> Result<Resumed<'p>, PlayError> {
     let dir = opts.journal.as_ref().ok_or_else(|| {
         PlayError::Journal("--resume needs the journal (do not pass --no-journal)".into())
     })?;
@@ -136,7 +144,12 @@ fn resume<'p>(
     }
     let restored = engine.marking();
     info!(steps = r.steps, time_s = r.last_time as f64 / 1e6, queued = engine.queued(), ?restored, timers = ?engine.deadlines(), "resumed from the journal");
-    Ok((engine, r.last_time, r.steps, version))
+    Ok(Resumed {
+        engine,
+        last: r.last_time,
+        steps: r.steps,
+        version,
+    })
 }
 
 /// The content hash of the version the journal's last reload brought ("" without a reload).
@@ -147,30 +160,174 @@ fn engine_version(entries: &[Entry]) -> String {
     }
 }
 
+/// Joins the vehicle's services (with the operators' group, if any), after removing what
+/// dead processes left there.
+fn join_vehicle(opts: &PlayOptions) -> Result<Vehicle, PlayError> {
+    let mut vehicle = Vehicle::new(&opts.vehicle).map_err(|e| PlayError::Vehicle(e.to_string()))?;
+    if let Some(group) = &opts.group {
+        let group =
+            petrel_ipc::Group::lookup(group).map_err(|e| PlayError::Setup(e.to_string()))?;
+        vehicle = vehicle.with_group(group);
+    }
+    match petrel_ipc::cleanup_dead_nodes(&vehicle, Duration::from_millis(500)) {
+        Ok(r) if !r.cleaned.is_empty() => {
+            info!(
+                cleaned = r.cleaned.len(),
+                "removed the resources of dead processes"
+            )
+        }
+        Ok(_) => {}
+        Err(e) => warn!(error = %e, "could not look for dead processes"),
+    }
+    Ok(vehicle)
+}
+
+/// Opens the player's ports on the vehicle, each sized from `project` ([`crate::sizing`]), and
+/// the watch on its programs.
+fn open_ports(
+    vehicle: &Vehicle,
+    project: &CompiledProject,
+    wait: WaitStrategy,
+) -> Result<(Ports, ProgramWatch), PlayError> {
+    let setup = |e: petrel_ipc::SetupError| PlayError::Setup(e.to_string());
+    let me = Participant::join_player(vehicle, project.programs.len()).map_err(setup)?;
+    // The largest status this project can have, and the fullest ledger, always fit.
+    let heartbeat_max = Heartbeat::max_encoded_len(status_bound(project));
+    if heartbeat_max > petrel_ipc::wire::MAX_BODY_LEN {
+        warn!(
+            bytes = heartbeat_max,
+            "the status of this project may exceed what a heartbeat carries: it will leave out the marking when it does"
+        );
+    }
+    let ports = Ports {
+        events: me
+            .event_receiver_sized(event_bound(project), project.programs.len())
+            .map_err(setup)?,
+        calls: project
+            .programs
+            .iter()
+            .map(|p| me.call_sender_sized(&p.name, call_bound(p)))
+            .collect::<Result<_, _>>()
+            .map_err(setup)?,
+        marking: me
+            .marking_publisher_sized(marking_bound(project))
+            .map_err(setup)?,
+        heartbeat: me.heartbeat_publisher_sized(heartbeat_max).map_err(setup)?,
+        reload: me.reload_receiver().map_err(setup)?,
+        reload_answers: me.reload_answer_publisher().map_err(setup)?,
+        _me: me,
+    };
+    if wait != WaitStrategy::Block {
+        // Spinning, the player sees events in shared memory: their notifications are
+        // consumed now and then, not at every event (two system calls fewer each).
+        ports
+            .events
+            .consume_wakeups_every(Some(petrel_ipc::SPIN_WAKEUP_PERIOD));
+    }
+    let watch = ProgramWatch::new(&ports._me, project.programs.iter().map(|p| p.name.clone()))
+        .map_err(setup)?;
+    Ok((ports, watch))
+}
+
+/// Opens the journal (a recorder that writes nothing without a journal directory), its header
+/// naming the mission's first version and its start.
+fn open_journal(
+    project: &CompiledProject,
+    opts: &PlayOptions,
+    mission_start_ms: u64,
+) -> Result<Journal, PlayError> {
+    let writer = match &opts.journal {
+        None => None,
+        Some(dir) => {
+            let header = Entry::Header {
+                version: crate::journal::FORMAT_VERSION,
+                project: project.name.clone(),
+                project_dir: opts.project_dir.clone(),
+                // A mission's segments all name its first version (a resume after a
+                // reload runs a later one: the reload entries say which).
+                digest: match (opts.resume, crate::journal::first_header(dir)) {
+                    (true, Some(Entry::Header { digest, .. })) => digest,
+                    _ => crate::journal::project_digest(project),
+                },
+                vehicle: opts.vehicle.clone(),
+                // Every segment of a mission names its start: replay checks they agree.
+                started_unix_ms: mission_start_ms,
+            };
+            let w = JournalWriter::open(dir, header, opts.flush, opts.rotate_bytes)
+                .map_err(|e| PlayError::Journal(format!("cannot write {}: {e}", dir.display())))?;
+            info!(dir = %dir.display(), flush = ?opts.flush, "journal open");
+            Some(w)
+        }
+    };
+    let mut journal = Journal::with_backlog(writer, opts.journal_backlog);
+    journal.batch_records();
+    Ok(journal)
+}
+
+/// Starts a new mission at time 0 (its calls go through `sink`) and journals its start.
+fn start_mission<'p>(
+    project: &'p CompiledProject,
+    sink: &mut RuntimeSink<'_, 'p>,
+    journal: &mut Journal,
+) -> Engine<'p> {
+    let mut engine = Engine::new(project);
+    engine.start(0, sink);
+    // The start's actions are the start's, not the first event's.
+    sink.record.clear();
+    journal.append(&Entry::Start {
+        time: 0,
+        state: engine.state().to_vec(),
+    });
+    engine
+}
+
+/// Carries a restored mission on, from now: the engine, the mission time it goes on from, and
+/// the instant that time is counted from.
+///
+/// Mission time went on while the player was down: timers keep their wall-clock deadlines, and
+/// those that passed expire now, in deadline order. The resume entry says when, so that replay
+/// expires them at the same time.
+fn carry_on<'p>(
+    mut engine: Engine<'p>,
+    last: Micros,
+    mission_start_ms: u64,
+    journal: &mut Journal,
+) -> (Engine<'p>, Micros, Instant) {
+    let t0 = Instant::now();
+    let wall = unix_ms()
+        .saturating_sub(mission_start_ms)
+        .saturating_mul(1000);
+    if wall < last {
+        warn!(
+            wall_s = wall as f64 / 1e6,
+            journal_s = last as f64 / 1e6,
+            "the wall clock is behind the journal's last entry: mission time goes on from the journal's"
+        );
+    }
+    let time = wall.max(last);
+    let overdue = engine
+        .deadlines()
+        .iter()
+        .flatten()
+        .filter(|&&d| d <= time)
+        .count();
+    journal.append(&Entry::Resume { time });
+    engine.advance_to(time);
+    info!(
+        down_s = (time - last) as f64 / 1e6,
+        overdue, "resumed at the mission's wall-clock time; overdue timers expire now"
+    );
+    (engine, time, t0)
+}
+
 impl<'p> PlayerLoop<'p> {
     /// Sets the player up: removes what dead processes left, restores the journal for
     /// `--resume`, joins the vehicle, opens the journal and starts the mission (or carries on
     /// the restored one).
     pub fn new(project: &'p CompiledProject, opts: &PlayOptions) -> Result<Self, PlayError> {
-        let mut vehicle =
-            Vehicle::new(&opts.vehicle).map_err(|e| PlayError::Vehicle(e.to_string()))?;
-        if let Some(group) = &opts.group {
-            let group =
-                petrel_ipc::Group::lookup(group).map_err(|e| PlayError::Setup(e.to_string()))?;
-            vehicle = vehicle.with_group(group);
-        }
-        match petrel_ipc::cleanup_dead_nodes(&vehicle, Duration::from_millis(500)) {
-            Ok(r) if !r.cleaned.is_empty() => {
-                info!(
-                    cleaned = r.cleaned.len(),
-                    "removed the resources of dead processes"
-                )
-            }
-            Ok(_) => {}
-            Err(e) => warn!(error = %e, "could not look for dead processes"),
-        }
+        let vehicle = join_vehicle(opts)?;
         // Mission time is wall-clock time since the mission started; a new mission starts now.
-        let (mut t0, now_ms) = (Instant::now(), unix_ms());
+        let (t0, now_ms) = (Instant::now(), unix_ms());
         // The journal directory is this player's alone, and this vehicle's.
         let (lock, mission_start_ms) = match &opts.journal {
             Some(dir) => {
@@ -180,138 +337,34 @@ impl<'p> PlayerLoop<'p> {
             None => (None, now_ms),
         };
         // Recovery first: the engine is rebuilt from the journal before anything else happens.
-        let resumed = if opts.resume {
-            Some(resume(project, opts)?)
-        } else {
-            None
+        let resumed = match opts.resume {
+            true => Some(resume(project, opts)?),
+            false => None,
         };
         // A resume after a reload runs the reloaded version.
-        let project: &'p CompiledProject = match &resumed {
-            Some((engine, ..)) => engine.project(),
-            None => project,
-        };
-        let version = resumed.as_ref().and_then(|r| r.3.clone());
-
-        let setup = |e: petrel_ipc::SetupError| PlayError::Setup(e.to_string());
-        let me = Participant::join_player(&vehicle, project.programs.len()).map_err(setup)?;
-        // The largest status this project can have, and the fullest ledger, always fit.
-        let heartbeat_max = Heartbeat::max_encoded_len(status_bound(project));
-        if heartbeat_max > petrel_ipc::wire::MAX_BODY_LEN {
-            warn!(
-                bytes = heartbeat_max,
-                "the status of this project may exceed what a heartbeat carries: it will leave out the marking when it does"
-            );
-        }
-        let ports = Ports {
-            events: me
-                .event_receiver_sized(event_bound(project), project.programs.len())
-                .map_err(setup)?,
-            calls: project
-                .programs
-                .iter()
-                .map(|p| me.call_sender_sized(&p.name, call_bound(p)))
-                .collect::<Result<_, _>>()
-                .map_err(setup)?,
-            marking: me
-                .marking_publisher_sized(marking_bound(project))
-                .map_err(setup)?,
-            heartbeat: me.heartbeat_publisher_sized(heartbeat_max).map_err(setup)?,
-            reload: me.reload_receiver().map_err(setup)?,
-            reload_answers: me.reload_answer_publisher().map_err(setup)?,
-            _me: me,
-        };
-        if opts.wait != WaitStrategy::Block {
-            // Spinning, the player sees events in shared memory: their notifications are
-            // consumed now and then, not at every event (two system calls fewer each).
-            ports
-                .events
-                .consume_wakeups_every(Some(petrel_ipc::SPIN_WAKEUP_PERIOD));
-        }
-        let watch = ProgramWatch::new(&ports._me, project.programs.iter().map(|p| p.name.clone()))
-            .map_err(setup)?;
+        let project: &'p CompiledProject = resumed.as_ref().map_or(project, |r| r.engine.project());
+        let (ports, watch) = open_ports(&vehicle, project, opts.wait)?;
         let reactor = Reactor::new(opts.wait).map_err(|e| PlayError::Setup(e.to_string()))?;
-
-        let writer = match &opts.journal {
-            None => None,
-            Some(dir) => {
-                let header = Entry::Header {
-                    version: crate::journal::FORMAT_VERSION,
-                    project: project.name.clone(),
-                    project_dir: opts.project_dir.clone(),
-                    // A mission's segments all name its first version (a resume after a
-                    // reload runs a later one: the reload entries say which).
-                    digest: match (opts.resume, crate::journal::first_header(dir)) {
-                        (true, Some(Entry::Header { digest, .. })) => digest,
-                        _ => crate::journal::project_digest(project),
-                    },
-                    vehicle: opts.vehicle.clone(),
-                    // Every segment of a mission names its start: replay checks they agree.
-                    started_unix_ms: mission_start_ms,
-                };
-                let w = JournalWriter::open(dir, header, opts.flush, opts.rotate_bytes).map_err(
-                    |e| PlayError::Journal(format!("cannot write {}: {e}", dir.display())),
-                )?;
-                info!(dir = %dir.display(), flush = ?opts.flush, "journal open");
-                Some(w)
-            }
-        };
-        let mut journal = Journal::with_backlog(writer, opts.journal_backlog);
-        journal.batch_records();
+        let mut journal = open_journal(project, opts, mission_start_ms)?;
         let mut record = StepRecord::new(project).without_calls();
         let mut undelivered = Vec::new();
         let mut report = PlayReport::default();
         let held = HeldCalls::new(project.programs.len());
-        let (engine, base) = match resumed {
-            Some((mut engine, last, steps, _)) => {
-                report.resumed_steps = steps;
-                // Mission time went on while the player was down: timers keep their wall-clock
-                // deadlines, and those that passed expire now, in deadline order. The resume
-                // entry says when, so that replay expires them at the same time.
-                t0 = Instant::now();
-                let wall = unix_ms()
-                    .saturating_sub(mission_start_ms)
-                    .saturating_mul(1000);
-                if wall < last {
-                    warn!(
-                        wall_s = wall as f64 / 1e6,
-                        journal_s = last as f64 / 1e6,
-                        "the wall clock is behind the journal's last entry: mission time goes on from the journal's"
-                    );
-                }
-                let time = wall.max(last);
-                let overdue = engine
-                    .deadlines()
-                    .iter()
-                    .flatten()
-                    .filter(|&&d| d <= time)
-                    .count();
-                journal.append(&Entry::Resume { time });
-                engine.advance_to(time);
-                info!(
-                    down_s = (time - last) as f64 / 1e6,
-                    overdue, "resumed at the mission's wall-clock time; overdue timers expire now"
-                );
-                (engine, time)
+        let version = resumed.as_ref().and_then(|r| r.version.clone());
+        let (engine, base, t0) = match resumed {
+            Some(r) => {
+                report.resumed_steps = r.steps;
+                carry_on(r.engine, r.last, mission_start_ms, &mut journal)
             }
             None => {
-                let mut engine = Engine::new(project);
-                engine.start(
-                    0,
-                    &mut RuntimeSink {
-                        record: &mut record,
-                        calls: &ports.calls,
-                        holding: held.holding(),
-                        undelivered: &mut undelivered,
-                        sent: &mut report.calls_sent,
-                    },
-                );
-                // The start's actions are the start's, not the first event's.
-                record.clear();
-                journal.append(&Entry::Start {
-                    time: 0,
-                    state: engine.state().to_vec(),
-                });
-                (engine, 0)
+                let mut sink = RuntimeSink {
+                    record: &mut record,
+                    calls: &ports.calls,
+                    holding: held.holding(),
+                    undelivered: &mut undelivered,
+                    sent: &mut report.calls_sent,
+                };
+                (start_mission(project, &mut sink, &mut journal), 0, t0)
             }
         };
         let words = engine.state().len();
