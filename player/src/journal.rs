@@ -27,6 +27,17 @@
 //! dropped; a killed player leaves them, a reader takes them as the end of the journal, and
 //! `--resume` cuts them off. The format is unchanged.
 //!
+//! **Writing, failing, one player per directory.** [`JournalWriter`] queues complete records
+//! and writes them at the segment's last good record boundary (a failed write is cut back to
+//! it, its records stay queued); `sync`, and file systems without `fallocate`, write through
+//! the file (`PETREL_JOURNAL_NO_MAP` forces that, for benchmarks). [`Journal`] is the
+//! recorder's state: ok; failing (records wait in memory and are retried at each heartbeat);
+//! dropping (past the backlog, until a gap and a checkpoint can be written); each change is
+//! raised to the nets (`recorder_failed`, `recorder_restored`). [`JournalLock`] makes a
+//! journal directory one player's: a second player is refused, naming the owner; a dead
+//! player's lock is taken over with a warning. The player also refuses a new mission a
+//! directory that already holds a journal, and `--resume` another vehicle's journal.
+//!
 //! Decoding is bounded: a record's body is decoded with a bincode limit proportional to its own
 //! length ([`decode_entry`]), so a body with a valid checksum that claims a vector of 2^61
 //! elements or a string of 2^40 bytes is refused as an undecodable record, never a panic or an

@@ -2,6 +2,14 @@
 //! the events service's ([`event_bound`]), the marking publisher's ([`marking_bound`]) and the
 //! heartbeat publisher's ([`status_bound`]), so that the messages this project can give fit
 //! the fixed samples (docs/benchmarks.md, "Footprint").
+//!
+//! A call sender is a fixed segment when the program's functions take only fixed-size
+//! parameters; the events service records the longest event a process may send (int, float
+//! and bool exact, 256 bytes per text or list) for the programs' senders to size theirs from,
+//! and takes one sender per program and a few more (`petrel_ipc::EVENT_SENDERS_SPARE`); the
+//! marking publisher holds twice the largest snapshot; the heartbeat publisher the largest
+//! status, so that no status is ever refused for its size. Longer texts and lists still go, in
+//! pieces (`petrel_ipc::wire::FRAGMENT`).
 
 use crate::status::{status_json, StatusSnapshot};
 use petrel_ipc::{CallMsg, EventMsg, MarkingMsg};
