@@ -230,7 +230,7 @@ pub fn operator_event(
 /// what mission time in microseconds holds; `nan`, `inf` and negative numbers are refused
 /// with the option's usage, not clamped.
 pub fn seconds(text: &str) -> Result<f64, String> {
-    petrel_player::time::parse_time(text)
+    petrel_player::script::parse_time(text)
 }
 
 /// Reads an option that is a finite number (`--sim-leak-at`): `nan` and `inf` are refused.

@@ -309,9 +309,9 @@ fn parse_timer(text: &str, p: &CompiledProject) -> Result<Expectation, String> {
 }
 
 /// A deadline in seconds, as microseconds: read as a timed line's time is
-/// ([`crate::time::parse_time`]), so that what a line may say and a deadline may be agree.
+/// ([`crate::script::parse_time`]), so that what a line may say and a deadline may be agree.
 fn seconds(text: &str) -> Result<Micros, String> {
-    let s = crate::time::parse_time(text)?;
+    let s = crate::script::parse_time(text)?;
     Ok((s * 1e6).round() as Micros)
 }
 

@@ -4,8 +4,7 @@
 //! - [`record`]: the record of one step (event, firings, actions), which every reader of the
 //!   player's steps goes through.
 //! - [`script`]: missions as unit tests, in virtual time (`petrel run --script`); [`expect`]:
-//!   what a script's `expect` lines say and how they are checked; [`time`]: times in seconds,
-//!   read one way for scripts and the command line.
+//!   what a script's `expect` lines say and how they are checked.
 //! - [`runtime`]: the player process on iceoryx2 (`petrel play`), a thin shell around sans-I/O
 //!   parts: [`intake`], what it does with each message it takes; [`held`], the calls it holds
 //!   for programs joining; [`ack`], its ledger of what it took from each sender, refused and
@@ -32,4 +31,3 @@ pub mod script;
 pub mod shadow;
 mod sizing;
 mod status;
-pub mod time;

@@ -28,7 +28,6 @@ use crate::engine::{Engine, Micros, Refusal};
 use crate::expect::{check, holds, marking_text, Observed};
 pub use crate::expect::{Expectation, Item, Since};
 use crate::record::{Outcome, StepRecord};
-use crate::time::parse_time;
 use petrel_nets::compiled::{
     CompiledProject, EventId, FunctionId, NetId, ProgramId, StateFormula, Value,
 };
@@ -204,6 +203,24 @@ fn parse_timed(line: &str, p: &CompiledProject, last: &mut f64) -> Result<Line, 
         time,
         event: Some((event.text, params)),
     })
+}
+
+/// The largest script time, in seconds: mission time is counted in microseconds in a `u64`,
+/// and a time past it would silently saturate.
+pub const MAX_TIME_S: f64 = u64::MAX as f64 / 1e6;
+
+/// Reads a time in seconds: a finite number from 0 to [`MAX_TIME_S`], nothing else (`nan`,
+/// `inf` and `-1` are refused, not clamped).
+pub fn parse_time(text: &str) -> Result<f64, String> {
+    let time: f64 = text
+        .parse()
+        .map_err(|_| format!("`{text}` is not a time in seconds"))?;
+    if !time.is_finite() || !(0.0..=MAX_TIME_S).contains(&time) {
+        return Err(format!(
+            "`{text}` is not a time: a time is a number of seconds from 0 to {MAX_TIME_S:e}"
+        ));
+    }
+    Ok(time)
 }
 
 /// The errors the lexer and parser found in a line's action, as one message: a line is used
