@@ -112,8 +112,9 @@ pub fn replay_in<'p>(
 ) -> (Engine<'p>, ReplayReport) {
     let mut r = Replayer::new(project, kept);
     let mut skip_to = 0;
-    if let (true, Some(k)) = (from_last_reload, last_reload(entries)) {
-        if let Err(d) = r.start_at_reload(k, &entries[k]) {
+    let last = last_reload(entries).and_then(|k| Some((k, ReloadAt::of(&entries[k])?)));
+    if let (true, Some((k, at))) = (from_last_reload, last) {
+        if let Err(d) = r.start_at_reload(k, at) {
             r.report.divergence = Some(d);
             return (r.engine, r.report);
         }
@@ -193,7 +194,10 @@ impl<'p, 'e> Replayer<'p, 'e> {
                 self.engine.count_refused();
                 Ok(())
             }
-            Entry::Reload { .. } => self.reload(i, entry),
+            Entry::Reload { .. } => match ReloadAt::of(entry) {
+                Some(at) => self.reload(i, at),
+                None => Ok(()),
+            },
             // The player came back at this mission time: timers whose deadline passed while it
             // was down expire now, as they did live.
             Entry::Resume { time } => {
@@ -223,7 +227,14 @@ impl<'p, 'e> Replayer<'p, 'e> {
                 params,
                 ..
             } => self.submit(i, *time, event, params),
-            Entry::Step { .. } => self.step(i, entry),
+            Entry::Step {
+                time,
+                event,
+                outcome,
+                fired,
+                state,
+                ..
+            } => self.step(i, *time, event, (outcome, fired), state),
         }
     }
 
@@ -318,23 +329,19 @@ impl<'p, 'e> Replayer<'p, 'e> {
 
     /// A recorded step: the engine takes its next event, which must be the recorded one, with
     /// the same outcome, the same transitions fired and the same state after.
-    fn step(&mut self, i: usize, entry: &Entry) -> Result<(), Divergence> {
-        let Entry::Step {
-            time,
-            event,
-            outcome,
-            fired,
-            state,
-            ..
-        } = entry
-        else {
-            return Ok(());
-        };
-        self.engine.advance_to(*time);
+    fn step(
+        &mut self,
+        i: usize,
+        time: Micros,
+        event: &str,
+        (outcome, fired): (&str, &[String]),
+        state: &[u64],
+    ) -> Result<(), Divergence> {
+        self.engine.advance_to(time);
         self.log.clear();
         let Some(step) = self.engine.step(&mut self.log) else {
             let what = "the journal has a step here, the replay has no event left to take";
-            return Err(self.diverge(i, what.into(), event, *time, state));
+            return Err(self.diverge(i, what.into(), event, time, state));
         };
         self.report.steps += 1;
         let taken = &self.project.events[step.event as usize].name;
@@ -344,7 +351,7 @@ impl<'p, 'e> Replayer<'p, 'e> {
             format!("the replay took `{taken}`, the journal `{event}`")
         } else if replayed_outcome != outcome {
             format!("the event was {replayed_outcome} in the replay, {outcome} in the journal")
-        } else if &found_fired != fired {
+        } else if found_fired != fired {
             format!(
                 "fired [{}] in the replay, [{}] in the journal",
                 found_fired.join(", "),
@@ -352,30 +359,18 @@ impl<'p, 'e> Replayer<'p, 'e> {
             )
         } else {
             let what = "the marking after the step differs";
-            return self.check_state(i, what, event, *time, state, None);
+            return self.check_state(i, what, event, time, state, None);
         };
-        Err(self.diverge(i, what, event, *time, state))
+        Err(self.diverge(i, what, event, time, state))
     }
 
     /// A reload: the queue at the reload must be the recorded one; the version it brought is
     /// read from the journal directory, the state mapped again with the recorded mapping (and
     /// checked against the recorded state), the queue carried over.
-    fn reload(&mut self, i: usize, entry: &Entry) -> Result<(), Divergence> {
-        let Entry::Reload {
-            time,
-            source_hash,
-            mapping,
-            state,
-            deadlines,
-            queued,
-            ..
-        } = entry
-        else {
-            return Ok(());
-        };
-        self.engine.advance_to(*time);
+    fn reload(&mut self, i: usize, at: ReloadAt) -> Result<(), Divergence> {
+        self.engine.advance_to(at.time);
         let carried = self.engine.queued_names();
-        if &carried != queued {
+        if carried != at.queued {
             let names = |q: &[(String, Vec<Value>, Option<String>)]| {
                 q.iter()
                     .map(|q| q.0.as_str())
@@ -385,17 +380,17 @@ impl<'p, 'e> Replayer<'p, 'e> {
             let what = format!(
                 "the queue at the reload differs: [{}] in the replay, [{}] in the journal",
                 names(&carried),
-                names(queued)
+                names(at.queued)
             );
-            return Err(self.diverge(i, what, "(reload)", *time, state));
+            return Err(self.diverge(i, what, "(reload)", at.time, at.state));
         }
-        match self.reload_engine(source_hash, mapping, *time) {
+        match self.reload_engine(at.source_hash, at.mapping, at.time) {
             Ok(()) => {
                 self.report.reloads += 1;
                 let what = "the state mapped at the reload differs";
-                self.check_state(i, what, "(reload)", *time, state, Some(deadlines))
+                self.check_state(i, what, "(reload)", at.time, at.state, Some(at.deadlines))
             }
-            Err(what) => Err(self.diverge(i, what, "(reload)", *time, state)),
+            Err(what) => Err(self.diverge(i, what, "(reload)", at.time, at.state)),
         }
     }
 
@@ -439,50 +434,38 @@ impl<'p, 'e> Replayer<'p, 'e> {
 
     /// Starts the replay at the journal's reload `k`, on the version it brought, from its
     /// recorded state (restored like a checkpoint's).
-    fn start_at_reload(&mut self, k: usize, entry: &Entry) -> Result<(), Divergence> {
-        let Entry::Reload {
-            time,
-            source_hash,
-            mapping,
-            state,
-            deadlines,
-            queued,
-            ..
-        } = entry
-        else {
-            return Ok(());
-        };
+    fn start_at_reload(&mut self, k: usize, at: ReloadAt) -> Result<(), Divergence> {
         let at_reload = |what: String| Divergence {
             kind: DivergenceKind::Replay,
             entry: k,
-            time: *time,
+            time: at.time,
             event: "(reload)".into(),
             what,
             recorded: Vec::new(),
             replayed: Vec::new(),
         };
         let loaded = match self.kept {
-            Some(dir) => crate::reload::version::load_kept(dir, source_hash),
+            Some(dir) => crate::reload::version::load_kept(dir, at.source_hash),
             None => Err("the journal directory is needed to find the reloaded version".into()),
         };
         let project = crate::reload::version::leak(loaded.map_err(at_reload)?);
         let mut engine = Engine::new(project);
-        let renamed = petrel_nets::reload::Mapping::parse(mapping)
+        let renamed = petrel_nets::reload::Mapping::parse(at.mapping)
             .map(|m| m.nets)
             .unwrap_or_default();
         // The events queued at the reload were received before it.
         let stats = crate::engine::Stats {
-            received: queued.len() as u64,
+            received: at.queued.len() as u64,
             ..Default::default()
         };
         let args = vec![Vec::new(); project.nets.len()];
         let adopted = engine.adopt(
-            *time,
-            state,
-            deadlines,
+            at.time,
+            at.state,
+            at.deadlines,
             args,
             stats,
-            queued.clone(),
+            at.queued.to_vec(),
             &renamed,
         );
         self.run_version(project, engine);
@@ -491,9 +474,46 @@ impl<'p, 'e> Replayer<'p, 'e> {
                 "the reload's state is not of its version's size".into(),
             ));
         }
-        self.report.last_time = *time;
+        self.report.last_time = at.time;
         self.report.reloads += 1;
         Ok(())
+    }
+}
+
+/// What a reload entry holds that the replay needs ([`Entry::Reload`]).
+struct ReloadAt<'e> {
+    time: Micros,
+    source_hash: &'e str,
+    mapping: &'e str,
+    /// The state recorded after the reload (mapped onto the new version).
+    state: &'e [u64],
+    deadlines: &'e [Option<u64>],
+    /// The events queued at the reload, carried over to the new version.
+    queued: &'e [(String, Vec<Value>, Option<String>)],
+}
+
+impl<'e> ReloadAt<'e> {
+    /// The reload `entry` holds, if it is one.
+    fn of(entry: &'e Entry) -> Option<Self> {
+        match entry {
+            Entry::Reload {
+                time,
+                source_hash,
+                mapping,
+                state,
+                deadlines,
+                queued,
+                ..
+            } => Some(ReloadAt {
+                time: *time,
+                source_hash,
+                mapping,
+                state,
+                deadlines,
+                queued,
+            }),
+            _ => None,
+        }
     }
 }
 
