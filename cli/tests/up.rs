@@ -377,7 +377,7 @@ fn fifty_starts_deliver_the_first_call_every_time() {
                         out.contains("reached --until: place `FIRST.done`"),
                         "{what}\n{out}"
                     );
-                    assert!(log.contains("1 calls sent"), "{what}\n{log}");
+                    assert!(log.contains("1 call sent"), "{what}\n{log}");
                     assert!(log.contains(" 0 failed;"), "{what}\n{log}");
                     assert!(!log.contains("call not delivered"), "{what}\n{log}");
                     assert_vehicle_left_clean(&up.vehicle);
@@ -459,7 +459,7 @@ fn a_program_is_ready_only_once_it_receives_its_calls() {
         "{echo}\n{out}"
     );
     assert!(echo.contains("answered ping"), "{echo}");
-    assert!(log.contains("1 calls sent, 0 held, 0 failed"), "{log}");
+    assert!(log.contains("1 call sent, 0 held, 0 failed"), "{log}");
 }
 
 #[test]
