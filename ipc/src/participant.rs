@@ -13,8 +13,8 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::publisher::PublisherCreateError;
 use iceoryx2::port::subscriber::SubscriberCreateError;
 use iceoryx2::prelude::{
-    ipc, AllocationStrategy, AttributeSpecifier, BackpressureStrategy, EventId, Node, NodeBuilder,
-    NodeName, PortFactory, SemanticString, ServiceName,
+    ipc, AllocationStrategy, AttributeSpecifier, BackpressureStrategy, CallbackProgression,
+    EventId, Node, NodeBuilder, NodeName, PortFactory, SemanticString, ServiceName,
 };
 use iceoryx2::service::attribute::{AttributeKey, AttributeValue};
 use iceoryx2::service::builder::event::{EventOpenError, EventOpenOrCreateError};
@@ -24,6 +24,7 @@ use iceoryx2::service::builder::publish_subscribe::{
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 
 use crate::access::{AccessError, Session};
+use crate::mending::Mending;
 use crate::naming::{NameError, Role, Vehicle};
 use crate::port::{
     CallReceiver, CallSender, EventReceiver, EventSender, HeartbeatPublisher, HeartbeatSubscriber,
@@ -445,6 +446,15 @@ impl Participant {
         )
     }
 
+    /// A view of program `program`'s calls service, opened (or made, as the player makes it)
+    /// without a port: who receives the program's calls ([`CallsView::receiver_nodes`]). A
+    /// program is ready when one of its live nodes does: what [`ProgramWatch`](crate::ProgramWatch)
+    /// checks, for the player and for `petrel up`.
+    pub fn calls_view(&self, program: &str) -> Result<CallsView, SetupError> {
+        let factory = self.open_pubsub(&self.vehicle.calls_service(program)?, &CALLS, None)?;
+        Ok(CallsView { factory })
+    }
+
     /// The receiver of this program's calls. Only a [`Role::Program`] has one.
     pub fn call_receiver(&self) -> Result<CallReceiver, SetupError> {
         match &self.role {
@@ -727,9 +737,12 @@ impl Participant {
             .listener_builder()
             .create()
             .map_err(|e| failed(ServiceFailure::Listener(e)))?;
+        // A connection iceoryx2 could not make is mended by the receiver (crate::mending).
+        let mending = Mending::new();
         let subscriber = factory
             .subscriber_builder()
             .buffer_size(spec.subscriber_buffer)
+            .set_degradation_handler(mending.handler())
             .create()
             .map_err(|e| failed(ServiceFailure::Subscriber(e)))?;
         self.session.share_now();
@@ -739,8 +752,29 @@ impl Participant {
             subscriber,
             listener,
             factory,
+            mending,
             self.session.clone(),
         ))
+    }
+}
+
+/// A program's calls service seen without a port ([`Participant::calls_view`]).
+#[derive(Debug)]
+pub struct CallsView {
+    factory: publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>,
+}
+
+impl CallsView {
+    /// The iceoryx2 ids of the nodes ([`NodeInfo::id`](crate::NodeInfo::id)) whose receivers
+    /// are connected to the program's calls now: a call sent now reaches them. A receiver of a
+    /// dead node stays listed until the node is cleaned up.
+    pub fn receiver_nodes(&self) -> Vec<u128> {
+        let mut nodes = Vec::new();
+        self.factory.dynamic_config().list_subscribers(|s| {
+            nodes.push(s.node_id.value());
+            CallbackProgression::Continue
+        });
+        nodes
     }
 }
 

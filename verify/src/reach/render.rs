@@ -2,6 +2,7 @@
 //! named by its id (and its name when it has one), each trace by its transitions.
 
 use super::{ExploreError, PtReport, Representation, Trace};
+use petrel_diag::plural::count;
 use petrel_nets::pt::{PtNet, PtNode};
 use std::fmt::Write as _;
 
@@ -11,11 +12,11 @@ pub fn render_human(net: &PtNet, r: &PtReport) -> String {
     let yes_no = |b: bool| if b { "yes" } else { "no" };
     let _ = writeln!(
         out,
-        "net {}: {} places, {} transitions, {} arcs",
+        "net {}: {}, {}, {}",
         net.name,
-        net.places.len(),
-        net.transitions.len(),
-        net.arcs.len()
+        count(net.places.len(), "place"),
+        count(net.transitions.len(), "transition"),
+        count(net.arcs.len(), "arc")
     );
     if r.reduced {
         // Sizes and maxima of the reduced graph would read as the net's: say what they are.
