@@ -870,6 +870,38 @@ impl Ctx<'_> {
         }
     }
 
+    /// Runs delivery `di` from `s` with the guards' choices `prefix` into `t`, then (timed
+    /// exploration) advances the zone by the step's timer operations and, for a timer's expiry,
+    /// by that timer: every successor of a move is made here.
+    fn run_delivery(
+        &mut self,
+        s: &[u64],
+        di: usize,
+        prefix: &[bool],
+        counter: Option<u32>,
+        t: &mut State,
+    ) {
+        run_step_into(
+            self.sem,
+            self.env,
+            &mut self.rec,
+            &mut self.scratch,
+            s,
+            Some(&self.deliveries[di]),
+            prefix,
+            counter,
+            t,
+        );
+        if let Some(tm) = &self.timing {
+            let k = if counter.is_none() {
+                self.timer_of[di]
+            } else {
+                None
+            };
+            tm.step(&self.sem.layout, t, k, &self.rec.timer_ops);
+        }
+    }
+
     /// Runs move `m` from state `i` (`s`): one step per counter (from `counters`) and per
     /// outcome of the guards it cannot decide.
     #[allow(clippy::too_many_arguments)]
@@ -887,26 +919,8 @@ impl Ctx<'_> {
         let mut prefixes = std::mem::take(&mut self.prefixes);
         for &counter in &counters[m.counters.clone()] {
             if m.dropped {
+                self.run_delivery(s, di, &[], counter, &mut t);
                 let d = &self.deliveries[di];
-                run_step_into(
-                    self.sem,
-                    self.env,
-                    &mut self.rec,
-                    &mut self.scratch,
-                    s,
-                    Some(d),
-                    &[],
-                    counter,
-                    &mut t,
-                );
-                if let Some(tm) = &self.timing {
-                    let k = if counter.is_none() {
-                        self.timer_of[di]
-                    } else {
-                        None
-                    };
-                    tm.step(&self.sem.layout, &mut t, k, &self.rec.timer_ops);
-                }
                 self.flagged |= !self.rec.refused.is_empty() || self.rec.livelock.is_some();
                 let key = (di as u32, Vec::new(), counter, true);
                 let lid = match self.known_label(&key) {
@@ -939,25 +953,8 @@ impl Ctx<'_> {
                         event: self.p.events[d.event as usize].name.clone(),
                     });
                 }
-                run_step_into(
-                    self.sem,
-                    self.env,
-                    &mut self.rec,
-                    &mut self.scratch,
-                    s,
-                    Some(d),
-                    &prefix,
-                    counter,
-                    &mut t,
-                );
-                if let Some(tm) = &self.timing {
-                    let k = if counter.is_none() {
-                        self.timer_of[di]
-                    } else {
-                        None
-                    };
-                    tm.step(&self.sem.layout, &mut t, k, &self.rec.timer_ops);
-                }
+                self.run_delivery(s, di, &prefix, counter, &mut t);
+                let d = &self.deliveries[di];
                 Oracle::next_prefixes(&prefix, self.rec.oracle.used, &mut prefixes);
                 self.flagged |= self.rec.oracle.used > 0
                     || !self.rec.refused.is_empty()
