@@ -4,7 +4,7 @@
 //!
 //! Like the manifest and can.toml, it is read with serde and toml with every span kept, and
 //! every problem is reported at once, at its file, line and column. Nothing here starts a
-//! process: [`super::run`] does, from the [`VehicleFile`] this module builds.
+//! process: [`super::supervise`] does, from the [`VehicleFile`] this module builds.
 
 use petrel_nets::compiled::CompiledProject;
 use petrel_nets::compiled::Value;

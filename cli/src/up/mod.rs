@@ -4,7 +4,7 @@
 //!   with diagnostics (E08xx), as `petrel check` reports them;
 //! - this module: the command line, and the plan of a run (which processes on this computer,
 //!   their executables and arguments expanded, the run directory);
-//! - [`run`]: the supervisor that starts, watches, restarts and stops the processes;
+//! - [`supervise`]: the supervisor that starts, watches, restarts and stops the processes;
 //! - [`display`]: the status lines; [`signals`]: stop requests and children's ends;
 //!   `build_hint`: the cargo command for a missing executable of the running petrel's build;
 //!   [`notify`]: systemd's readiness and watchdog notifications.
@@ -13,8 +13,8 @@ mod build_hint;
 pub mod display;
 pub mod file;
 pub mod notify;
-pub mod run;
 pub mod signals;
+pub mod supervise;
 
 use crate::common::{require_clean, Outcome, Scope};
 use file::{expand, Journal, Kind, ProcessSpec, SendSpec, VehicleFile};
@@ -193,7 +193,7 @@ pub fn up(a: UpArgs) -> Outcome {
         Ok(p) => p,
         Err(o) => return o,
     };
-    run::run(plan, start)
+    supervise::run(plan, start)
 }
 
 /// The current time as `YYYYMMDD-HHMMSS` (UTC), for run directory names.

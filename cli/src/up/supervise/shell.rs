@@ -7,11 +7,11 @@
 //! end) cuts short: the iceoryx2 ports are single-threaded, and a round is short beside the
 //! player's 100 ms heartbeat.
 
-use super::display::{Display, Line};
-use super::file::{Kind, Restart};
-use super::notify::{Notifier, VARIABLES};
-use super::signals::Signals;
-use super::{Plan, Planned, Until};
+use crate::up::display::{Display, Line};
+use crate::up::file::{Kind, Restart};
+use crate::up::notify::{Notifier, VARIABLES};
+use crate::up::signals::Signals;
+use crate::up::{Plan, Planned, Until};
 use crate::common::Outcome;
 use nix::sys::signal::{killpg, Signal};
 use nix::unistd::Pid;

@@ -1,0 +1,5 @@
+//! The supervisor of `petrel up`.
+
+mod shell;
+
+pub use shell::run;
