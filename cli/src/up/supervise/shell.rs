@@ -13,7 +13,7 @@ use crate::up::display::{Display, Line};
 use crate::up::file::Kind;
 use crate::up::notify::{Notifier, VARIABLES};
 use crate::up::signals::Signals;
-use crate::up::Plan;
+use crate::up::RunPlan;
 use nix::sys::signal::{killpg, Signal};
 use nix::unistd::Pid;
 use std::collections::BTreeSet;
@@ -36,7 +36,7 @@ struct Ports {
 }
 
 struct Supervisor {
-    plan: Plan,
+    plan: RunPlan,
     policy: Policy,
     /// Each process's child, while it is not reaped.
     children: Vec<Option<Child>>,
@@ -53,7 +53,7 @@ struct Supervisor {
 }
 
 /// Runs the plan; prints the summary; the outcome gives the exit code.
-pub fn run(plan: Plan, t0: Instant) -> Outcome {
+pub fn run(plan: RunPlan, t0: Instant) -> Outcome {
     // The signals first: from here on, Ctrl-C cannot leave children behind.
     let signals = match Signals::new() {
         Ok(s) => s,
@@ -94,7 +94,7 @@ pub fn run(plan: Plan, t0: Instant) -> Outcome {
 }
 
 /// Subscribed before the player starts, so that the first marking (a snapshot) is seen.
-fn open_ports(me: &petrel_ipc::Participant, plan: &Plan) -> Result<Ports, Outcome> {
+fn open_ports(me: &petrel_ipc::Participant, plan: &RunPlan) -> Result<Ports, Outcome> {
     let ports = me
         .heartbeat_subscriber()
         .and_then(|b| Ok((b, me.marking_subscriber()?, me.event_sender()?)));
@@ -115,7 +115,7 @@ fn open_ports(me: &petrel_ipc::Participant, plan: &Plan) -> Result<Ports, Outcom
 }
 
 impl Supervisor {
-    fn new(plan: Plan, t0: Instant, petrel: std::path::PathBuf, origin: String) -> Supervisor {
+    fn new(plan: RunPlan, t0: Instant, petrel: std::path::PathBuf, origin: String) -> Supervisor {
         let mut display = Display::new(t0);
         let on = match &plan.computer {
             Some(k) => format!(
