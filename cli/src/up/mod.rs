@@ -173,18 +173,9 @@ pub struct RunPlan {
     pub run_dir: PathBuf,
     /// The processes of this computer, dependencies first.
     pub processes: Vec<Planned>,
-    /// The timed sends of this computer, in time order.
-    pub sends: Vec<SendSpec>,
-    /// Conditions that end the run with success.
-    pub until: Vec<Until>,
-    /// The run fails past this.
-    pub timeout: Option<Duration>,
-    /// The manifest's final markings, as place names.
-    pub finals: Vec<Vec<String>>,
-    /// Stay up after the mission's end.
-    pub keep_running: bool,
-    /// Any failure for good stops the vehicle.
-    pub fail_fast: bool,
+    /// The timed sends, `--until`, `--timeout`, the final markings, `--keep-running`,
+    /// `--fail-fast`.
+    pub rules: supervise::policy::Rules,
 }
 
 /// Brings the vehicle up, supervises it, and brings it down.
@@ -419,12 +410,14 @@ fn plan(a: UpArgs) -> Result<RunPlan, Outcome> {
         project_dir,
         run_dir,
         processes,
-        sends,
-        until,
-        timeout,
-        finals,
-        keep_running: a.keep_running,
-        fail_fast: a.fail_fast,
+        rules: supervise::policy::Rules {
+            sends,
+            until,
+            timeout,
+            finals,
+            keep_running: a.keep_running,
+            fail_fast: a.fail_fast,
+        },
     })
 }
 

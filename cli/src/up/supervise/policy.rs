@@ -156,8 +156,9 @@ struct PendingAck {
 }
 
 /// What the run is asked to do, beside its processes.
+#[derive(Default)]
 pub struct Rules {
-    /// The timed sends, in time order.
+    /// The timed sends of this computer, in time order.
     pub sends: Vec<SendSpec>,
     /// Conditions that end the run with success.
     pub until: Vec<Until>,
@@ -733,19 +734,8 @@ mod tests {
         }
     }
 
-    fn rules() -> Rules {
-        Rules {
-            sends: vec![],
-            until: vec![],
-            timeout: None,
-            finals: vec![],
-            keep_running: false,
-            fail_fast: false,
-        }
-    }
-
     fn policy(procs: &[Planned], t0: Instant) -> Policy {
-        Policy::new(procs, rules(), t0)
+        Policy::new(procs, Rules::default(), t0)
     }
 
     fn finish(actions: &[Action]) -> Option<&End> {
@@ -888,7 +878,7 @@ mod tests {
             &procs,
             Rules {
                 fail_fast: true,
-                ..rules()
+                ..Rules::default()
             },
             t0,
         );
@@ -1059,7 +1049,7 @@ mod tests {
                 Until::Place("mission.done".into()),
                 Until::Event("abort".into()),
             ],
-            ..rules()
+            ..Rules::default()
         };
         let p = Policy::new(&[], rules, t0);
         let mut seen = Observed::default();
@@ -1093,7 +1083,7 @@ mod tests {
             &[],
             Rules {
                 finals: finals.clone(),
-                ..rules()
+                ..Rules::default()
             },
             t0,
         );
@@ -1120,7 +1110,7 @@ mod tests {
             Rules {
                 finals,
                 keep_running: true,
-                ..rules()
+                ..Rules::default()
             },
             t0,
         );
@@ -1134,7 +1124,7 @@ mod tests {
             &[],
             Rules {
                 timeout: Some(3 * S),
-                ..rules()
+                ..Rules::default()
             },
             t0,
         );
@@ -1160,7 +1150,7 @@ mod tests {
         let procs = [planned("player", Kind::Player, &[], Restart::Never)];
         let rules = Rules {
             sends: vec![send(0, "go"), send(5, "abort")],
-            ..rules()
+            ..Rules::default()
         };
         let mut p = Policy::new(&procs, rules, t0);
         assert!(

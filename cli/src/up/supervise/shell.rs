@@ -7,7 +7,7 @@
 //! end) cuts short: the iceoryx2 ports are single-threaded, and a round is short beside the
 //! player's 100 ms heartbeat.
 
-use super::policy::{Action, End, Kill, Observed, PlayerStatus, Policy, Rules, Seen, State};
+use super::policy::{Action, End, Kill, Observed, PlayerStatus, Policy, Seen, State};
 use crate::common::Outcome;
 use crate::up::display::{Display, Line};
 use crate::up::file::Kind;
@@ -115,7 +115,12 @@ fn open_ports(me: &petrel_ipc::Participant, plan: &RunPlan) -> Result<Ports, Out
 }
 
 impl Supervisor {
-    fn new(plan: RunPlan, t0: Instant, petrel: std::path::PathBuf, origin: String) -> Supervisor {
+    fn new(
+        mut plan: RunPlan,
+        t0: Instant,
+        petrel: std::path::PathBuf,
+        origin: String,
+    ) -> Supervisor {
         let mut display = Display::new(t0);
         let on = match &plan.computer {
             Some(k) => format!(
@@ -141,14 +146,7 @@ impl Supervisor {
         ));
         let mut notify = Notifier::from_env();
         notify.status(&format!("starting {processes}"));
-        let rules = Rules {
-            sends: plan.sends.clone(),
-            until: plan.until.clone(),
-            timeout: plan.timeout,
-            finals: plan.finals.clone(),
-            keep_running: plan.keep_running,
-            fail_fast: plan.fail_fast,
-        };
+        let rules = std::mem::take(&mut plan.rules);
         let policy = Policy::new(&plan.processes, rules, t0);
         Supervisor {
             children: plan.processes.iter().map(|_| None).collect(),
