@@ -54,56 +54,80 @@ impl<'a> VehicleChecker<'a> {
             .detection
             .as_ref()
             .and_then(|d| self.duration(d, "[link] detection"));
-        let retention = l.retention.as_ref().and_then(|r| {
-            let retention = self.duration(r, "[link] retention")?;
-            let bound = detection.unwrap_or(crate::gateway::DEFAULT_DETECTION);
-            if retention <= bound {
+        let retention = l
+            .retention
+            .as_ref()
+            .and_then(|r| self.retention(r, detection));
+        let lost_event = self.link_event(&l.lost_event, "lost_event");
+        let restored_event = self.link_event(&l.restored_event, "restored_event");
+        self.credentials(l);
+        let insecure = l.security.as_ref().is_some_and(|s| self.security(s));
+        LinkSpec {
+            detection,
+            retention,
+            lost_event,
+            restored_event,
+            user: l.user.as_ref().map(|u| u.get_ref().clone()),
+            credentials: l.credentials.as_ref().map(|u| u.get_ref().clone()),
+            insecure,
+        }
+    }
+
+    /// `[link] retention`: longer than the detection bound (`detection`, or its default).
+    fn retention(&mut self, r: &Spanned<String>, detection: Option<Duration>) -> Option<Duration> {
+        let retention = self.duration(r, "[link] retention")?;
+        let bound = detection.unwrap_or(crate::gateway::DEFAULT_DETECTION);
+        if retention <= bound {
+            self.error(
+                "E0812",
+                self.span(r),
+                format!(
+                    "[link] retention ({}) must be longer than the detection bound ({:?})",
+                    r.get_ref(),
+                    bound
+                ),
+                "not longer than detection",
+                "a carried message is sent again while it is younger than retention - detection: give retention several detection bounds (default 30s)",
+            );
+            return None;
+        }
+        Some(retention)
+    }
+
+    /// `[link] lost_event` or `restored_event` (`what`): the project's, of the communication
+    /// category, with one `text` parameter (the computer's name).
+    fn link_event(&mut self, e: &Option<Spanned<String>>, what: &str) -> Option<String> {
+        let e = e.as_ref()?;
+        let name = e.get_ref();
+        if let Some(project) = self.project {
+            let found = project.events.iter().find(|ev| &ev.name == name);
+            let ok = found.is_some_and(|ev| {
+                ev.category == petrel_nets::model::Category::Communication
+                    && ev.params.len() == 1
+                    && ev.params[0].1 == petrel_nets::model::Type::Text
+            });
+            if !ok {
+                let why = match found {
+                    None => format!("`{name}` is not an event of the project"),
+                    Some(_) => format!(
+                        "`{name}` is not of category communication with one `text` parameter"
+                    ),
+                };
                 self.error(
                     "E0812",
-                    self.span(r),
-                    format!(
-                        "[link] retention ({}) must be longer than the detection bound ({:?})",
-                        r.get_ref(),
-                        bound
-                    ),
-                    "not longer than detection",
-                    "a carried message is sent again while it is younger than retention - detection: give retention several detection bounds (default 30s)",
+                    self.span(e),
+                    format!("[link] {what}: {why}"),
+                    "not a link event",
+                    &format!("declare it in petrel.toml: {name} = {{ category = \"communication\", params = [\"computer: text\"] }}"),
                 );
                 return None;
             }
-            Some(retention)
-        });
-        let mut event = |e: &Option<Spanned<String>>, what: &str| -> Option<String> {
-            let e = e.as_ref()?;
-            let name = e.get_ref();
-            if let Some(project) = self.project {
-                let found = project.events.iter().find(|ev| &ev.name == name);
-                let ok = found.is_some_and(|ev| {
-                    ev.category == petrel_nets::model::Category::Communication
-                        && ev.params.len() == 1
-                        && ev.params[0].1 == petrel_nets::model::Type::Text
-                });
-                if !ok {
-                    let why = match found {
-                        None => format!("`{name}` is not an event of the project"),
-                        Some(_) => format!(
-                            "`{name}` is not of category communication with one `text` parameter"
-                        ),
-                    };
-                    self.error(
-                        "E0812",
-                        self.span(e),
-                        format!("[link] {what}: {why}"),
-                        "not a link event",
-                        &format!("declare it in petrel.toml: {name} = {{ category = \"communication\", params = [\"computer: text\"] }}"),
-                    );
-                    return None;
-                }
-            }
-            Some(name.clone())
-        };
-        let lost_event = event(&l.lost_event, "lost_event");
-        let restored_event = event(&l.restored_event, "restored_event");
+        }
+        Some(name.clone())
+    }
+
+    /// `[link] user` and `credentials`: both or neither; the credentials inside the project.
+    fn credentials(&mut self, l: &RawLink) {
         if l.user.is_some() != l.credentials.is_some() {
             let span = self.first_span(&[l.user.as_ref(), l.credentials.as_ref()]);
             self.error(
@@ -124,16 +148,6 @@ impl<'a> VehicleChecker<'a> {
                     "give a path relative to the project directory",
                 );
             }
-        }
-        let insecure = l.security.as_ref().is_some_and(|s| self.security(s));
-        LinkSpec {
-            detection,
-            retention,
-            lost_event,
-            restored_event,
-            user: l.user.as_ref().map(|u| u.get_ref().clone()),
-            credentials: l.credentials.as_ref().map(|u| u.get_ref().clone()),
-            insecure,
         }
     }
 
