@@ -9,11 +9,6 @@ use petrel_diag::duration::TimeUnit;
 use petrel_diag::report::{Diagnostic, Diagnostics};
 use petrel_diag::source::{FileId, Span};
 
-/// Words that cannot be used as names anywhere.
-pub fn is_keyword(s: &str) -> bool {
-    matches!(s, "true" | "false" | "self")
-}
-
 #[derive(Clone, Debug, PartialEq)]
 enum Tok {
     Ident(String),
