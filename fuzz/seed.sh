@@ -21,14 +21,14 @@ for t in "${@:-net_parse net_check manifest can_toml pnml wire journal dbc candu
   for t in $t; do
     case $t in
     net_parse | net_check)
-        seed "$t" $(find "$repo/missions" "$repo/nets/tests/data" "$repo/can_bridge/tests/data" -name '*.pn') ;;
+        seed "$t" $(find "$repo/missions" "$repo/nets/tests/data" "$repo/verify/tests/data" "$repo/can_bridge/tests/data" -name '*.pn') ;;
     manifest)
-        seed "$t" $(find "$repo/missions" "$repo/nets/tests/data" "$repo/can_bridge/tests/data" -name petrel.toml) ;;
+        seed "$t" $(find "$repo/missions" "$repo/nets/tests/data" "$repo/verify/tests/data" "$repo/can_bridge/tests/data" -name petrel.toml) ;;
     can_toml)
         seed "$t" $(find "$repo/missions" "$repo/can_bridge/tests/data" -name can.toml) ;;
     pnml)
         # The small MCC models only: libFuzzer's inputs stay under -max_len.
-        seed "$t" $(find "$repo/nets/tests/data" -name '*.pnml' -size -60k) ;;
+        seed "$t" $(find "$repo/nets/tests/data" "$repo/verify/tests/data" -name '*.pnml' -size -60k) ;;
     dbc)
         # 64 bytes of payload first, then the DBC.
         mkdir -p corpus/dbc

@@ -5,8 +5,8 @@
 #   scripts/bench-verify.sh [MODEL...]
 #
 # Default models: Dekker-PT-015 Anderson-PT-05 NeoElection-PT-3 Peterson-PT-3 SafeBus-PT-06
-# NQueens-PT-10 (from nets/tests/data/mcc). For each, Petrel explores the PNML file
-# (`petrel verify FILE --format json`, or the `explore` example of petrel-nets while the CLI lacks
+# NQueens-PT-10 (from verify/tests/data/mcc). For each, Petrel explores the PNML file
+# (`petrel verify FILE --format json`, or the `explore` example of petrel-verify while the CLI lacks
 # the subcommand) and Spin explores the same net translated to Promela by the peer script
 # pnml2pml.py (compiled -DNOREDUCE -DSAFETY -DBFS, run `./pan -E`). Wall seconds and peak RSS
 # come from /usr/bin/time -v. Spin's compile time is shown apart; its run time is what is
@@ -19,7 +19,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
-MCC="$ROOT/nets/tests/data/mcc"
+MCC="$ROOT/verify/tests/data/mcc"
 
 models=("$@")
 if [ "${#models[@]}" -eq 0 ]; then
@@ -68,10 +68,10 @@ if printf '%s' "$probe" | grep -q '"edges": *1,'; then
     petrel_args=(--format json)
     petrel_name="petrel verify FILE --format json"
 else
-    cargo build --release --quiet -p petrel-nets --example explore >&2
+    cargo build --release --quiet -p petrel-verify --example explore >&2
     petrel=("$ROOT/target/release/examples/explore")
     petrel_args=()
-    petrel_name="petrel-nets example explore FILE (petrel verify does not take PNML yet)"
+    petrel_name="petrel-verify example explore FILE (petrel verify does not take PNML yet)"
 fi
 say "Petrel runs as: $petrel_name"
 

@@ -16,8 +16,8 @@ use std::time::Instant;
 use petrel_can_bridge::bridge::BridgeCore;
 use petrel_can_bridge::config::check_rules;
 use petrel_can_bridge::{CanId, Dbc, Frame};
-use petrel_nets::diag::Diagnostics;
-use petrel_nets::source::SourceMap;
+use petrel_diag::report::Diagnostics;
+use petrel_diag::source::SourceMap;
 
 const FRAMES: usize = 1_000_000;
 /// The most frames a saturated 1 Mbit/s classic CAN bus carries in a second (shortest frames).

@@ -3,8 +3,8 @@
 mod common;
 
 use common::codes;
-use petrel_nets::diag::Diagnostics;
-use petrel_nets::source::SourceMap;
+use petrel_diag::report::Diagnostics;
+use petrel_diag::source::SourceMap;
 
 fn load(dir: &std::path::Path) -> (Diagnostics, String) {
     let mut sources = SourceMap::new();

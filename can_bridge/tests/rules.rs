@@ -60,8 +60,8 @@ fn the_bench_configuration_checks_clean() {
 
 #[test]
 fn load_project_can_reads_the_dbc_it_names() {
-    let mut sources = petrel_nets::source::SourceMap::new();
-    let mut diags = petrel_nets::diag::Diagnostics::new();
+    let mut sources = petrel_diag::source::SourceMap::new();
+    let mut diags = petrel_diag::report::Diagnostics::new();
     let got = petrel_can_bridge::load_project_can(
         &common::data("auv"),
         &common::project(),
@@ -93,8 +93,8 @@ fn a_broken_dbc_is_reported_where_it_breaks() {
         "VERSION \"\"\nNS_ :\nBS_:\nBU_: A\nBO_ 16 M: 1 A\n SG_ s : 4|8@1+ (1,0) [0|1] \"\" A\n",
     )
     .unwrap();
-    let mut sources = petrel_nets::source::SourceMap::new();
-    let mut diags = petrel_nets::diag::Diagnostics::new();
+    let mut sources = petrel_diag::source::SourceMap::new();
+    let mut diags = petrel_diag::report::Diagnostics::new();
     let got = petrel_can_bridge::load_project_can(
         dir.path(),
         &common::project(),
@@ -109,7 +109,7 @@ fn a_broken_dbc_is_reported_where_it_breaks() {
     assert!(text.contains("bad.dbc:6"), "{text}");
     // A missing DBC, at the `dbc` value.
     std::fs::write(dir.path().join("can.toml"), "dbc = \"none.dbc\"\n").unwrap();
-    let mut diags = petrel_nets::diag::Diagnostics::new();
+    let mut diags = petrel_diag::report::Diagnostics::new();
     petrel_can_bridge::load_project_can(dir.path(), &common::project(), &mut sources, &mut diags)
         .unwrap();
     assert_eq!(codes(&diags), ["E0702"]);

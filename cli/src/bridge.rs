@@ -1,7 +1,7 @@
 //! `petrel bridge`: the CAN data server, serving a bus or replaying a recorded one.
 
 use crate::common::{out, require_clean, vehicle_of, wait_strategy, Outcome, Scope};
-use petrel_nets::plural::count;
+use petrel_diag::plural::count;
 use std::path::PathBuf;
 
 /// `petrel bridge`.

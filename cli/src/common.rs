@@ -1,11 +1,10 @@
 //! What every command shares: how a command ends, where its output goes, and the one way a
 //! project is loaded and checked.
 
+use petrel_diag::report::{Diagnostic, Diagnostics, Severity};
+use petrel_diag::source::SourceMap;
 use petrel_nets::compiled::CompiledProject;
-use petrel_nets::diag::{Diagnostic, Diagnostics, Severity};
 use petrel_nets::project::{self, LoadError, LoadedProject};
-use petrel_nets::source::SourceMap;
-use petrel_nets::verify;
 use std::path::Path;
 
 /// How a command ended; the exit code follows from it.
@@ -137,14 +136,14 @@ pub fn check_project(dir: &Path, scope: Scope) -> Result<Checked, Outcome> {
         d.sort();
     }
     if let (Some(c), true) = (&compiled, scope.quick_verify) {
-        let opts = verify::VerifyOptions {
+        let opts = petrel_verify::VerifyOptions {
             max_states: Some(QUICK_VERIFY_STATES),
             ..Default::default()
         };
         use petrel_nets::check::{apply_allows, AllowPass};
-        match verify::verify(c, opts) {
+        match petrel_verify::verify(c, opts) {
             Ok(report) => {
-                d.extend(verify::diagnostics(&loaded.project, &report));
+                d.extend(petrel_verify::diagnostics(&loaded.project, &report));
                 apply_allows(&loaded.project, &mut d, AllowPass::Final);
             }
             Err(e) => d.push(Diagnostic {

@@ -4,10 +4,10 @@
 
 use std::path::{Path, PathBuf};
 
+use petrel_diag::report::{Diagnostic, Severity};
 use petrel_gateway::keys::{self, KeyError};
 use petrel_gateway::session::is_loopback;
 use petrel_gateway::Security;
-use petrel_nets::diag::{Diagnostic, Severity};
 
 use crate::common::{out, require_clean, Outcome, Scope};
 use crate::up::file::VehicleFile;

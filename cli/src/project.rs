@@ -3,11 +3,10 @@
 use crate::common::{
     check_project, interactive, out, report, require_clean, write_output, Format, Outcome, Scope,
 };
-use petrel_nets::diag::Diagnostics;
-use petrel_nets::plural::count;
+use petrel_diag::plural::count;
+use petrel_diag::report::Diagnostics;
+use petrel_diag::source::SourceMap;
 use petrel_nets::project;
-use petrel_nets::source::SourceMap;
-use petrel_nets::verify;
 use std::path::{Path, PathBuf};
 
 /// `petrel check`.
@@ -148,7 +147,7 @@ pub struct VerifyArgs {
     deadlocks: bool,
 }
 
-/// `--edges`: [`verify::EdgeMemory`] on the command line.
+/// `--edges`: [`petrel_verify::EdgeMemory`] on the command line.
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]
 pub enum EdgesArg {
     /// Kept up to about a million edges, recomputed beyond.
@@ -159,12 +158,12 @@ pub enum EdgesArg {
     Replay,
 }
 
-impl From<EdgesArg> for verify::EdgeMemory {
+impl From<EdgesArg> for petrel_verify::EdgeMemory {
     fn from(e: EdgesArg) -> Self {
         match e {
-            EdgesArg::Auto => verify::EdgeMemory::Auto,
-            EdgesArg::Keep => verify::EdgeMemory::Keep,
-            EdgesArg::Replay => verify::EdgeMemory::Replay,
+            EdgesArg::Auto => petrel_verify::EdgeMemory::Auto,
+            EdgesArg::Keep => petrel_verify::EdgeMemory::Keep,
+            EdgesArg::Replay => petrel_verify::EdgeMemory::Replay,
         }
     }
 }
@@ -197,7 +196,7 @@ pub fn verify(a: VerifyArgs) -> Outcome {
         }
     }
     let interactive = interactive(a.format);
-    let opts = verify::VerifyOptions {
+    let opts = petrel_verify::VerifyOptions {
         max_states: a.max_states,
         only_net: a.net,
         no_reduction: a.no_reduction,
@@ -211,9 +210,9 @@ pub fn verify(a: VerifyArgs) -> Outcome {
         }),
         ..Default::default()
     };
-    let r = match verify::verify(&c, opts) {
+    let r = match petrel_verify::verify(&c, opts) {
         Ok(r) => r,
-        Err(verify::VerifyError::UnknownNet(n)) => {
+        Err(petrel_verify::VerifyError::UnknownNet(n)) => {
             let names: Vec<_> = c.nets.iter().map(|n| n.name.as_str()).collect();
             return Outcome::Usage(format!(
                 "no net named `{n}`; the nets are: {}",
@@ -230,9 +229,9 @@ pub fn verify(a: VerifyArgs) -> Outcome {
     }
     // Each finding located in the project's text, as `petrel check` shows its own.
     let mut d = if a.all {
-        verify::diagnostics_all(&checked.loaded.project, &r)
+        petrel_verify::diagnostics_all(&checked.loaded.project, &r)
     } else {
-        verify::diagnostics(&checked.loaded.project, &r)
+        petrel_verify::diagnostics(&checked.loaded.project, &r)
     };
     petrel_nets::check::apply_allows(
         &checked.loaded.project,
@@ -244,7 +243,7 @@ pub fn verify(a: VerifyArgs) -> Outcome {
     match a.format {
         Format::Json => {
             // The report's every finding, and the diagnostics with file, line and column.
-            let mut doc = verify::to_json(&r);
+            let mut doc = petrel_verify::to_json(&r);
             if let Some(map) = doc.as_object_mut() {
                 map.insert("errors".into(), r.errors().into());
                 map.insert("warnings".into(), r.warnings().into());
@@ -263,7 +262,7 @@ pub fn verify(a: VerifyArgs) -> Outcome {
             if !text.is_empty() {
                 text.push('\n');
             }
-            text.push_str(&verify::render_summary(&c.name, &r, a.all));
+            text.push_str(&petrel_verify::render_summary(&c.name, &r, a.all));
             out(&text);
         }
     }
@@ -276,7 +275,6 @@ pub fn verify(a: VerifyArgs) -> Outcome {
 }
 
 fn verify_pnml(file: &Path, format: Format, max_states: Option<u64>, deadlocks: bool) -> Outcome {
-    use petrel_nets::reach;
     let text = match std::fs::read_to_string(file) {
         Ok(t) => t,
         Err(e) => return Outcome::Usage(format!("cannot read {}: {e}", file.display())),
@@ -301,39 +299,45 @@ fn verify_pnml(file: &Path, format: Format, max_states: Option<u64>, deadlocks: 
         );
     }
     for net in &nets {
-        let opts = reach::ExploreOptions {
+        let opts = petrel_verify::reach::ExploreOptions {
             max_states,
             deadlocks_only: deadlocks,
             progress: interactive.then(|| {
-                Box::new(|p: reach::Progress| {
+                Box::new(|p: petrel_verify::reach::Progress| {
                     eprint!(
                         "\r{} states, {:.0} states/s   ",
                         p.states, p.states_per_second
                     );
-                }) as Box<dyn FnMut(reach::Progress)>
+                }) as Box<dyn FnMut(petrel_verify::reach::Progress)>
             }),
             ..Default::default()
         };
-        let result = reach::explore(net, opts);
+        let result = petrel_verify::reach::explore(net, opts);
         if interactive {
             eprint!("\r\x1b[K");
         }
         match (result, format) {
             (Ok(r), Format::Human) => {
                 clean &= r.safe && !r.deadlock;
-                out(&reach::render_human(net, &r));
+                out(&petrel_verify::reach::render_human(net, &r));
             }
             (Ok(r), Format::Json) => {
                 clean &= r.safe && !r.deadlock;
-                docs.push(with_skeleton_note(net, reach::to_json(net, &r)));
+                docs.push(with_skeleton_note(
+                    net,
+                    petrel_verify::reach::to_json(net, &r),
+                ));
             }
             (Err(e), Format::Human) => {
                 clean = false;
-                eprintln!("error: {}", reach::render_error(net, &e));
+                eprintln!("error: {}", petrel_verify::reach::render_error(net, &e));
             }
             (Err(e), Format::Json) => {
                 clean = false;
-                docs.push(with_skeleton_note(net, reach::error_to_json(net, &e)));
+                docs.push(with_skeleton_note(
+                    net,
+                    petrel_verify::reach::error_to_json(net, &e),
+                ));
             }
         }
     }

@@ -1,7 +1,7 @@
 //! The flight recorder's commands: `replay` and `journal show`.
 
 use crate::common::{compiled, out, Outcome};
-use petrel_nets::plural::count;
+use petrel_diag::plural::count;
 use std::path::{Path, PathBuf};
 
 /// `petrel replay`.

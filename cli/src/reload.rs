@@ -1,8 +1,8 @@
 //! `petrel reload`: a new version of the project for a running player (docs/reload.md).
 
 use crate::common::{require_clean, Outcome, Scope};
+use petrel_diag::plural::count;
 use petrel_ipc::{ReloadAnswer, ReloadRequest};
-use petrel_nets::plural::count;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 

@@ -1,7 +1,7 @@
 //! `petrel run`: a mission script in virtual time, with no process.
 
 use crate::common::{compiled, out, Outcome};
-use petrel_nets::plural::count;
+use petrel_diag::plural::count;
 use std::path::PathBuf;
 
 /// `petrel run`.

@@ -1,7 +1,7 @@
 //! Commands that run a vehicle or talk to one: `play`, `send`, `status`.
 
 use crate::common::{compiled, out, vehicle_of, wait_strategy, Outcome};
-use petrel_nets::plural::{self, count};
+use petrel_diag::plural::{self, count};
 use std::path::PathBuf;
 
 /// `petrel play`.

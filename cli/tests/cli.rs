@@ -242,7 +242,7 @@ fn verify_says_when_a_pnml_file_is_a_petrel_export() {
 
     // A plain P/T net gets no note.
     let plain = repo()
-        .join("nets/tests/data/mcc/Sudoku-PT-AN01.pnml")
+        .join("verify/tests/data/mcc/Sudoku-PT-AN01.pnml")
         .display()
         .to_string();
     let o = petrel(&["verify", &plain]);
@@ -336,7 +336,7 @@ fn verify_proves_the_uav_mission_and_lists_its_planned_ends() {
 #[test]
 fn verify_and_check_report_each_flaw_with_its_trace() {
     let flawed = repo()
-        .join("nets/tests/data/verify/flawed")
+        .join("verify/tests/data/verify/flawed")
         .display()
         .to_string();
     let o = petrel(&["verify", &flawed]);
@@ -379,7 +379,7 @@ fn verify_and_check_report_each_flaw_with_its_trace() {
 
 fn progress_data(name: &str) -> String {
     repo()
-        .join("nets/tests/data/progress")
+        .join("verify/tests/data/progress")
         .join(name)
         .display()
         .to_string()
@@ -489,7 +489,7 @@ fn verify_reduces_independent_nets_unless_told_not_to() {
 fn verify_timed_drops_an_order_of_timers_that_cannot_happen() {
     // The 2 s watchdog always expires before the 10 min timeout started with it.
     let dir = format!(
-        "{}/../nets/tests/data/timed/race",
+        "{}/../verify/tests/data/timed/race",
         env!("CARGO_MANIFEST_DIR")
     );
     let untimed = petrel(&["verify", &dir]);
@@ -510,7 +510,7 @@ fn verify_timed_drops_an_order_of_timers_that_cannot_happen() {
 #[test]
 fn verify_reports_time_bounds_declared_and_asked_for() {
     let dir = repo()
-        .join("nets/tests/data/timed/relay")
+        .join("verify/tests/data/timed/relay")
         .display()
         .to_string();
     // Declared in [verify.bounds]: decided with --timed, not without.
@@ -574,7 +574,7 @@ fn verify_reports_time_bounds_declared_and_asked_for() {
 
 #[test]
 fn verify_fails_on_a_bound_over_its_requirement() {
-    let copy = copy_project(&repo().join("nets/tests/data/timed/relay"));
+    let copy = copy_project(&repo().join("verify/tests/data/timed/relay"));
     let manifest = copy.path().join("petrel.toml");
     let text = std::fs::read_to_string(&manifest).unwrap();
     std::fs::write(
@@ -936,7 +936,7 @@ fn the_example_of_docs_scripts_md_runs_on_the_uav() {
 #[test]
 fn verify_deadlocks_reduces_a_pnml_net_and_refuses_a_project() {
     let philo = repo()
-        .join("nets/tests/data/mcc/Philosophers-PT-000010.pnml")
+        .join("verify/tests/data/mcc/Philosophers-PT-000010.pnml")
         .display()
         .to_string();
     let full = petrel(&["verify", &philo, "--format", "json"]);

@@ -3,9 +3,9 @@
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 use petrel_can_bridge::Dbc;
+use petrel_diag::report::Diagnostics;
+use petrel_diag::source::SourceMap;
 use petrel_nets::compiled::CompiledProject;
-use petrel_nets::diag::Diagnostics;
-use petrel_nets::source::SourceMap;
 use std::sync::OnceLock;
 
 fn auv() -> &'static (CompiledProject, Dbc) {

@@ -4,8 +4,8 @@
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 use petrel_can_bridge::{BridgeCore, CanConfig, Dbc, ManualClock};
-use petrel_nets::diag::Diagnostics;
-use petrel_nets::source::FileId;
+use petrel_diag::report::Diagnostics;
+use petrel_diag::source::FileId;
 use std::sync::{Arc, OnceLock};
 
 fn auv() -> &'static (CanConfig, Arc<Dbc>) {

@@ -2,8 +2,8 @@
 //! file (every manifest-only check), and the manifest written back.
 #![no_main]
 use libfuzzer_sys::fuzz_target;
-use petrel_nets::diag::Diagnostics;
-use petrel_nets::source::SourceMap;
+use petrel_diag::report::Diagnostics;
+use petrel_diag::source::SourceMap;
 
 fuzz_target!(|data: &[u8]| {
     let text = String::from_utf8_lossy(data);

@@ -36,10 +36,10 @@ fuzz_target!(|data: &[u8]| {
         let _ = d.render_human(&sources);
     }
     if let Some(c) = compiled {
-        let opts = petrel_nets::verify::VerifyOptions {
+        let opts = petrel_verify::VerifyOptions {
             max_states: Some(200),
             ..Default::default()
         };
-        let _ = petrel_nets::verify::verify(&c, opts);
+        let _ = petrel_verify::verify(&c, opts);
     }
 });

@@ -2,8 +2,8 @@
 //! the diagnostics rendered both ways: none of it may panic.
 #![no_main]
 use libfuzzer_sys::fuzz_target;
-use petrel_nets::diag::Diagnostics;
-use petrel_nets::source::SourceMap;
+use petrel_diag::report::Diagnostics;
+use petrel_diag::source::SourceMap;
 
 /// Rendering (ariadne, JSON) costs more than parsing under the fuzzer's instrumentation: it
 /// runs on the inputs up to this size, where its cases are found; longer inputs exercise the

@@ -18,10 +18,10 @@
 //!    folded into literals; then `start`, final markings, invariants and scoped globals.
 
 use crate::compiled as c;
-use crate::diag::{Diagnostic, Diagnostics};
 use crate::model::*;
-use crate::names::{suggest, Candidates};
-use crate::source::Span;
+use petrel_diag::names::{suggest, Candidates};
+use petrel_diag::report::{Diagnostic, Diagnostics};
+use petrel_diag::source::Span;
 use std::collections::{HashMap, HashSet};
 
 /// Checks a project; returns the compiled project when no error was found, and every finding.
@@ -1171,7 +1171,7 @@ impl<'p> Checker<'p> {
             let to = self.occurrence(project, &b.to);
             let within_us = match &b.within {
                 None => Some(None),
-                Some(w) => match crate::duration::parse_duration_us(&w.text) {
+                Some(w) => match petrel_diag::duration::parse_duration_us(&w.text) {
                     Some(us) => Some(Some(us)),
                     None => {
                         self.d.push(
@@ -2353,7 +2353,7 @@ pub fn command_line_bound(project: &c::CompiledProject, text: &str) -> Result<c:
     };
     let end = |what: &str, t: &str| -> Result<c::Occurrence, String> {
         let mut d = Diagnostics::new();
-        let read = crate::manifest::bound_end(crate::source::FileId::default(), 0, t, &mut d);
+        let read = crate::manifest::bound_end(petrel_diag::source::FileId::default(), 0, t, &mut d);
         if let Some(first) = d.iter().next() {
             return Err(format!(
                 "bound `{text}`: {what} `{}`: {}",
@@ -2537,7 +2537,7 @@ pub fn apply_allows(project: &Project, d: &mut Diagnostics, pass: AllowPass) {
     let same = |a: Span, b: Span| a.file == b.file && a.start == b.start && a.end == b.end;
     let mut kept = Diagnostics::new();
     for diag in std::mem::take(d).into_iter() {
-        let silenced = diag.severity == crate::diag::Severity::Warning
+        let silenced = diag.severity == petrel_diag::report::Severity::Warning
             && diag.span.is_some_and(|s| {
                 let mut hit = false;
                 for a in allows.iter_mut() {

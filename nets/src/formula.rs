@@ -15,9 +15,9 @@
 //! A net's name may hold `/` (`MISSION_PHASES/TRANSIT`, a child instance) and a place's `.`
 //! (`TRANSIT.done`, a completion place): a reference is read whole, the checker splits it.
 
-use crate::diag::{Diagnostic, Diagnostics};
 use crate::model::{Formula, Name};
-use crate::source::{FileId, Span};
+use petrel_diag::report::{Diagnostic, Diagnostics};
+use petrel_diag::source::{FileId, Span};
 
 /// Deepest nesting accepted (parentheses and `not`s): no text can exhaust the stack.
 pub const MAX_DEPTH: usize = 64;

@@ -23,43 +23,12 @@
 //! TOML structure errors stop reading (the TOML parser reports one at a time); everything
 //! written inside strings (names, types, categories) is checked here and reported all at once.
 
-use crate::diag::{Diagnostic, Diagnostics};
 use crate::model::*;
-use crate::source::{FileId, Span};
-use serde::de::{Deserialize, Deserializer, MapAccess, Visitor};
+use petrel_diag::report::{Diagnostic, Diagnostics};
+use petrel_diag::source::{FileId, Span};
+use petrel_diag::toml::Ordered;
 use std::fmt::Write as _;
 use toml::Spanned;
-
-/// A TOML table read in document order, each key with its span: serde's maps forget the order
-/// (meaningful for nets, events, rules...) and the keys' places (where diagnostics point).
-/// `can.toml`'s reader uses it too.
-pub struct Ordered<V>(pub Vec<(Spanned<String>, V)>);
-
-impl<V> Default for Ordered<V> {
-    fn default() -> Self {
-        Ordered(Vec::new())
-    }
-}
-
-impl<'de, V: Deserialize<'de>> Deserialize<'de> for Ordered<V> {
-    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        struct V2<V>(std::marker::PhantomData<V>);
-        impl<'de, V: Deserialize<'de>> Visitor<'de> for V2<V> {
-            type Value = Ordered<V>;
-            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-                f.write_str("a table")
-            }
-            fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Self::Value, A::Error> {
-                let mut out = Vec::new();
-                while let Some((k, v)) = map.next_entry()? {
-                    out.push((k, v));
-                }
-                Ok(Ordered(out))
-            }
-        }
-        d.deserialize_map(V2(std::marker::PhantomData))
-    }
-}
 
 #[derive(serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -292,37 +261,16 @@ fn quoted_in(
         .map(|i| range.start + i + 1..range.start + i + 1 + needle.len())
 }
 
-/// Where a TOML parse error is and what it says, on one line: for the manifest and for every
-/// other TOML file of a project (can.toml).
-pub fn toml_error(file: FileId, e: &toml::de::Error) -> (Span, String) {
-    let span = e
-        .span()
-        .map(|r| Span::new(file, r.start, r.end))
-        .unwrap_or(Span::new(file, 0, 0));
-    let msg = e
-        .message()
-        .lines()
-        .map(str::trim)
-        .filter(|l| !l.is_empty())
-        .collect::<Vec<_>>()
-        .join(": ");
-    (span, msg)
-}
-
 /// Reads a manifest. Problems go to `diags`; `None` only when the TOML cannot be read at all.
 pub fn parse_manifest(file: FileId, text: &str, diags: &mut Diagnostics) -> Option<Manifest> {
-    let raw: RawManifest = match toml::from_str(text) {
-        Ok(r) => r,
-        Err(e) => {
-            let (span, msg) = toml_error(file, &e);
-            diags.push(
-                Diagnostic::error("E0101", span, format!("the manifest is not valid: {msg}"))
-                    .label(msg)
-                    .help("the manifest has a [project] table (name, files, start) and optional [globals], [events], [programs.NAME] and [timers] tables; see docs/language.md"),
-            );
-            return None;
-        }
-    };
+    let raw: RawManifest = petrel_diag::toml::parse(
+        file,
+        text,
+        "E0101",
+        "the manifest",
+        "the manifest has a [project] table (name, files, start) and optional [globals], [events], [programs.NAME] and [timers] tables; see docs/language.md",
+        diags,
+    )?;
     let mut r = Reader { file, diags };
     let mut m = Manifest {
         name: raw.project.name.clone(),
@@ -334,7 +282,7 @@ pub fn parse_manifest(file: FileId, text: &str, diags: &mut Diagnostics) -> Opti
             path: f.get_ref().clone(),
             span: r.span(f.span()),
         };
-        if let Err(why) = crate::paths::check_relative(&file.path) {
+        if let Err(why) = petrel_diag::paths::check_relative(&file.path) {
             r.diags.push(outside_project(&file, &why));
         }
         m.files.push(file);
@@ -655,7 +603,7 @@ pub(crate) fn bound_end(
 }
 
 /// E0109: a net file path of the manifest that would leave the project directory.
-pub(crate) fn outside_project(f: &FileRef, why: &crate::paths::PathProblem) -> Diagnostic {
+pub(crate) fn outside_project(f: &FileRef, why: &petrel_diag::paths::PathProblem) -> Diagnostic {
     Diagnostic::error(
         "E0109",
         f.span,
@@ -857,7 +805,7 @@ pub fn format_manifest(m: &Manifest) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::source::SourceFile;
+    use petrel_diag::source::SourceFile;
 
     const TEXT: &str = r#"
 [project]

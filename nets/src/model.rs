@@ -6,7 +6,8 @@
 //! player. Equality ignores spans, so a model read from text equals the same model read back from
 //! PNML.
 
-use crate::source::Span;
+use petrel_diag::duration::TimeUnit;
+use petrel_diag::source::Span;
 use std::fmt;
 
 /// A name as written, with where it was written.
@@ -39,6 +40,11 @@ impl fmt::Display for Name {
     }
 }
 
+/// Words that cannot be used as names anywhere.
+pub fn is_keyword(s: &str) -> bool {
+    matches!(s, "true" | "false" | "self")
+}
+
 /// True if `s` is a valid Petrel identifier: a letter or `_`, then letters, digits or `_`.
 pub fn is_identifier(s: &str) -> bool {
     let mut chars = s.chars();
@@ -46,7 +52,7 @@ pub fn is_identifier(s: &str) -> bool {
         Some(c) if c.is_ascii_alphabetic() || c == '_' => {}
         _ => return false,
     }
-    chars.all(|c| c.is_ascii_alphanumeric() || c == '_') && !crate::syntax::is_keyword(s)
+    chars.all(|c| c.is_ascii_alphanumeric() || c == '_') && !is_keyword(s)
 }
 
 /// The type of an event or function parameter (one type for the whole of Petrel).
@@ -416,8 +422,6 @@ impl Expr {
         }
     }
 }
-
-pub use crate::duration::TimeUnit;
 
 /// How long a timer runs.
 #[derive(Clone, Debug, PartialEq)]

@@ -2,12 +2,12 @@
 
 use crate::check;
 use crate::compiled::CompiledProject;
-use crate::diag::{Diagnostic, Diagnostics};
 use crate::fmt::format_file;
 use crate::manifest::{format_manifest, parse_manifest};
 use crate::model::Project;
-use crate::source::{FileId, SourceMap};
 use crate::syntax::parse_file;
+use petrel_diag::report::{Diagnostic, Diagnostics};
+use petrel_diag::source::{FileId, SourceMap};
 use std::fmt;
 use std::path::{Path, PathBuf};
 
@@ -80,9 +80,9 @@ pub fn load(dir: &Path) -> Result<LoadedProject, LoadError> {
     if let Some(manifest) = parse_manifest(manifest_file, &text, &mut diagnostics) {
         for f in &manifest.files {
             // Never read (and so never let `fmt` rewrite) a file outside the project.
-            let path = match crate::paths::confine(dir, &f.path) {
+            let path = match petrel_diag::paths::confine(dir, &f.path) {
                 Ok(p) => p,
-                Err(why @ crate::paths::PathProblem::Escapes(_)) => {
+                Err(why @ petrel_diag::paths::PathProblem::Escapes(_)) => {
                     diagnostics.push(crate::manifest::outside_project(f, &why));
                     continue;
                 }
@@ -130,7 +130,7 @@ pub fn load(dir: &Path) -> Result<LoadedProject, LoadError> {
                 diagnostics.push(
                     Diagnostic::warning(
                         "W0101",
-                        crate::source::Span::new(manifest_file, 0, 0),
+                        petrel_diag::source::Span::new(manifest_file, 0, 0),
                         format!("net file `{n}` is in the project directory but not in `files`"),
                     )
                     .label("the manifest's file list")
@@ -191,7 +191,7 @@ pub fn load_and_check(
 
 /// Writes a project (manifest and net files, in canonical layout) into `dir`, creating it.
 ///
-/// Every net file path must stay inside `dir` ([`crate::paths::confine`]): otherwise nothing is
+/// Every net file path must stay inside `dir` ([`petrel_diag::paths::confine`]): otherwise nothing is
 /// written and the error (`InvalidInput`) names the path. Readers report such paths as
 /// diagnostics first (E0109, E0508); this is the last guard.
 pub fn write(dir: &Path, project: &Project) -> std::io::Result<()> {
@@ -218,7 +218,7 @@ pub fn write_net_file(dir: &Path, rel: &str, text: &str) -> std::io::Result<()> 
 }
 
 fn confined(dir: &Path, rel: &str) -> std::io::Result<PathBuf> {
-    crate::paths::confine(dir, rel).map_err(|why| {
+    petrel_diag::paths::confine(dir, rel).map_err(|why| {
         std::io::Error::new(
             std::io::ErrorKind::InvalidInput,
             format!(

@@ -1,10 +1,10 @@
 //! Place/transition nets: the structure and initial marking of a PNML net, and nothing else.
 //!
-//! [`crate::pnml::parse_pnml`] builds them from PNML; [`crate::reach`] explores them. They live
-//! apart from PNML because the explorer does not care where a net came from (a test builds one by
-//! hand).
+//! [`crate::pnml::parse_pnml`] builds them from PNML; `petrel_verify::reach` explores them.
+//! They live apart from PNML because the explorer does not care where a net came from (a test
+//! builds one by hand).
 
-use crate::source::Span;
+use petrel_diag::source::Span;
 
 /// A place/transition net read from PNML: the structure and the initial marking, nothing else.
 #[derive(Clone, Debug, PartialEq)]

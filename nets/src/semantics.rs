@@ -251,16 +251,19 @@ impl Layout {
     }
 
     /// True if net `n` is active in `s`.
+    #[inline]
     pub fn is_active(&self, s: &[u64], n: NetId) -> bool {
         Self::bit(s, self.net_active[n as usize])
     }
 
     /// True if place `r` of net `n` is marked in `s`.
+    #[inline]
     pub fn is_marked(&self, s: &[u64], n: NetId, r: PlaceRef) -> bool {
         Self::bit(s, self.place_bit(n, r))
     }
 
     /// The bit of place `r` seen from net `n`.
+    #[inline]
     pub fn place_bit(&self, n: NetId, r: PlaceRef) -> u32 {
         match r {
             PlaceRef::Local(i) => self.net_base[n as usize] + i,
@@ -269,11 +272,13 @@ impl Layout {
     }
 
     /// True if timer `t` runs in `s`.
+    #[inline]
     pub fn timer_running(&self, s: &[u64], t: TimerId) -> bool {
         Self::bit(s, self.timer_base + t)
     }
 
     /// True once a catastrophic event has been processed.
+    #[inline]
     pub fn is_over(&self, s: &[u64]) -> bool {
         Self::bit(s, self.catastrophic)
     }
@@ -287,6 +292,7 @@ impl Layout {
     }
 
     /// Whether `f` holds in `s`.
+    #[inline]
     pub fn holds(&self, f: &StateFormula, s: &[u64]) -> bool {
         match f {
             StateFormula::Const(b) => *b,
@@ -301,6 +307,7 @@ impl Layout {
 
     /// True if rules `a` and `b` take a token from a common place (they conflict when both are
     /// enabled by the same event).
+    #[inline]
     pub fn share_input(&self, a: u32, b: u32) -> bool {
         let (x, y) = (
             &self.rules[a as usize].consume.0,
@@ -311,6 +318,7 @@ impl Layout {
     }
 
     /// Number of marked places (local and global) in `s`.
+    #[inline]
     pub fn tokens(&self, s: &[u64]) -> u32 {
         let mut n = 0;
         for b in self.net_base.first().copied().unwrap_or(self.global_base)..self.timer_base {
@@ -622,6 +630,7 @@ impl<'p> Semantics<'p> {
     }
 
     /// Marks timer `t` as expired (not running) before its event is processed.
+    #[inline]
     pub fn timer_expired(&self, s: &mut [u64], t: TimerId) {
         Layout::clear(s, self.layout.timer_base + t);
     }

@@ -4,14 +4,10 @@
 //! on to report the next one. Newlines separate nothing (every statement starts with a keyword),
 //! but the lexer notes them so comments and blank lines stay where the author put them.
 
-use crate::diag::{Diagnostic, Diagnostics};
 use crate::model::*;
-use crate::source::{FileId, Span};
-
-/// Words that cannot be used as names anywhere.
-pub fn is_keyword(s: &str) -> bool {
-    matches!(s, "true" | "false" | "self")
-}
+use petrel_diag::duration::TimeUnit;
+use petrel_diag::report::{Diagnostic, Diagnostics};
+use petrel_diag::source::{FileId, Span};
 
 #[derive(Clone, Debug, PartialEq)]
 enum Tok {

@@ -2,8 +2,8 @@
 //! reader of the front end is bounded. Each case runs on a thread with a small stack, so that
 //! a bound that regressed would overflow it rather than pass on a large main stack.
 
-use petrel_nets::diag::Diagnostics;
-use petrel_nets::source::SourceMap;
+use petrel_diag::report::Diagnostics;
+use petrel_diag::source::SourceMap;
 use std::path::Path;
 
 fn on_small_stack<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {

@@ -203,7 +203,7 @@ fn forty_thousand_bad_characters_on_one_line_give_a_short_report() {
     );
     assert_eq!(
         text.matches("[E0001] Error").count(),
-        petrel_nets::diag::MAX_HUMAN
+        petrel_diag::report::MAX_HUMAN
     );
     assert!(
         text.contains("... and 39900 more errors not shown"),
@@ -216,10 +216,10 @@ fn forty_thousand_bad_characters_on_one_line_give_a_short_report() {
     assert!(text.contains("a.pn:2:116 ]"));
     let json = d.to_json(&sources);
     assert_eq!(json["errors"], 40_000);
-    assert_eq!(json["omitted"], 40_000 - petrel_nets::diag::MAX_JSON);
+    assert_eq!(json["omitted"], 40_000 - petrel_diag::report::MAX_JSON);
     assert_eq!(
         json["diagnostics"].as_array().map(Vec::len),
-        Some(petrel_nets::diag::MAX_JSON)
+        Some(petrel_diag::report::MAX_JSON)
     );
 }
 

@@ -10,9 +10,10 @@
 //! The whole-project golden is `tests/data/dot/survey.dot`; run with `PETREL_BLESS=1` to rewrite
 //! it after an intended change, then review the difference.
 
+use petrel_diag::duration::TimeUnit;
+use petrel_diag::source::Span;
 use petrel_nets::dot::{project_to_dot, project_tree_dot};
 use petrel_nets::model::*;
-use petrel_nets::source::Span;
 
 // ---------------------------------------------------------------------------------------------
 // Building projects.

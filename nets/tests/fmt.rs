@@ -1,9 +1,10 @@
 //! The formatter: text to model to text round trips, and `fmt` twice changes nothing.
 
-use petrel_nets::diag::Diagnostics;
+use petrel_diag::duration::TimeUnit;
+use petrel_diag::report::Diagnostics;
+use petrel_diag::source::FileId;
 use petrel_nets::fmt::format_file;
 use petrel_nets::model::*;
-use petrel_nets::source::FileId;
 use petrel_nets::syntax::parse_file;
 use proptest::prelude::*;
 use std::path::Path;
@@ -199,7 +200,7 @@ fn trivia() -> impl Strategy<Value = Trivia> {
 }
 
 fn expr() -> impl Strategy<Value = Expr> {
-    let sp = petrel_nets::source::Span::default();
+    let sp = petrel_diag::source::Span::default();
     let leaf = prop_oneof![
         any::<i64>().prop_map(move |v| Expr::Int(v, sp)),
         any::<f64>()
@@ -253,7 +254,7 @@ fn place_ref() -> impl Strategy<Value = Name> {
 }
 
 fn action() -> impl Strategy<Value = Action> {
-    let sp = petrel_nets::source::Span::default();
+    let sp = petrel_diag::source::Span::default();
     prop_oneof![
         (name(), prop::collection::vec(expr(), 0..3)).prop_map(move |(net, args)| {
             Action::Activate {

@@ -1,10 +1,10 @@
 //! Paths read from files stay inside their directory (issue 10, item 3): PNML net file paths,
 //! the manifest's `files`, and what `project::write` and `project::write_net_file` accept.
 
-use petrel_nets::diag::Diagnostics;
+use petrel_diag::report::Diagnostics;
+use petrel_diag::source::SourceMap;
 use petrel_nets::pnml::{export_pnml, import_pnml};
 use petrel_nets::project;
-use petrel_nets::source::SourceMap;
 use std::path::Path;
 
 fn uav_pnml() -> String {

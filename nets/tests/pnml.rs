@@ -1,15 +1,16 @@
 //! PNML interchange: reading the MCC benchmark nets, importing plain P/T nets, the exact round
 //! trip of a Petrel project, and the diagnostics for broken documents.
 
-use petrel_nets::diag::{Diagnostic, Diagnostics};
+use petrel_diag::duration::TimeUnit;
+use petrel_diag::report::{Diagnostic, Diagnostics};
+use petrel_diag::source::{FileId, LineCol, SourceMap, Span};
 use petrel_nets::model::*;
 use petrel_nets::pnml::{export_pnml, import_pnml, parse_pnml, PtNode};
-use petrel_nets::source::{FileId, LineCol, SourceMap, Span};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 fn mcc_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/mcc")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../verify/tests/data/mcc")
 }
 
 /// One row of answers.csv, by column name.
@@ -1346,7 +1347,7 @@ mod properties {
             description in any::<String>(),
             literal in "[^\n]*",
             path in any::<String>().prop_filter("a path inside the project", |p| {
-                petrel_nets::paths::check_relative(p).is_ok()
+                petrel_diag::paths::check_relative(p).is_ok()
             }),
         ) {
             let mut project = sample_project();

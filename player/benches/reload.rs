@@ -7,8 +7,9 @@
 //! and verifying from the mapped state; with, as baselines of the same run, checking the
 //! project (`load_and_check`) and verifying it from its initial state (`petrel verify`).
 
-use petrel_nets::reload::{map_state, verify_mapped, OldState};
+use petrel_nets::reload::{map_state, OldState};
 use petrel_nets::semantics::{NoEffects, Scratch, Semantics};
+use petrel_verify::reload::verify_mapped;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -88,7 +89,7 @@ fn main() {
     });
     let verify_from = best(runs, || verify_mapped(&candidate.project, &mapped, None));
     let verify_all = best(runs, || {
-        petrel_nets::verify::verify(&candidate.project, Default::default()).map(|r| r.states)
+        petrel_verify::verify(&candidate.project, Default::default()).map(|r| r.states)
     });
     let states = verify_mapped(&candidate.project, &mapped, None).expect("verified");
     let total = load + map + verify_from;

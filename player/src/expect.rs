@@ -18,12 +18,12 @@
 
 use crate::engine::{Engine, Micros};
 use crate::record::{call_text, transition_name, Outcome};
+use petrel_diag::report::Diagnostics;
+use petrel_diag::source::FileId;
 use petrel_nets::compiled::{
     CompiledProject, EventId, FunctionId, NetId, PlaceRef, ProgramId, StateFormula, TimerId, Value,
 };
-use petrel_nets::diag::Diagnostics;
 use petrel_nets::model::{Action, Expr, Type};
-use petrel_nets::source::FileId;
 
 /// What an `expect` line checks.
 #[derive(Clone, Debug, PartialEq)]

@@ -9,9 +9,9 @@
 //!   parts: [`intake`], what it does with each message it takes; [`held`], the calls it holds
 //!   for programs joining; [`ack`], its ledger of what it took from each sender, refused and
 //!   recorded (the acknowledgements of its heartbeat); [`reload`], the decisions of a reload
-//!   (`petrel reload`; the mapping and verification are `petrel_nets::reload`'s) and the
-//!   versions kept beside the journal; `status`, the status JSON of its heartbeat; `sizing`,
-//!   the sizes of its services from the project.
+//!   (`petrel reload`; the mapping is `petrel_nets::reload`'s, the verification
+//!   `petrel_verify::reload`'s) and the versions kept beside the journal; `status`, the status
+//!   JSON of its heartbeat; `sizing`, the sizes of its services from the project.
 //! - [`journal`], [`replay`]: the flight recorder and its replay (`--resume` too).
 //! - [`shadow`]: the ground-station copy that follows a vehicle's steps.
 //!

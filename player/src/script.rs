@@ -28,12 +28,12 @@ use crate::engine::{Engine, Micros, Refusal};
 use crate::expect::{check, holds, marking_text, Observed};
 pub use crate::expect::{Expectation, Item, Since};
 use crate::record::{Outcome, StepRecord};
+use petrel_diag::report::Diagnostics;
+use petrel_diag::source::FileId;
 use petrel_nets::compiled::{
     CompiledProject, EventId, FunctionId, NetId, ProgramId, StateFormula, Value,
 };
-use petrel_nets::diag::Diagnostics;
 use petrel_nets::model::Action;
-use petrel_nets::source::FileId;
 
 /// A line of a script.
 #[derive(Clone, Debug, PartialEq)]

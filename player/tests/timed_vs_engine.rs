@@ -1,14 +1,14 @@
 //! The timed verifier against the engine in virtual time (issue 18, "Time"): random scripts of
 //! outside events at random moments, the engine expiring its timers when their deadlines come;
 //! every stable state the engine reaches is one `petrel verify --timed` reached (its marking,
-//! active nets, global places and running timers). On `nets/tests/data/timed/race` the untimed
+//! active nets, global places and running timers). On `verify/tests/data/timed/race` the untimed
 //! analysis reaches a state no script does, so the check has teeth.
 
 use petrel_nets::compiled::{Bound, CompiledProject, Occurrence};
 use petrel_nets::project::load_and_check;
-use petrel_nets::verify::{verify, BoundStatus, VerifyOptions};
 use petrel_player::engine::{Engine, NullSink};
 use petrel_value::{Type, Value};
+use petrel_verify::{verify, BoundStatus, VerifyOptions};
 use std::collections::HashSet;
 use std::path::Path;
 
@@ -134,7 +134,7 @@ fn check(dir: &Path, runs: u64) -> (States, States, States) {
 #[test]
 fn every_state_a_script_reaches_is_one_the_timed_verifier_found() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
-    let (played, timed, untimed) = check(&root.join("nets/tests/data/timed/race"), 200);
+    let (played, timed, untimed) = check(&root.join("verify/tests/data/timed/race"), 200);
     // The scripts reach every timed state there; the untimed analysis reaches M{aborted},
     // which no script does.
     assert_eq!(played, timed);
@@ -241,8 +241,8 @@ fn every_delay_a_script_shows_lies_within_the_bound_the_timed_verifier_reports()
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let mut checked = 0usize;
     for dir in [
-        "nets/tests/data/timed/relay",
-        "nets/tests/data/timed/race",
+        "verify/tests/data/timed/relay",
+        "verify/tests/data/timed/race",
         "missions/uav",
     ] {
         let mut p = load(&root.join(dir));

@@ -9,9 +9,9 @@
 
 use petrel_nets::compiled::{Action, CompiledProject, NetId, Value};
 use petrel_nets::project::from_sources;
-use petrel_nets::verify::{verify, VerifyOptions};
 use petrel_player::engine::{Engine, NullSink};
 use petrel_value::Type;
+use petrel_verify::{verify, VerifyOptions};
 use std::collections::{HashSet, VecDeque};
 
 fn compile(manifest: &str, nets: &str) -> CompiledProject {

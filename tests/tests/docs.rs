@@ -34,7 +34,16 @@ fn codes_in(dir: &Path, out: &mut BTreeSet<String>) {
 /// Every code the crates' sources report.
 fn codes_of_the_code() -> BTreeSet<String> {
     let mut codes = BTreeSet::new();
-    for krate in ["nets", "can_bridge", "player", "cli", "ipc", "programs"] {
+    for krate in [
+        "diag",
+        "nets",
+        "verify",
+        "can_bridge",
+        "player",
+        "cli",
+        "ipc",
+        "programs",
+    ] {
         codes_in(&repo().join(krate).join("src"), &mut codes);
     }
     assert!(codes.len() > 40, "the scan found too few codes: {codes:?}");

@@ -1,10 +1,10 @@
-//! The 30 Model Checking Contest nets (copied in nets/tests/data/mcc, see its README) go through
+//! The 30 Model Checking Contest nets (copied in verify/tests/data/mcc, see its README) go through
 //! `petrel import` then `petrel check`, as a user would run them.
 //!
 //! 27 become Petrel projects that check clean. Three cannot be held by safe nets, and import
 //! says exactly why, element by element, writing nothing.
 
-use petrel_nets::plural::count;
+use petrel_diag::plural::count;
 use petrel_tests::{petrel_bin, repo};
 use std::process::Command;
 
@@ -20,7 +20,7 @@ const REFUSED: [(&str, &str, usize); 3] = [
 
 #[test]
 fn every_mcc_net_imports_or_is_refused_with_reasons() {
-    let data = repo().join("nets/tests/data/mcc");
+    let data = repo().join("verify/tests/data/mcc");
     let answers = std::fs::read_to_string(data.join("answers.csv")).unwrap();
     let out = tempfile::tempdir().unwrap();
     let mut imported = 0;
@@ -97,7 +97,7 @@ fn dot_of_the_uav_mission_and_of_an_imported_net_is_valid_graphviz() {
     let imported = out.path().join("philo");
     let o = Command::new(petrel_bin())
         .arg("import")
-        .arg(repo().join("nets/tests/data/mcc/Philosophers-PT-000005.pnml"))
+        .arg(repo().join("verify/tests/data/mcc/Philosophers-PT-000005.pnml"))
         .arg("-o")
         .arg(&imported)
         .output()

@@ -1,12 +1,12 @@
 //! Reading and checking the text of `can.toml` against the DBC and the project (codes E07xx).
 
+use petrel_diag::duration::parse_duration_us;
+use petrel_diag::names::{self, Candidates};
+use petrel_diag::report::{Diagnostic, Diagnostics};
+use petrel_diag::source::{FileId, Span};
+use petrel_diag::toml::Ordered;
 use petrel_nets::compiled::{CompiledProject, Value};
-use petrel_nets::diag::{Diagnostic, Diagnostics};
-use petrel_nets::duration::parse_duration_us;
-use petrel_nets::manifest::Ordered;
 use petrel_nets::model::Type;
-use petrel_nets::names::{self, Candidates};
-use petrel_nets::source::{FileId, Span};
 use serde::Deserialize;
 use toml::Spanned;
 
@@ -1154,18 +1154,14 @@ pub fn check_rules(
     project: &CompiledProject,
     diags: &mut Diagnostics,
 ) -> Option<CanConfig> {
-    let raw: RawCan = match toml::from_str(text) {
-        Ok(r) => r,
-        Err(e) => {
-            let (span, msg) = petrel_nets::manifest::toml_error(file, &e);
-            diags.push(
-                Diagnostic::error("E0701", span, format!("can.toml is not valid: {msg}"))
-                    .label(msg)
-                    .help("can.toml has `dbc`, and optional [bus], [heartbeat], [commands] tables and [[rule]] entries; see can_bridge/README.md"),
-            );
-            return None;
-        }
-    };
+    let raw: RawCan = petrel_diag::toml::parse(
+        file,
+        text,
+        "E0701",
+        "can.toml",
+        "can.toml has `dbc`, and optional [bus], [heartbeat], [commands] tables and [[rule]] entries; see can_bridge/README.md",
+        diags,
+    )?;
     let mut c = Checker {
         file,
         dbc,

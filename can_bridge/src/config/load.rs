@@ -2,9 +2,9 @@
 
 use std::path::Path;
 
+use petrel_diag::report::{Diagnostic, Diagnostics};
+use petrel_diag::source::{SourceMap, Span};
 use petrel_nets::compiled::CompiledProject;
-use petrel_nets::diag::{Diagnostic, Diagnostics};
-use petrel_nets::source::{SourceMap, Span};
 use serde::Deserialize;
 use toml::Spanned;
 
@@ -54,7 +54,7 @@ pub fn load_project_can(
         );
         return Ok(None);
     };
-    let dbc_path = match petrel_nets::paths::confine(dir, dbc_name.get_ref()) {
+    let dbc_path = match petrel_diag::paths::confine(dir, dbc_name.get_ref()) {
         Ok(p) => p,
         Err(why) => {
             diags.push(

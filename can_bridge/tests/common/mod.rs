@@ -6,9 +6,9 @@ use std::sync::Arc;
 
 use petrel_can_bridge::config::{check_rules, CanConfig};
 use petrel_can_bridge::Dbc;
+use petrel_diag::report::Diagnostics;
+use petrel_diag::source::SourceMap;
 use petrel_nets::compiled::CompiledProject;
-use petrel_nets::diag::Diagnostics;
-use petrel_nets::source::SourceMap;
 
 pub fn data(path: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -18,8 +18,8 @@ pub mod supervise;
 
 use crate::common::{require_clean, Outcome, Scope};
 use file::{expand, Journal, Kind, ProcessSpec, SendSpec, VehicleFile};
+use petrel_diag::source::SourceMap;
 use petrel_nets::compiled::CompiledProject;
-use petrel_nets::source::SourceMap;
 use std::os::unix::fs::{DirBuilderExt, PermissionsExt};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -433,7 +433,7 @@ fn vehicle_file(
     let vehicle_file = match &a.file {
         None => checked,
         Some(path) => {
-            let mut d = petrel_nets::diag::Diagnostics::new();
+            let mut d = petrel_diag::report::Diagnostics::new();
             let read = file::load_file(path, Some(c), can_program, sources, &mut d)
                 .map_err(|e| Outcome::Usage(format!("cannot read {}: {e}", path.display())))?;
             crate::common::report(&d, sources);
@@ -464,7 +464,7 @@ fn scenario(
     let Some(path) = &a.scenario else {
         return Ok(file.sends.clone());
     };
-    let mut d = petrel_nets::diag::Diagnostics::new();
+    let mut d = petrel_diag::report::Diagnostics::new();
     let read = file::load_scenario(path, c, file, sources, &mut d)
         .map_err(|e| Outcome::Usage(format!("cannot read {}: {e}", path.display())))?;
     crate::common::report(&d, sources);

@@ -7,12 +7,12 @@ use super::read::{parse_document, RawNet, PETREL_DATA_HELP};
 use super::view::{nodes, sanitize, structure, Layout, Unique};
 use super::xml::Node;
 use super::PETREL_VERSION;
-use crate::diag::{Diagnostic, Diagnostics};
 use crate::instances::{instances, Instances, MAX_INSTANCES};
 use crate::model::*;
 use crate::pt::PtNode;
-use crate::source::{FileId, Span};
 use crate::syntax::{parse_action, parse_args, parse_guard};
+use petrel_diag::report::{Diagnostic, Diagnostics};
+use petrel_diag::source::{FileId, Span};
 
 /// The hint for nets Petrel cannot take as mission nets but can still analyse.
 const VERIFY_HINT: &str = "`petrel verify FILE.pnml` analyses weighted, unsafe P/T nets directly";
@@ -316,7 +316,7 @@ impl Rebuild<'_, '_> {
         if path.is_empty() {
             return;
         }
-        if let Err(why) = crate::paths::check_relative(path) {
+        if let Err(why) = petrel_diag::paths::check_relative(path) {
             self.diags.push(
                 Diagnostic::error(
                     "E0508",

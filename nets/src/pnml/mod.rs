@@ -17,7 +17,7 @@
 //!   hold.
 //!
 //! The reader streams with `quick_xml` over the text (no DOM) so a megabyte of PNML reads in
-//! milliseconds, and turns byte positions into [`Span`](crate::source::Span)s so every problem
+//! milliseconds, and turns byte positions into [`Span`](petrel_diag::source::Span)s so every problem
 //! shows `file:line:col`.
 //!
 //! Diagnostic codes:

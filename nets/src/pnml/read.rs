@@ -7,9 +7,9 @@ use quick_xml::events::Event;
 
 use super::xml::{attr, Child, Elem, Fatal, Node, Xml};
 use super::PTNET_TYPE;
-use crate::diag::{Diagnostic, Diagnostics};
 use crate::pt::{PtArc, PtNet, PtNode, PtPlace, PtTransition};
-use crate::source::{FileId, Span};
+use petrel_diag::report::{Diagnostic, Diagnostics};
+use petrel_diag::source::{FileId, Span};
 
 /// Deepest `<page>` nesting accepted: the page reader recurses, and a hostile file must not be
 /// able to overflow the stack.

@@ -4,8 +4,8 @@
 use std::collections::{HashMap, HashSet};
 
 use crate::instances::Instances;
+use crate::model::is_keyword;
 use crate::model::*;
-use crate::syntax::is_keyword;
 
 /// A P/T node of a net as written: each of its places and transitions, and each child it
 /// declares (the child's completion place `CHILD.done`, a place of the parent).

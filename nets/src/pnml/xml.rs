@@ -11,8 +11,8 @@ use std::fmt::Write as _;
 use quick_xml::events::{BytesStart, Event};
 use quick_xml::Reader;
 
-use crate::diag::{Diagnostic, Diagnostics};
-use crate::source::{FileId, Span};
+use petrel_diag::report::{Diagnostic, Diagnostics};
+use petrel_diag::source::{FileId, Span};
 
 /// Deepest nesting of elements in a Petrel block ([`Xml::node`]). The data Petrel writes nests
 /// five deep; the bound keeps a crafted block from building a tree whose (recursive) drop

@@ -24,7 +24,8 @@ pub mod version;
 use crate::engine::Engine;
 use petrel_ipc::{ReloadAnswer, ReloadRequest};
 use petrel_nets::compiled::CompiledProject;
-use petrel_nets::reload::{Finding, MapRefusal, Mapped, OldState};
+use petrel_nets::reload::{MapRefusal, Mapped, OldState};
+use petrel_verify::reload::Finding;
 use std::time::Instant;
 use version::Candidate;
 

@@ -4,7 +4,8 @@
 
 use super::*;
 use crate::engine::NullSink;
-use petrel_nets::reload::{source_digest, verify_mapped, Mapping};
+use petrel_nets::reload::{source_digest, Mapping};
+use petrel_verify::reload::verify_mapped;
 use std::time::Duration;
 
 const MANIFEST: &str = "[project]\nname = \"r\"\nfiles = [\"a.pn\"]\nstart = [\"A\"]\n\n[events]\ngo = { category = \"nominal\" }\nback = { category = \"nominal\" }\n";

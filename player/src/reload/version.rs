@@ -1,6 +1,7 @@
 //! The player's side of a reload (docs/reload.md): reading and checking the new version from
 //! its directory, keeping its files beside the journal, reading them back for replay and
-//! `--resume`. The mapping and the verification are [`petrel_nets::reload`]'s.
+//! `--resume`. The mapping is [`petrel_nets::reload`]'s, the verification
+//! [`petrel_verify::reload`]'s.
 //!
 //! A version kept is `project-<hash>/` beside the journal, written whole or not at all. The
 //! compiled project of a version that runs is leaked on purpose ([`leak`]): the engine and the
@@ -41,7 +42,7 @@ pub fn load_candidate(dir: &Path, expected: &str, mapping: &str) -> Result<Candi
     let Some(project) = compiled else {
         let mut reasons: Vec<String> = diagnostics
             .iter()
-            .filter(|d| d.severity == petrel_nets::diag::Severity::Error)
+            .filter(|d| d.severity == petrel_diag::report::Severity::Error)
             .take(20)
             .map(|d| {
                 let at = d.span.map(|s| {
@@ -83,7 +84,7 @@ pub fn keep(journal: &Path, hash: &str, files: &[(String, String)]) -> std::io::
     }
     std::fs::create_dir_all(&tmp)?;
     for (path, text) in files {
-        let to = petrel_nets::paths::confine(&tmp, path).map_err(|why| {
+        let to = petrel_diag::paths::confine(&tmp, path).map_err(|why| {
             std::io::Error::new(
                 std::io::ErrorKind::InvalidInput,
                 format!("`{path}` would leave the kept copy: {why}"),

@@ -21,7 +21,8 @@ use crate::reload::{map_onto, running_state, Begin, Requester, Settle};
 use crate::sizing::{call_bound, status_bound};
 use petrel_ipc::{CallSender, Heartbeat, ProgramWatch, ReloadAnswer, ReloadRequest};
 use petrel_nets::compiled::CompiledProject;
-use petrel_nets::reload::{Finding, Mapped, Mapping};
+use petrel_nets::reload::{Mapped, Mapping};
+use petrel_verify::reload::Finding;
 use std::path::Path;
 use std::time::Instant;
 use tracing::{info, warn};
@@ -63,7 +64,7 @@ impl<'p> PlayerLoop<'p> {
         let verifier = std::thread::Builder::new()
             .name("reload-verify".into())
             .spawn(move || {
-                petrel_nets::reload::verify_mapped(&project, &mapped, Some(RELOAD_MAX_STATES))
+                petrel_verify::reload::verify_mapped(&project, &mapped, Some(RELOAD_MAX_STATES))
             });
         match verifier {
             Ok(verifier) => self.verifier = Some(verifier),

@@ -9,10 +9,10 @@ use super::{
     VehicleFile, DEFAULT_BACKOFF, DEFAULT_LOGS, DEFAULT_MAX_RESTARTS, DEFAULT_READY_TIMEOUT,
     DEFAULT_STOP_GRACE, LOGS_VARS, PROCESS_VARS,
 };
+use petrel_diag::report::{Diagnostic, Diagnostics};
+use petrel_diag::source::{FileId, Span};
+use petrel_diag::toml::Ordered;
 use petrel_nets::compiled::CompiledProject;
-use petrel_nets::diag::{Diagnostic, Diagnostics};
-use petrel_nets::manifest::{toml_error, Ordered};
-use petrel_nets::source::{FileId, Span};
 use std::time::Duration;
 use toml::Spanned;
 
@@ -41,18 +41,14 @@ pub fn check_file(
     can_program: Option<&str>,
     diags: &mut Diagnostics,
 ) -> Option<VehicleFile> {
-    let raw: RawFile = match toml::from_str(text) {
-        Ok(r) => r,
-        Err(e) => {
-            let (span, msg) = toml_error(file, &e);
-            diags.push(
-                Diagnostic::error("E0801", span, format!("vehicle.toml is not valid: {msg}"))
-                    .label(msg)
-                    .help("vehicle.toml has an optional [vehicle] table (name, logs, stop_grace), [computers.NAME] tables, [[process]] entries and [[send]] entries; see docs/vehicle.md"),
-            );
-            return None;
-        }
-    };
+    let raw: RawFile = petrel_diag::toml::parse(
+        file,
+        text,
+        "E0801",
+        "vehicle.toml",
+        "vehicle.toml has an optional [vehicle] table (name, logs, stop_grace), [computers.NAME] tables, [[process]] entries and [[send]] entries; see docs/vehicle.md",
+        diags,
+    )?;
     let mut c = VehicleChecker::new(file, diags, project);
     let vehicle = vehicle_table(&mut c, &raw.vehicle);
     let computers = computers(&mut c, raw.computers);
@@ -784,7 +780,7 @@ fn find_cycle(processes: &[ProcessSpec]) -> Option<Vec<String>> {
 mod tests {
     use super::*;
     use crate::up::file::expand;
-    use petrel_nets::source::SourceMap;
+    use petrel_diag::source::SourceMap;
 
     fn check(text: &str) -> (Option<VehicleFile>, Diagnostics, SourceMap) {
         let mut sources = SourceMap::default();

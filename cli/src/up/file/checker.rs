@@ -4,9 +4,9 @@
 
 use super::raw::{RawLink, RawSend};
 use super::{expand, suggest, Computer, Kind, LinkSpec, SendSpec};
+use petrel_diag::report::{Diagnostic, Diagnostics};
+use petrel_diag::source::{FileId, Span};
 use petrel_nets::compiled::CompiledProject;
-use petrel_nets::diag::{Diagnostic, Diagnostics};
-use petrel_nets::source::{FileId, Span};
 use std::time::Duration;
 use toml::Spanned;
 
@@ -139,7 +139,7 @@ impl<'a> VehicleChecker<'a> {
             );
         }
         if let Some(cred) = &l.credentials {
-            if let Err(e) = petrel_nets::paths::check_relative(cred.get_ref()) {
+            if let Err(e) = petrel_diag::paths::check_relative(cred.get_ref()) {
                 self.error(
                     "E0812",
                     self.span(cred),
@@ -215,7 +215,7 @@ impl<'a> VehicleChecker<'a> {
 
     /// A duration (`500ms`, `2s`), or E0806.
     pub(super) fn duration(&mut self, d: &Spanned<String>, what: &str) -> Option<Duration> {
-        match petrel_nets::duration::parse_duration_us(d.get_ref()) {
+        match petrel_diag::duration::parse_duration_us(d.get_ref()) {
             Some(us) => Some(Duration::from_micros(us)),
             None => {
                 self.error(

@@ -17,11 +17,10 @@ mod checker;
 mod raw;
 
 use checker::VehicleChecker;
+use petrel_diag::report::Diagnostics;
+use petrel_diag::source::SourceMap;
 use petrel_nets::compiled::CompiledProject;
 use petrel_nets::compiled::Value;
-use petrel_nets::diag::{Diagnostic, Diagnostics};
-use petrel_nets::manifest::toml_error;
-use petrel_nets::source::SourceMap;
 use raw::RawScenario;
 use std::path::Path;
 use std::time::Duration;
@@ -255,7 +254,7 @@ fn is_process_name(s: &str) -> bool {
 /// The closest of `candidates` to `name`, as a hint.
 fn suggest<'a>(name: &str, candidates: impl Iterator<Item = &'a str>) -> String {
     let best = candidates
-        .map(|c| (petrel_nets::names::distance(name, c), c))
+        .map(|c| (petrel_diag::names::distance(name, c), c))
         .min();
     match best {
         Some((d, c)) if d <= 2.max(name.len() / 3) => format!("did you mean `{c}`? "),
@@ -309,17 +308,15 @@ pub fn load_scenario(
 ) -> std::io::Result<Option<Vec<SendSpec>>> {
     let text = std::fs::read_to_string(path)?;
     let file = sources.add(path.display().to_string(), text.clone());
-    let raw: RawScenario = match toml::from_str(&text) {
-        Ok(r) => r,
-        Err(e) => {
-            let (span, msg) = toml_error(file, &e);
-            diags.push(
-                Diagnostic::error("E0801", span, format!("the scenario is not valid: {msg}"))
-                    .label(msg)
-                    .help("a scenario file holds [[send]] entries (at, event, and optionally computer); see docs/vehicle.md"),
-            );
-            return Ok(None);
-        }
+    let Some(raw) = petrel_diag::toml::parse::<RawScenario>(
+        file,
+        &text,
+        "E0801",
+        "the scenario",
+        "a scenario file holds [[send]] entries (at, event, and optionally computer); see docs/vehicle.md",
+        diags,
+    ) else {
+        return Ok(None);
     };
     let mut c = VehicleChecker::new(file, diags, Some(project));
     let sends = check::sends(&mut c, &raw.sends, &vehicle.computers, &vehicle.processes);

@@ -1,7 +1,7 @@
 //! The vehicle file's and the scenario file's tables as serde reads them, every span kept
 //! (checked into [`super::VehicleFile`] by [`super::check`]).
 
-use petrel_nets::manifest::Ordered;
+use petrel_diag::toml::Ordered;
 use serde::Deserialize;
 use toml::Spanned;
 

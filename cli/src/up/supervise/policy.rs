@@ -390,7 +390,7 @@ impl Policy {
         let failure = match p.plan.spec.restart {
             Restart::Never => format!("{why} (restart = \"never\")"),
             Restart::OnFailure { max, .. } if p.restarts >= max => {
-                let restarts = petrel_nets::plural::count(max, "restart");
+                let restarts = petrel_diag::plural::count(max, "restart");
                 format!("{why}, after {restarts}: none left")
             }
             Restart::OnFailure { .. } => why,

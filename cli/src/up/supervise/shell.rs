@@ -137,7 +137,7 @@ impl Supervisor {
             ),
             None => String::new(),
         };
-        let processes = petrel_nets::plural::count(plan.processes.len(), "process");
+        let processes = petrel_diag::plural::count(plan.processes.len(), "process");
         display.message(&format!(
             "petrel up: vehicle `{}` (project `{}`), {processes}{on}; run directory {}",
             plan.vehicle.name(),
@@ -345,7 +345,7 @@ impl Supervisor {
         let status = format!(
             "vehicle `{}` up: {} running",
             self.plan.vehicle.name(),
-            petrel_nets::plural::count(self.policy.procs.len(), "process")
+            petrel_diag::plural::count(self.policy.procs.len(), "process")
         );
         self.notify.ready(&status);
     }
@@ -535,7 +535,7 @@ impl Supervisor {
                         text.push_str(&format!(
                             "  mission {:.1} s, {}, {} marked{}",
                             s.time,
-                            petrel_nets::plural::count(s.processed, "event"),
+                            petrel_diag::plural::count(s.processed, "event"),
                             s.marked.len(),
                             if s.over { ", OVER" } else { "" }
                         ));
@@ -577,7 +577,7 @@ impl Supervisor {
             text.push_str(&format!(
                 "  last player status: mission time {:.1} s, {} processed, marking {}\n",
                 s.time,
-                petrel_nets::plural::count(s.processed, "event"),
+                petrel_diag::plural::count(s.processed, "event"),
                 s.doc["marking"]
             ));
         }
