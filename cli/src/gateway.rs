@@ -39,6 +39,7 @@ pub fn gateway(a: GatewayArgs) -> Outcome {
             can: true,
             quick_verify: false,
             vehicle: true,
+            map: false,
         },
         "gateway",
     ) {

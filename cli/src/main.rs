@@ -13,6 +13,7 @@ mod bridge;
 mod common;
 mod gateway;
 mod gen;
+mod map;
 mod monitor;
 mod plot;
 mod project;
@@ -54,8 +55,9 @@ enum Command {
     /// The CAN data server: frames from the vehicle bus become events for the player (by the
     /// rules of the project's can.toml), calls to the commands program become frames.
     Bridge(bridge::BridgeArgs),
-    /// The pictures of a Redermor run (Figure 9): map.svg (areas, forbidden zones, planned
-    /// routes, the vehicle's track, events) and depth.svg, from a `petrel up` run directory.
+    /// Draw a recorded run's map (map.svg: the project's map.toml, the vehicle's track, the
+    /// planned routes and the events where they happened, with a legend and a scale; and
+    /// profile.svg, a track's depth against time), from a run directory or a journal.
     Plot(plot::PlotArgs),
     /// Bring a vehicle up from the project's vehicle.toml: start the player, the data server
     /// and the programs in order, show their status, make the timed sends, restart what fails

@@ -267,8 +267,13 @@ pub fn browser_available() -> bool {
 }
 
 impl Browser {
-    /// Starts chromedriver and a headless Chromium session.
+    /// Starts chromedriver and a headless Chromium session, its window 1600 x 900.
     pub fn start() -> Browser {
+        Browser::start_sized(1600, 900)
+    }
+
+    /// Starts chromedriver and a headless Chromium session, its window `width` x `height`.
+    pub fn start_sized(width: u32, height: u32) -> Browser {
         let port = {
             let l = std::net::TcpListener::bind("127.0.0.1:0").expect("a free port");
             l.local_addr().expect("its address").port()
@@ -301,7 +306,7 @@ impl Browser {
             "goog:chromeOptions": {
                 "binary": CHROMIUM,
                 "args": ["--headless", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
-                         "--window-size=1600,900",
+                         format!("--window-size={width},{height}"),
                          format!("--user-data-dir={}", profile.path().display()),
                          format!("--disk-cache-dir={}", profile.path().join("cache").display())],
             }
@@ -317,6 +322,14 @@ impl Browser {
             .as_str()
             .unwrap_or_else(|| panic!("no WebDriver session: {r}"))
             .to_string();
+        // The page's own area is the size asked for (a headless window's chrome would take
+        // some of it): what a page measures and a screenshot shows.
+        b.call(
+            "POST",
+            &format!("/session/{}/goog/cdp/execute", b.session),
+            &json!({"cmd": "Emulation.setDeviceMetricsOverride", "params": {
+                "width": width, "height": height, "deviceScaleFactor": 1, "mobile": false}}),
+        );
         b
     }
 

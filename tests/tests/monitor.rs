@@ -347,7 +347,7 @@ fn many_nets(n: usize) -> petrel_tests::TempProject {
 }
 
 #[test]
-fn forty_nets_stay_readable_select_zoom_and_filter() {
+fn forty_nets_stay_readable_select_zoom_and_search() {
     if !browser_available() {
         return;
     }
@@ -357,7 +357,8 @@ fn forty_nets_stay_readable_select_zoom_and_filter() {
     let dir = project.path().display().to_string();
     let monitor = Monitor::start(&[&dir, "--vehicle", &vehicle]);
     let b = Browser::start();
-    b.open(&monitor.url("/"));
+    // Every net in one drawing.
+    b.open(&monitor.url("/?view=all"));
     b.wait_ready();
     let mut start: Vec<String> = (0..40).map(|i| format!("N{i}.a")).collect();
     start.push("global.shared".into());
@@ -372,27 +373,50 @@ fn forty_nets_stay_readable_select_zoom_and_filter() {
     let after = sorted(after);
     let refs: Vec<&str> = after.iter().map(String::as_str).collect();
     assert_eq!(wait_marked(&b, &refs), after);
-
-    // Selecting a net in the list zooms on its cluster (the view's area shrinks).
-    let width = |b: &Browser| {
+    // Zoomed in, then fitted again: the view's area shrinks and comes back.
+    let area = |b: &Browser| {
         b.eval("const v = document.querySelector('#canvas svg').viewBox.baseVal; return v.width * v.height")
             .as_f64()
             .unwrap_or(0.0)
     };
-    let full = width(&b);
+    let full = area(&b);
+    b.eval("document.getElementById('zoomin').click(); document.getElementById('zoomin').click(); return null");
+    assert!(area(&b) < full * 0.5, "{} of {full}", area(&b));
+    b.eval("document.getElementById('fit').click(); return null");
+    assert!((area(&b) - full).abs() < full * 1e-6);
+
+    // A net of the list opens its own view, with its places and the global place it uses.
     b.eval("document.querySelector('#netlist li[data-net=\"N17\"]').click(); return null");
+    let shown = b.wait_for(
+        10.0,
+        "return document.body.dataset.view + ' ' + document.body.dataset.net",
+        |v| v == "net N17",
+    );
+    assert_eq!(shown, "net N17");
     assert_eq!(
         b.eval("return document.getElementById('selected').textContent"),
         "net N17"
     );
-    let zoomed = width(&b);
-    assert!(zoomed > 0.0 && zoomed < full / 10.0, "{zoomed} of {full}");
-    b.eval("document.getElementById('fit').click(); return null");
-    assert_eq!(width(&b), full);
-    // The list filters by name.
-    b.eval("const f = document.getElementById('filter'); f.value = 'N3'; f.dispatchEvent(new Event('input')); return null");
-    let shown = b.eval("return Array.from(document.querySelectorAll('#netlist li')).filter(li => !li.hidden).map(li => li.dataset.net)");
-    assert_eq!(strings(&shown).len(), 11, "{shown}");
+    assert_eq!(wait_marked(&b, &["N17.b"]), ["N17.b"]);
+    assert_eq!(b.eval("return location.search"), "?net=N17");
+    b.eval("document.querySelector('#netlist li[data-net=\"N2\"]').click(); return null");
+    assert_eq!(
+        wait_marked(&b, &["N2.b", "global.shared"]),
+        ["N2.b", "global.shared"]
+    );
+    // The overview: a box per net, each with its state and its count of marked places.
+    b.open(&monitor.url("/?view=overview"));
+    b.wait_ready();
+    let boxes = b.wait_for(10.0, "return Array.from(document.querySelectorAll('#canvas g.node')).filter(g => g.dataset.state === 'active').length", |v| v == 40);
+    assert_eq!(boxes, 40);
+    // The search finds nets, places and transitions by name; a result opens its net.
+    b.eval("const f = document.getElementById('search'); f.value = 'N3'; f.dispatchEvent(new Event('input')); return null");
+    let nets = b.eval("return Array.from(document.querySelectorAll('#results li')).filter(li => li.querySelector('.kind').textContent === 'net').map(li => li.dataset.net)");
+    assert_eq!(strings(&nets).len(), 11, "{nets}");
+    b.eval("const f = document.getElementById('search'); f.value = 'N39.t.back'; f.dispatchEvent(new Event('input')); return null");
+    b.eval("document.querySelector('#results li[data-net]').click(); return null");
+    let found = b.wait_for(10.0, "const g = document.querySelector('#canvas g.node.found'); return document.body.dataset.net + ' ' + (g ? g.dataset.name : '')", |v| v == "N39 N39.t.back");
+    assert_eq!(found, "N39 N39.t.back");
 }
 
 #[test]
@@ -576,7 +600,12 @@ fn the_operator_sends_from_the_page_only_with_the_token() {
     let href = b.wait_for(10.0, "return location.href", |v| {
         v.as_str().is_some_and(|h| !h.contains("token"))
     });
-    assert_eq!(href, monitor.url("/"));
+    // (The page then says its view in the address: `/?view=all`.)
+    let href = href.as_str().unwrap_or_default();
+    assert!(
+        href.starts_with(&monitor.url("/")) && !href.contains("token") && !href.contains('#'),
+        "{href}"
+    );
     b.eval(submit);
     let r = b.wait_for(30.0, result, |v| {
         v.as_str().is_some_and(|s| s.starts_with("ok"))

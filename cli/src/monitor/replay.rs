@@ -21,6 +21,13 @@ pub struct Read {
     corrupt: bool,
 }
 
+impl Read {
+    /// The journal's entries, in order.
+    pub fn entries(&self) -> &[Entry] {
+        &self.entries
+    }
+}
+
 /// Reads journal `path` (a directory of segments, or one segment).
 pub fn read(path: &Path) -> Result<Read, Outcome> {
     let read =

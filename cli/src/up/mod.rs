@@ -335,6 +335,7 @@ fn plan(a: UpArgs) -> Result<Plan, Outcome> {
             can: true,
             quick_verify: false,
             vehicle: a.file.is_none(),
+            map: true,
         },
         "up",
     )?;
