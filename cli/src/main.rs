@@ -2,7 +2,7 @@
 //!
 //! One module per family of commands: [`project`] (check, verify, fmt, dot, export, import),
 //! [`script`] (run), [`vehicle`] (play, send, status), [`recorder`] (replay, journal),
-//! [`bridge`], [`up`] (a whole vehicle from its vehicle.toml), [`monitor`] (the web monitor), [`gen`] (program prototypes); [`common`] holds what they share, first of all the one way a project is loaded
+//! [`bridge`], [`gateway`] and [`keys`] (a vehicle on several computers and its keys), [`up`] (a whole vehicle from its vehicle.toml), [`monitor`] (the web monitor), [`gen`] (program prototypes); [`common`] holds what they share, first of all the one way a project is loaded
 //! and checked ([`common::check_project`]). A new command is a new module and one line in
 //! [`Command`].
 //!
@@ -13,6 +13,7 @@ mod bridge;
 mod common;
 mod gateway;
 mod gen;
+mod keys;
 mod map;
 mod monitor;
 mod plot;
@@ -69,6 +70,11 @@ enum Command {
     /// ground stations; lost and returning computers become communication events
     /// (docs/gateway.md). Stops on SIGINT or SIGTERM, printing its counters.
     Gateway(gateway::GatewayArgs),
+    /// Make the vehicle's keys for the link between its computers: a certificate authority of
+    /// the vehicle and a certificate per computer of vehicle.toml, owner-only, in this user's
+    /// state directory or --out; an existing key is never replaced. Say where each computer
+    /// needs its own (docs/gateway.md).
+    Keys(keys::KeysArgs),
     /// Internal to `petrel up`, not for people: starts PROGRAM with ARGS in place of this
     /// process, every signal unblocked (`petrel up` keeps its stop signals blocked, and a
     /// blocked mask would pass to the program through exec).
@@ -119,7 +125,12 @@ fn main() -> ExitCode {
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+                // zenoh's QUIC client warns at each connection that it does not check the
+                // server's name: the gateway chose so (docs/gateway.md), the name that matters
+                // being the certificate's computer, which zenoh's access control checks.
+                .unwrap_or_else(|_| {
+                    tracing_subscriber::EnvFilter::new("info,zenoh_link_commons::quic::utils=error")
+                }),
         )
         .with_writer(std::io::stderr)
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
@@ -144,6 +155,7 @@ fn main() -> ExitCode {
         Command::Plot(a) => plot::plot(a),
         Command::Up(a) => up::up(a),
         Command::Gateway(a) => gateway::gateway(a),
+        Command::Keys(a) => keys::keys(a),
         Command::Exec(a) => up::exec(a),
     };
     match outcome {

@@ -38,7 +38,18 @@ pub fn check(a: CheckArgs) -> Outcome {
         Ok(c) => c,
         Err(o) => return o,
     };
-    let d = &checked.diagnostics;
+    // The link between the vehicle's computers: what this machine has of its keys.
+    let mut link = None;
+    let mut diagnostics = checked.diagnostics.clone();
+    if let (Some(v), Some(c)) = (&checked.vehicle, &checked.compiled) {
+        let (line, warning) =
+            crate::keys::check_link(v, &crate::keys::vehicle_name(None, v, &c.name));
+        link = line;
+        if let Some(w) = warning {
+            diagnostics.push(w);
+        }
+    }
+    let d = &diagnostics;
     match a.format {
         Format::Json => {
             let doc = d.to_json(&checked.loaded.sources);
@@ -72,11 +83,12 @@ pub fn check(a: CheckArgs) -> Outcome {
                         .map(|p| format!("{} ({})", p.name, p.kind.as_str()))
                         .collect();
                     out(&format!(
-                        "vehicle.toml: {} processes ({}), {} computers, {} timed sends\n",
+                        "vehicle.toml: {} processes ({}), {} computers, {} timed sends{}\n",
                         v.processes.len(),
                         names.join(", "),
                         v.computers.len(),
-                        v.sends.len()
+                        v.sends.len(),
+                        link.map(|l| format!("; {l}")).unwrap_or_default()
                     ));
                 }
             }

@@ -258,6 +258,15 @@ fn journal_show(journal: &Path, format: &str) -> Outcome {
                 vec![],
                 vec![],
             ),
+            Entry::ProgramStopped { program, .. } => (
+                "stopped",
+                String::new(),
+                vec![],
+                format!("program/{program}"),
+                "left in good order".to_string(),
+                vec![],
+                vec![],
+            ),
             Entry::Checkpoint { .. } => (
                 "checkpoint",
                 String::new(),

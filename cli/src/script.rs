@@ -47,6 +47,21 @@ pub fn run(a: RunArgs) -> Outcome {
         .iter()
         .filter(|(_, l)| matches!(l, petrel_player::script::Line::Expect { .. }))
         .count();
+    // A cascade stopped at the bound is the player's safety net, not a mission's behaviour:
+    // said on stderr whatever the expectations say.
+    for step in outcome
+        .steps
+        .iter()
+        .filter(|s| !s["cascade_stopped"].is_null())
+    {
+        eprintln!(
+            "{}: warning: at {} s, events produced at one instant did not settle: the cascade was stopped after {} steps, {} produced event(s) dropped, livelock raised (`petrel verify` locates the loop: E0608)",
+            script_path.display(),
+            step["time"],
+            step["cascade_stopped"]["steps"],
+            step["cascade_stopped"]["dropped"]
+        );
+    }
     match outcome.failure {
         Some((line, msg)) => {
             eprintln!(

@@ -121,8 +121,8 @@ pub fn play(a: PlayArgs) -> Outcome {
                 0.0
             };
             eprintln!(
-                "player stopped: {} messages ({} refused before the engine), {} events received, {} processed, {} unused, {} refused; {} calls sent, {} failed; journal: {} records, {:.1} us each, {} failed writes, {} entries lost{}",
-                r.messages, r.bad_messages, s.received, s.processed, s.unused, s.refused, r.calls_sent, r.calls_failed,
+                "player stopped: {} messages ({} refused before the engine), {} events received, {} processed, {} unused, {} refused; {} calls sent, {} held, {} failed; journal: {} records, {:.1} us each, {} failed writes, {} entries lost{}",
+                r.messages, r.bad_messages, s.received, s.processed, s.unused, s.refused, r.calls_sent, r.calls_held, r.calls_failed,
                 r.journal_records, per_record, r.journal_failures, r.journal_lost,
                 if r.resumed_steps > 0 { format!("; resumed after {} steps", r.resumed_steps) } else { String::new() }
             );
@@ -426,6 +426,7 @@ pub fn status(a: StatusArgs) -> Outcome {
         .map(|p| {
             let st = match petrel_ipc::program_status(&v, &p.name) {
                 Ok(petrel_ipc::ProgramStatus::Alive) => "alive",
+                Ok(petrel_ipc::ProgramStatus::Joining) => "joining",
                 Ok(petrel_ipc::ProgramStatus::Dead) => "dead",
                 Ok(petrel_ipc::ProgramStatus::Absent) => "absent",
                 Err(_) => "unknown",
@@ -532,9 +533,22 @@ pub fn status(a: StatusArgs) -> Outcome {
                     .collect()
             })
             .unwrap_or_default();
+        // Second gateways claiming a computer whose gateway is up, refused (one per computer).
+        let claims: Vec<String> = g["counters"]["claims_refused"]
+            .as_object()
+            .into_iter()
+            .flatten()
+            .map(|(c, n)| format!("{n} message(s) of a second gateway of `{c}`"))
+            .collect();
         text.push_str(&format!(
-            "  gateway of `{computer}`: peers {}\n",
-            peers.join(", ")
+            "  gateway of `{computer}`: peers {}; link: {}{}\n",
+            peers.join(", "),
+            g["security"].as_str().unwrap_or("?"),
+            if claims.is_empty() {
+                String::new()
+            } else {
+                format!("; refused {}", claims.join(", "))
+            }
         ));
         if let Some(kinds) = g["counters"]["kinds"].as_object() {
             for (kind, c) in kinds {

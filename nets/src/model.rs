@@ -154,7 +154,7 @@ pub fn builtin_events() -> &'static [EventDecl] {
                 "livelock",
                 Category::Safety,
                 &[("net", Type::Text), ("transition", Type::Text)],
-                "immediate transitions did not settle: the fixpoint was stopped",
+                "immediate transitions, or events produced at one instant, did not settle: the fixpoint or the cascade was stopped",
             ),
             ev(
                 "bad_message",

@@ -490,7 +490,8 @@ pub struct Finding {
 }
 
 /// The first finding of `report` that refuses a reload (docs/semantics.md): an unsafe place,
-/// a cycle of immediate transitions, an unintended dead marking, a broken invariant.
+/// a cycle of immediate transitions, a cascade of produced events that does not settle, an
+/// unintended dead marking, a broken invariant.
 pub fn refusing_finding(report: &crate::verify::Report) -> Option<Finding> {
     if let Some(u) = report.unsafe_places.first() {
         return Some(Finding {
@@ -508,6 +509,16 @@ pub fn refusing_finding(report: &crate::verify::Report) -> Option<Finding> {
                 l.transitions.join(" -> ")
             ),
             trace: l.trace.clone(),
+        });
+    }
+    if let Some(c) = report.cascades.first() {
+        return Some(Finding {
+            what: format!(
+                "livelock: events produced at one instant do not settle ({}; {})",
+                c.events.join(" -> "),
+                c.transitions.join(", ")
+            ),
+            trace: c.trace.clone(),
         });
     }
     if let Some(d) = report.dead_markings.iter().find(|d| !d.intended) {

@@ -467,6 +467,23 @@ pub enum StepOutcome {
     RefusedAfterCatastrophic,
 }
 
+/// Most steps a zero-time cascade takes (steps on events the nets emitted or the player raised
+/// about a step, while such events stay queued) before the player stops it
+/// (docs/semantics.md, "Zero-time cascades"): what the verifier's cascade check looks for too.
+pub const CASCADE_BOUND: u32 = 10_000;
+
+/// Where an event of category `c` waits in the queue: catastrophic first (0), nominal last
+/// (4). The queue gives the oldest event of the first non-empty category.
+pub fn queue_index(c: Category) -> usize {
+    match c {
+        Category::Catastrophic => 0,
+        Category::Safety => 1,
+        Category::Mission => 2,
+        Category::Communication => 3,
+        Category::Nominal => 4,
+    }
+}
+
 /// The engine's and the verifier's shared step function.
 pub struct Semantics<'p> {
     /// The compiled project.
@@ -475,15 +492,19 @@ pub struct Semantics<'p> {
     pub layout: Layout,
     /// Most immediate firings in one fixpoint before it is called a livelock.
     pub fixpoint_bound: u32,
+    /// Most steps of one zero-time cascade ([`CASCADE_BOUND`] unless set).
+    pub cascade_bound: u32,
 }
 
 impl<'p> Semantics<'p> {
-    /// The semantics of `project`, with the default fixpoint bound (10,000 firings).
+    /// The semantics of `project`, with the default bounds (10,000 firings in a fixpoint,
+    /// 10,000 steps in a cascade).
     pub fn new(project: &'p CompiledProject) -> Self {
         Semantics {
             project,
             layout: Layout::new(project),
             fixpoint_bound: 10_000,
+            cascade_bound: CASCADE_BOUND,
         }
     }
 

@@ -166,6 +166,10 @@ pub trait Sink {
     fn deactivated(&mut self, _net: NetId) {}
     /// The immediate fixpoint did not settle and was stopped; a `livelock` event is queued.
     fn livelock(&mut self) {}
+    /// A zero-time cascade reached the bound (docs/semantics.md, "Zero-time cascades"): after
+    /// `steps` steps on produced events, the `dropped` produced events still queued were
+    /// dropped (counted as refused); a `livelock` event is queued the first time in a cascade.
+    fn cascade_stopped(&mut self, _steps: u32, _dropped: u64) {}
     /// Invariant `name` of the manifest stopped holding after the step; an
     /// `invariant_violated` event is queued.
     fn invariant_violated(&mut self, _name: &str) {}
@@ -231,10 +235,16 @@ impl std::fmt::Display for Refusal {
     }
 }
 
-/// Counters that account for every event: `received == processed + unused + refused + queued`.
+/// Counters that account for every event: `received == processed + unused + refused + queued`,
+/// on every path: an event refused at its submission (unknown, wrong parameters, after a
+/// catastrophic event) is received and refused at once, one refused when taken (after a
+/// catastrophic event) was received when it was queued, and a message the player refuses
+/// before it could be submitted (undecodable, a built-in event from another process) is
+/// counted with [`Engine::count_refused`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Stats {
-    /// Events accepted into the queue (from outside, from nets, from timers, built-ins).
+    /// Events submitted (from outside, from nets, from timers, built-ins), accepted into the
+    /// queue or refused.
     pub received: u64,
     /// Events that fired or offered at least one transition.
     pub processed: u64,
@@ -244,6 +254,18 @@ pub struct Stats {
     pub refused: u64,
 }
 
+/// Where a queued event comes from: outside, or produced by a step (docs/semantics.md,
+/// "Zero-time cascades").
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Origin {
+    /// Submitted (a program, the operator, a timer, a report of the player's loop).
+    Outside,
+    /// Emitted by this transition of this net.
+    Emitted(NetId, u32),
+    /// Raised by the engine about a step: `safety_violation`, `livelock`, `invariant_violated`.
+    Raised,
+}
+
 /// One event waiting in the queue.
 #[derive(Debug)]
 struct Queued {
@@ -251,6 +273,20 @@ struct Queued {
     params: Vec<Value>,
     /// The one net it is addressed to, if any.
     target: Option<NetId>,
+    origin: Origin,
+}
+
+/// The zero-time cascade under way: steps taken on produced events while some stay queued.
+#[derive(Clone, Copy, Debug, Default)]
+struct Cascade {
+    /// Produced events in the queue.
+    queued: u64,
+    /// Steps taken on produced events since none was queued.
+    steps: u32,
+    /// The bound was reached in this cascade (its `livelock` raised).
+    stopped: bool,
+    /// The transition that emitted the last emitted event the cascade took.
+    emitter: Option<(NetId, u32)>,
 }
 
 /// What one step did.
@@ -286,16 +322,11 @@ pub struct Engine<'p> {
     /// Each invariant held after the previous step: a violation is raised once, when it stops
     /// holding.
     invariant_held: Vec<bool>,
+    cascade: Cascade,
 }
 
 fn category_index(c: Category) -> usize {
-    match c {
-        Category::Catastrophic => 0,
-        Category::Safety => 1,
-        Category::Mission => 2,
-        Category::Communication => 3,
-        Category::Nominal => 4,
-    }
+    petrel_nets::semantics::queue_index(c)
 }
 
 impl<'p> Engine<'p> {
@@ -323,12 +354,24 @@ impl<'p> Engine<'p> {
                 .map(|n| Vec::with_capacity(n.params.len()))
                 .collect(),
             invariant_held: vec![true; project.invariants.len()],
+            cascade: Cascade::default(),
         }
     }
 
     /// Sets the most immediate firings one fixpoint may do before it is a livelock.
     pub fn set_fixpoint_bound(&mut self, bound: u32) {
         self.sem.fixpoint_bound = bound;
+    }
+
+    /// Sets the most steps a zero-time cascade may take before it is stopped
+    /// ([`petrel_nets::semantics::CASCADE_BOUND`] by default).
+    pub fn set_cascade_bound(&mut self, bound: u32) {
+        self.sem.cascade_bound = bound;
+    }
+
+    /// Steps the zero-time cascade under way has taken (0 when no produced event is queued).
+    pub fn cascade_steps(&self) -> u32 {
+        self.cascade.steps
     }
 
     /// The project.
@@ -448,6 +491,8 @@ impl<'p> Engine<'p> {
         accepted: impl FnOnce(&[Value]),
     ) -> Result<(), Refusal> {
         let p = self.sem.project;
+        // Every submission is received: the refusals below count as refused besides.
+        self.stats.received += 1;
         let Some(decl) = p.events.get(event as usize) else {
             self.stats.refused += 1;
             return Err(Refusal::UnknownEvent(format!("#{event}")));
@@ -481,11 +526,11 @@ impl<'p> Engine<'p> {
             }
         }
         accepted(&params);
-        self.stats.received += 1;
         self.queues[category_index(decl.category)].push_back(Queued {
             event,
             params,
             target: None,
+            origin: Origin::Outside,
         });
         Ok(())
     }
@@ -517,6 +562,7 @@ impl<'p> Engine<'p> {
             q.clear();
         }
         self.stats.refused += n as u64;
+        self.cascade = Cascade::default();
         n
     }
 
@@ -536,10 +582,19 @@ impl<'p> Engine<'p> {
         match self.sem.project.event_id(name) {
             Some(e) => self.submit_with(e, params, accepted),
             None => {
-                self.stats.refused += 1;
+                self.count_refused();
+                self.recycle(params);
                 Err(Refusal::UnknownEvent(name.to_string()))
             }
         }
+    }
+
+    /// Counts a message refused before it could be submitted (one that did not decode, a
+    /// built-in event another process sent): received and refused, so that `received =
+    /// processed + unused + refused + queued` accounts for every message the player took.
+    pub fn count_refused(&mut self) {
+        self.stats.received += 1;
+        self.stats.refused += 1;
     }
 
     fn recycle(&mut self, mut params: Vec<Value>) {
@@ -571,6 +626,7 @@ impl<'p> Engine<'p> {
                 self.recycle(params);
             }
         }
+        self.cascade = Cascade::default();
         self.now = now;
         self.state.copy_from_slice(state);
         self.deadlines.copy_from_slice(deadlines);
@@ -603,6 +659,7 @@ impl<'p> Engine<'p> {
         for q in &mut self.queues {
             q.clear();
         }
+        self.cascade = Cascade::default();
         step
     }
 
@@ -638,6 +695,7 @@ impl<'p> Engine<'p> {
                 event,
                 params,
                 target,
+                ..
             } in q.drain(..)
             {
                 out.push((
@@ -647,6 +705,8 @@ impl<'p> Engine<'p> {
                 ));
             }
         }
+        // What a new version takes over comes to it from outside (`Engine::adopt`).
+        self.cascade = Cascade::default();
         out
     }
 
@@ -702,14 +762,10 @@ impl<'p> Engine<'p> {
                     )))
                 }
                 (Ok(t), Some(e)) => {
-                    // Counted as received once already, when it first arrived; a refusal
-                    // here is of a received event, like one refused after a catastrophic end.
+                    // Counted as received once already, when it first arrived: submitted
+                    // again, it is received again (and refused, if it is).
                     self.stats.received -= 1;
-                    let r = self.submit_to(e, params, t);
-                    if r.is_err() {
-                        self.stats.received += 1;
-                    }
-                    r
+                    self.submit_to(e, params, t)
                 }
             };
             if let Err(r) = result {
@@ -758,11 +814,20 @@ impl<'p> Engine<'p> {
             event,
             params,
             target,
+            origin,
         } = q.pop_front()?;
+        if origin != Origin::Outside {
+            self.cascade.queued = self.cascade.queued.saturating_sub(1);
+            self.cascade.steps += 1;
+            if let Origin::Emitted(net, t) = origin {
+                self.cascade.emitter = Some((net, t));
+            }
+        }
         sink.taken(event, &params);
         if self.is_over() {
             self.stats.refused += 1;
             self.recycle(params);
+            self.bound_cascade(sink);
             return Some(Step {
                 event,
                 outcome: StepOutcome::RefusedAfterCatastrophic,
@@ -793,7 +858,69 @@ impl<'p> Engine<'p> {
         }
         self.recycle(params);
         self.after_step(violations, livelock, sink);
+        self.bound_cascade(sink);
         Some(Step { event, outcome })
+    }
+
+    /// Queues what a step produced (emitted by a net, or raised by the engine about it): part
+    /// of the zero-time cascade (docs/semantics.md, "Zero-time cascades").
+    fn queue_produced(
+        &mut self,
+        event: EventId,
+        params: Vec<Value>,
+        target: Option<NetId>,
+        origin: Origin,
+    ) {
+        // Types were checked statically; only a catastrophic end can refuse (counted).
+        if self.submit_to(event, params, target).is_ok() {
+            let cat = category_index(self.sem.project.events[event as usize].category);
+            if let Some(last) = self.queues[cat].back_mut() {
+                last.origin = origin;
+            }
+            self.cascade.queued += 1;
+        }
+    }
+
+    /// After a step: the cascade ends when no produced event is left; at the bound, the
+    /// produced events still queued are dropped (counted as refused) and `livelock` is raised,
+    /// once per cascade (docs/semantics.md, "Zero-time cascades").
+    fn bound_cascade(&mut self, sink: &mut impl Sink) {
+        if self.cascade.queued > 0 && self.cascade.steps >= self.sem.cascade_bound {
+            let mut dropped = 0u64;
+            for k in 0..self.queues.len() {
+                let before = self.queues[k].len();
+                let mut kept = VecDeque::with_capacity(before);
+                while let Some(q) = self.queues[k].pop_front() {
+                    if q.origin == Origin::Outside {
+                        kept.push_back(q);
+                    } else {
+                        self.recycle(q.params);
+                    }
+                }
+                dropped += (before - kept.len()) as u64;
+                self.queues[k] = kept;
+            }
+            self.stats.refused += dropped;
+            self.cascade.queued = 0;
+            sink.cascade_stopped(self.cascade.steps, dropped);
+            if !std::mem::replace(&mut self.cascade.stopped, true) {
+                if let Some(e) = self.livelock {
+                    let p = self.sem.project;
+                    let (net, transition) = match self.cascade.emitter {
+                        Some((n, t)) => {
+                            let n = &p.nets[n as usize];
+                            (n.name.clone(), n.transitions[t as usize].name.clone())
+                        }
+                        None => (String::new(), String::new()),
+                    };
+                    let params = vec![Value::Text(net), Value::Text(transition)];
+                    self.queue_produced(e, params, None, Origin::Raised);
+                }
+            }
+        }
+        if self.cascade.queued == 0 {
+            self.cascade = Cascade::default();
+        }
     }
 
     /// Queues what the step produced: emitted events, then built-in reports; then checks the
@@ -806,8 +933,7 @@ impl<'p> Engine<'p> {
     ) {
         let mut emitted = std::mem::take(&mut self.emitted);
         for q in emitted.drain(..) {
-            // Types were checked statically; only a catastrophic end can refuse (counted).
-            let _ = self.submit_to(q.event, q.params, q.target);
+            self.queue_produced(q.event, q.params, q.target, q.origin);
         }
         // The buffer goes back for the next step: no allocation in the steady state.
         self.emitted = emitted;
@@ -819,7 +945,7 @@ impl<'p> Engine<'p> {
                 if let Some(e) = self.invariant_violated {
                     let mut params = self.param_buffer();
                     params.push(Value::Text(inv.name.clone()));
-                    let _ = self.submit(e, params);
+                    self.queue_produced(e, params, None, Origin::Raised);
                 }
             }
             self.invariant_held[k] = holds;
@@ -833,7 +959,7 @@ impl<'p> Engine<'p> {
                     Value::Text(n.transitions[t as usize].name.clone()),
                     Value::Text(place),
                 ];
-                let _ = self.submit(e, params);
+                self.queue_produced(e, params, None, Origin::Raised);
             }
         }
         if let (Some((net, t)), Some(e)) = (livelock, self.livelock) {
@@ -842,7 +968,7 @@ impl<'p> Engine<'p> {
                 Value::Text(n.name.clone()),
                 Value::Text(n.transitions[t as usize].name.clone()),
             ];
-            let _ = self.submit(e, params);
+            self.queue_produced(e, params, None, Origin::Raised);
         }
     }
 
@@ -925,10 +1051,12 @@ impl<S: Sink> Effects for Adapter<'_, '_, S> {
         };
         params.extend(a.iter().map(ArgValue::to_value));
         self.sink.emitted(event, &params);
+        let (net, transition) = self.last_fired.unwrap_or((0, 0));
         self.emitted.push(Queued {
             event,
             params,
             target,
+            origin: Origin::Emitted(net, transition),
         });
     }
 

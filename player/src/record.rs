@@ -36,6 +36,9 @@ pub struct StepRecord<'p> {
     pub activated: Vec<NetId>,
     /// Nets deactivated, in order.
     pub deactivated: Vec<NetId>,
+    /// The step reached the bound of a zero-time cascade: (steps taken, produced events
+    /// dropped) (docs/semantics.md, "Zero-time cascades").
+    pub cascade_stopped: Option<(u32, u64)>,
     /// Whether [`calls`](Self::calls) is kept (the player's record only needs the texts).
     keep_calls: bool,
     /// Texts of actions cleared, kept for the next ones (no allocation per step).
@@ -84,6 +87,7 @@ impl<'p> StepRecord<'p> {
             emits: Vec::new(),
             activated: Vec::new(),
             deactivated: Vec::new(),
+            cascade_stopped: None,
             keep_calls: true,
             spare: Vec::new(),
             taken_spare: None,
@@ -140,6 +144,7 @@ impl<'p> StepRecord<'p> {
         self.emits.clear();
         self.activated.clear();
         self.deactivated.clear();
+        self.cascade_stopped = None;
     }
 }
 
@@ -342,6 +347,12 @@ impl Sink for StepRecord<'_> {
     }
     fn invariant_violated(&mut self, name: &str) {
         self.actions.push(format!("invariant {name} broken"));
+    }
+    fn cascade_stopped(&mut self, steps: u32, dropped: u64) {
+        self.actions.push(format!(
+            "cascade stopped: {steps} steps at one instant, {dropped} produced event(s) dropped"
+        ));
+        self.cascade_stopped = Some((steps, dropped));
     }
 }
 

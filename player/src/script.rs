@@ -454,6 +454,9 @@ impl<F: FnMut(&serde_json::Value)> Runner<'_, F> {
             "reason": reason,
             "fired": fired,
             "actions": self.rec.actions,
+            "cascade_stopped": self.rec.cascade_stopped.map(|(steps, dropped)| {
+                serde_json::json!({"steps": steps, "dropped": dropped})
+            }),
             "timers": timers,
             "marking": marking,
         });

@@ -54,11 +54,9 @@ fn tuples(types: &[Type]) -> Vec<Vec<Value>> {
     out
 }
 
-/// Every stable state the engine reaches, one event at a time from each.
-fn brute_force(p: &CompiledProject) -> HashSet<Vec<u64>> {
-    let mut start = Engine::new(p);
-    start.start(0, &mut NullSink);
-    let s0 = start.state().to_vec();
+/// Per event, the nets it may be addressed to: none (every net), and each net an `emit ... to`
+/// names.
+fn emit_targets(p: &CompiledProject) -> Vec<Vec<Option<NetId>>> {
     let mut targets: Vec<Vec<Option<NetId>>> = vec![vec![None]; p.events.len()];
     for net in &p.nets {
         for t in &net.transitions {
@@ -76,6 +74,15 @@ fn brute_force(p: &CompiledProject) -> HashSet<Vec<u64>> {
             }
         }
     }
+    targets
+}
+
+/// Every stable state the engine reaches, one event at a time from each.
+fn brute_force(p: &CompiledProject) -> HashSet<Vec<u64>> {
+    let mut start = Engine::new(p);
+    start.start(0, &mut NullSink);
+    let s0 = start.state().to_vec();
+    let targets = emit_targets(p);
     let mut seen = HashSet::from([s0.clone()]);
     let mut queue = VecDeque::from([s0]);
     while let Some(s) = queue.pop_front() {
@@ -385,4 +392,145 @@ fn the_ugv_mission_agrees_with_the_engine_and_its_invariants_hold_everywhere() {
             "{robot} never inside"
         );
     }
+}
+
+/// Whether the engine, from state `s` of `p` (the start's own events when `s` is `None`), with
+/// `event` addressed to `target`, reaches the bound of a zero-time cascade.
+fn engine_stops(
+    p: &CompiledProject,
+    bound: u32,
+    s: Option<&[u64]>,
+    event: Option<(u32, Option<NetId>)>,
+) -> bool {
+    struct Stopped(bool);
+    impl petrel_player::engine::Sink for Stopped {
+        fn cascade_stopped(&mut self, _: u32, _: u64) {
+            self.0 = true;
+        }
+    }
+    let mut engine = Engine::new(p);
+    engine.set_cascade_bound(bound);
+    let mut seen = Stopped(false);
+    engine.start(0, &mut seen);
+    if let (Some(s), Some((e, target))) = (s, event) {
+        engine.discard_queued();
+        engine.set_state(s);
+        if engine.is_over() {
+            return false;
+        }
+        engine.submit_to(e, Vec::new(), target).unwrap();
+    }
+    engine.run_until_idle(&mut seen);
+    seen.0
+}
+
+/// Zero-time cascades (docs/semantics.md): on random projects whose nets emit events to each
+/// other and to themselves (immediate transitions too), the verifier reports a cascade that
+/// does not settle exactly when the engine, from some reachable state, after some event (or
+/// at the start), reaches the same bound and stops one.
+#[test]
+fn the_verifier_reports_a_cascade_exactly_when_the_engine_stops_one() {
+    let manifest = r#"
+[project]
+name = "emits"
+files = ["a.pn"]
+start = ["A", "B"]
+
+[events]
+e0 = { category = "nominal" }
+e1 = { category = "nominal" }
+e2 = { category = "nominal" }
+s0 = { category = "safety" }
+"#;
+    let bound = 300;
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    let mut next = move |m: u64| {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state % m
+    };
+    let (mut looping, mut settling, mut immediate_loops) = (0, 0, 0);
+    for round in 0..150 {
+        let mut nets = String::new();
+        for net in ["A", "B"] {
+            nets.push_str(&format!(
+                "net {net} {{\n    place p0 = 1\n    place p1\n    place p2\n"
+            ));
+            for t in 0..4 {
+                let from = next(3);
+                let to = next(3);
+                let trigger = match next(5) {
+                    0 => String::new(),
+                    1 => " on s0".to_string(),
+                    k => format!(" on e{}", k - 2),
+                };
+                let mut actions = Vec::new();
+                for _ in 0..2 {
+                    if next(5) < 3 {
+                        let to_net = match next(4) {
+                            0 => " to A",
+                            1 => " to B",
+                            _ => "",
+                        };
+                        let e = match next(4) {
+                            3 => "s0".to_string(),
+                            k => format!("e{k}"),
+                        };
+                        actions.push(format!("emit {e}{to_net}"));
+                    }
+                }
+                let body = if actions.is_empty() {
+                    String::new()
+                } else {
+                    format!(" {{ {} }}", actions.join("  "))
+                };
+                nets.push_str(&format!(
+                    "    transition t{t}{trigger}: p{from} -> p{to}{body}\n"
+                ));
+            }
+            nets.push_str("}\n\n");
+        }
+        let p = compile(manifest, &nets);
+        let r = verify(
+            &p,
+            VerifyOptions {
+                cascade_bound: Some(bound),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        if !r.livelocks.is_empty() {
+            // A loop of immediate transitions is E0603's; the player's fixpoint bound decides.
+            immediate_loops += 1;
+            continue;
+        }
+        let states = brute_force(&p);
+        let targets = emit_targets(&p);
+        let mut stops = engine_stops(&p, bound, None, None);
+        for s in &states {
+            for (e, list) in targets.iter().enumerate().take(4) {
+                for &target in list {
+                    stops = stops || engine_stops(&p, bound, Some(s), Some((e as u32, target)));
+                }
+            }
+        }
+        assert_eq!(
+            !r.cascades.is_empty(),
+            stops,
+            "round {round}: the verifier found {:?}\n{nets}",
+            r.cascades
+        );
+        if stops {
+            looping += 1;
+        } else {
+            settling += 1;
+        }
+    }
+    // The family has both kinds, enough of each for the comparison to mean something.
+    eprintln!("{looping} loop, {settling} settle, {immediate_loops} left to E0603");
+    assert!(
+        looping >= 20 && settling >= 20,
+        "{looping} loop, {settling} settle"
+    );
 }

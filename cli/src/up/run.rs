@@ -163,6 +163,9 @@ struct Supervisor {
     origin: String,
     /// The running petrel, which starts each process (`petrel __exec`).
     petrel: std::path::PathBuf,
+    /// The programs of this computer's processes: ready when they receive their calls (taken
+    /// away at the end: it keeps our node).
+    watch: Option<petrel_ipc::ProgramWatch>,
 }
 
 /// Runs the plan; prints the summary; the outcome gives the exit code.
@@ -194,6 +197,15 @@ pub fn run(plan: Plan, t0: Instant) -> Outcome {
         Err(e) => return Outcome::Usage(e.to_string()),
     };
     let origin = events.origin().to_string();
+    let programs = plan
+        .processes
+        .iter()
+        .filter(|p| p.spec.kind == Kind::Program)
+        .flat_map(|p| p.spec.programs.clone());
+    let watch = match petrel_ipc::ProgramWatch::new(&me, programs) {
+        Ok(w) => w,
+        Err(e) => return Outcome::Usage(format!("cannot watch the programs: {e}")),
+    };
     let petrel = match std::env::current_exe() {
         Ok(p) => p,
         Err(e) => return Outcome::Usage(format!("cannot find the running petrel: {e}")),
@@ -252,11 +264,12 @@ pub fn run(plan: Plan, t0: Instant) -> Outcome {
         acks: Vec::new(),
         origin,
         petrel,
+        watch: Some(watch),
     };
     let end = sup.supervise(&signals, &beats, &deltas, &events);
     sup.stop_all(&signals, &beats, &deltas);
     // Our node goes before the dead ones are cleaned, so the vehicle is left as we found it.
-    drop((beats, deltas, events));
+    drop((beats, deltas, events, sup.watch.take()));
     drop(me);
     if let Err(e) = petrel_ipc::cleanup_dead_nodes(&sup.plan.vehicle, Duration::from_millis(500)) {
         eprintln!("warning: {e}");
@@ -624,8 +637,8 @@ impl Supervisor {
         None
     }
 
-    /// Whether process `i`'s readiness is seen.
-    fn is_ready(&self, i: usize, nodes: &Option<Vec<petrel_ipc::NodeInfo>>) -> bool {
+    /// Whether process `i`'s readiness is seen (a program's at the watch's last check).
+    fn is_ready(&self, i: usize) -> bool {
         let p = &self.procs[i];
         let Some(since) = p.spawned_at else {
             return false;
@@ -634,13 +647,11 @@ impl Supervisor {
             Kind::Player => self.player_beat.is_some_and(|t| t > since),
             Kind::Bridge => self.bridge_beat.is_some_and(|t| t > since),
             Kind::Command => true,
-            Kind::Program => nodes.as_ref().is_some_and(|nodes| {
-                p.plan.spec.programs.iter().all(|x| {
-                    let node = petrel_ipc::naming::program_node_name(x);
-                    nodes
-                        .iter()
-                        .any(|n| n.name == node && n.status == petrel_ipc::NodeStatus::Alive)
-                })
+            // Each of its programs receives its calls (its node alone is not enough: a call
+            // sent before its calls receiver connects finds nobody).
+            Kind::Program => p.plan.spec.programs.iter().all(|x| {
+                let status = self.watch.as_ref().and_then(|w| w.status(x));
+                status == Some(petrel_ipc::ProgramStatus::Alive)
             }),
         }
     }
@@ -684,15 +695,20 @@ impl Supervisor {
         if starting.is_empty() {
             return fatal;
         }
-        let nodes = starting
+        if starting
             .iter()
             .any(|&i| self.procs[i].plan.spec.kind == Kind::Program)
-            .then(|| petrel_ipc::list_nodes(&self.plan.vehicle).ok())
-            .flatten();
+        {
+            // Not ready this round if the nodes cannot be listed.
+            if let Some(Err(e)) = self.watch.as_mut().map(|w| w.check()) {
+                self.display
+                    .message(&format!("cannot see the programs: {e}"));
+            }
+        }
         for i in starting {
             let name = self.procs[i].plan.spec.name.clone();
             let since = self.procs[i].spawned_at.unwrap_or(now);
-            if self.is_ready(i, &nodes) {
+            if self.is_ready(i) {
                 self.procs[i].state = if self.up_at.is_some() {
                     State::Running
                 } else {

@@ -273,93 +273,177 @@ pub(super) fn deliveries(p: &CompiledProject, l: &Layout) -> Result<Vec<Delivery
         if l.by_event[e as usize].is_empty() {
             continue;
         }
-        let decl = &p.events[e as usize];
-        let mut targets: Vec<Option<NetId>> = vec![None];
-        for net in &p.nets {
-            for t in &net.transitions {
-                for a in &t.actions {
-                    if let Action::Emit {
-                        event,
-                        target: Some(n),
-                        ..
-                    } = a
-                    {
-                        if *event == e && !targets.contains(&Some(*n)) {
-                            targets.push(Some(*n));
+        event_deliveries(p, e, &own_comparands(p, l, e), &mut out)?;
+    }
+    Ok(out)
+}
+
+/// What the guards of `e`'s transitions compare each of its parameters with, and whether they
+/// read it at all.
+fn own_comparands(p: &CompiledProject, l: &Layout, e: EventId) -> Vec<(Vec<Value>, bool)> {
+    let mut slots: Vec<(Vec<Value>, bool)> =
+        vec![(Vec::new(), false); p.events[e as usize].params.len()];
+    for &r in &l.by_event[e as usize] {
+        let rule = &l.rules[r as usize];
+        if let Some(g) = &p.nets[rule.net as usize].transitions[rule.transition as usize].guard {
+            comparands(g, &mut slots);
+        }
+    }
+    slots
+}
+
+/// The deliveries of `e` (awaited), its parameters split by `slots` ([`own_comparands`]),
+/// appended to `out`.
+fn event_deliveries(
+    p: &CompiledProject,
+    e: EventId,
+    slots: &[(Vec<Value>, bool)],
+    out: &mut Vec<Delivery>,
+) -> Result<(), VerifyError> {
+    let decl = &p.events[e as usize];
+    let mut targets: Vec<Option<NetId>> = vec![None];
+    for net in &p.nets {
+        for t in &net.transitions {
+            for a in &t.actions {
+                if let Action::Emit {
+                    event,
+                    target: Some(n),
+                    ..
+                } = a
+                {
+                    if *event == e && !targets.contains(&Some(*n)) {
+                        targets.push(Some(*n));
+                    }
+                }
+            }
+        }
+    }
+    let domains: Vec<Vec<Value>> = decl
+        .params
+        .iter()
+        .zip(slots)
+        .map(|((_, ty), (c, used))| domain(*ty, c, *used))
+        .collect();
+    let combinations: usize = domains.iter().map(Vec::len).product();
+    if combinations > MAX_GUARD_RUNS {
+        return Err(VerifyError::TooManyUndecidedGuards {
+            event: decl.name.clone(),
+        });
+    }
+    let shown = domains.iter().any(|d| d.len() > 1);
+    let mut tuple = vec![0usize; domains.len()];
+    loop {
+        let params: Vec<Value> = tuple
+            .iter()
+            .zip(&domains)
+            .map(|(&k, d)| d[k].clone())
+            .collect();
+        for &target in &targets {
+            let mut label = decl.name.clone();
+            if shown {
+                label = format!(
+                    "{label}({})",
+                    params
+                        .iter()
+                        .map(Value::literal)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                );
+            }
+            if let Some(n) = target {
+                label = format!("{label} to {}", p.nets[n as usize].name);
+            }
+            out.push(Delivery {
+                event: e,
+                target,
+                params: params.clone(),
+                label,
+            });
+        }
+        // The next combination, odometer-wise.
+        let mut k = 0;
+        loop {
+            if k == tuple.len() {
+                break;
+            }
+            tuple[k] += 1;
+            if tuple[k] < domains[k].len() {
+                break;
+            }
+            tuple[k] = 0;
+            k += 1;
+        }
+        if k == tuple.len() {
+            break;
+        }
+    }
+    Ok(())
+}
+
+/// The deliveries of the awaited events of `wanted` that start the cascade check
+/// ([`super::cascade`]). A parameter's classes also tell apart what the guards of the events
+/// it is passed on to (`on e(x) ... emit f(x)`, and on from `f`) compare it with, so that a
+/// value handed along a cascade is one value for every guard it meets. (Where that makes too
+/// many combinations, the event's own classes.)
+pub(super) fn cascade_deliveries(
+    p: &CompiledProject,
+    l: &Layout,
+    wanted: &[bool],
+) -> Vec<Delivery> {
+    let mut slots: Vec<Vec<(Vec<Value>, bool)>> = (0..p.events.len() as EventId)
+        .map(|e| own_comparands(p, l, e))
+        .collect();
+    // Where each event's parameters go: (event, parameter) to (event emitted, position).
+    let mut flows: Vec<(EventId, u32, EventId, usize)> = Vec::new();
+    for net in &p.nets {
+        for t in &net.transitions {
+            let Some(from) = t.event else { continue };
+            for a in &t.actions {
+                if let Action::Emit { event, args, .. } = a {
+                    for (j, arg) in args.iter().enumerate() {
+                        if let Arg::EventParam(i) = arg {
+                            flows.push((from, *i, *event, j));
                         }
                     }
                 }
             }
         }
-        let mut slots: Vec<(Vec<Value>, bool)> = vec![(Vec::new(), false); decl.params.len()];
-        for &r in &l.by_event[e as usize] {
-            let rule = &l.rules[r as usize];
-            if let Some(g) = &p.nets[rule.net as usize].transitions[rule.transition as usize].guard
-            {
-                comparands(g, &mut slots);
+    }
+    // A value goes at most once through each flow on a path that adds something.
+    for _ in 0..=flows.len() {
+        let mut changed = false;
+        for &(from, i, to, j) in &flows {
+            let (theirs, used) = slots[to as usize][j].clone();
+            let mine = &mut slots[from as usize][i as usize];
+            for v in theirs {
+                if !mine.0.iter().any(|x| x.literal() == v.literal()) {
+                    mine.0.push(v);
+                    changed = true;
+                }
+            }
+            if used && !mine.1 {
+                mine.1 = true;
+                changed = true;
             }
         }
-        let domains: Vec<Vec<Value>> = decl
-            .params
-            .iter()
-            .zip(&slots)
-            .map(|((_, ty), (c, used))| domain(*ty, c, *used))
-            .collect();
-        let combinations: usize = domains.iter().map(Vec::len).product();
-        if combinations > MAX_GUARD_RUNS {
-            return Err(VerifyError::TooManyUndecidedGuards {
-                event: decl.name.clone(),
-            });
-        }
-        let shown = domains.iter().any(|d| d.len() > 1);
-        let mut tuple = vec![0usize; domains.len()];
-        loop {
-            let params: Vec<Value> = tuple
-                .iter()
-                .zip(&domains)
-                .map(|(&k, d)| d[k].clone())
-                .collect();
-            for &target in &targets {
-                let mut label = decl.name.clone();
-                if shown {
-                    label = format!(
-                        "{label}({})",
-                        params
-                            .iter()
-                            .map(Value::literal)
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    );
-                }
-                if let Some(n) = target {
-                    label = format!("{label} to {}", p.nets[n as usize].name);
-                }
-                out.push(Delivery {
-                    event: e,
-                    target,
-                    params: params.clone(),
-                    label,
-                });
-            }
-            // The next combination, odometer-wise.
-            let mut k = 0;
-            loop {
-                if k == tuple.len() {
-                    break;
-                }
-                tuple[k] += 1;
-                if tuple[k] < domains[k].len() {
-                    break;
-                }
-                tuple[k] = 0;
-                k += 1;
-            }
-            if k == tuple.len() {
-                break;
-            }
+        if !changed {
+            break;
         }
     }
-    Ok(out)
+    let mut out = Vec::new();
+    for e in 0..p.events.len() as EventId {
+        if l.by_event[e as usize].is_empty() || !wanted[e as usize] {
+            continue;
+        }
+        let mut mine = Vec::new();
+        if event_deliveries(p, e, &slots[e as usize], &mut mine).is_err() {
+            mine.clear();
+            // The exploration made these already: they fit.
+            let _ = event_deliveries(p, e, &own_comparands(p, l, e), &mut mine);
+        }
+        out.append(&mut mine);
+    }
+    out
 }
 
 /// Answers "may this guard hold?" for the conflict check: true unless it is decided false.

@@ -18,6 +18,7 @@
 mod analysis;
 mod bound;
 mod cache;
+mod cascade;
 mod env;
 mod explore;
 mod minimize;
@@ -66,6 +67,10 @@ pub struct VerifyOptions {
     /// "The transition cache"): the graph is the same, state for state and edge for edge; for
     /// cross-checks and measurements.
     pub no_cache: bool,
+    /// The bound of a zero-time cascade the check looks for, instead of
+    /// [`crate::semantics::CASCADE_BOUND`]: for cross-checks with an engine given the same
+    /// bound.
+    pub cascade_bound: Option<u32>,
 }
 
 /// Where the analyses find the explored graph's edges (docs/verification.md, "The state
@@ -159,6 +164,25 @@ pub struct LivelockFinding {
     /// `NET.transition`s fired in the cycle, in order.
     pub transitions: Vec<String>,
     /// The events that lead to it (the last one starts the cycle; empty: at start).
+    pub trace: Trace,
+}
+
+/// Events produced at one instant that never settle (E0608, docs/semantics.md, "Zero-time
+/// cascades"): a cascade that comes back to a state and a queue it was in, or that takes as
+/// many steps as the player's bound with produced events still queued.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct CascadeFinding {
+    /// The events of one turn of the loop, in the order the player takes them (`EVENT`,
+    /// `EVENT(args)`, `EVENT to NET`); for a cascade that reaches the bound without coming
+    /// back, every event it takes, once each, in the order it first takes them.
+    pub events: Vec<String>,
+    /// The `NET.transition`s that fire in it (immediate ones included), in dispatch order.
+    pub transitions: Vec<String>,
+    /// It comes back to a state and a queue it was in: it never ends. Otherwise it reaches the
+    /// player's bound with produced events still queued (its queue grows).
+    pub endless: bool,
+    /// The events that lead to it: the last one is the outside event whose step starts it
+    /// (empty: the start's own produced events start it).
     pub trace: Trace,
 }
 
@@ -323,6 +347,14 @@ pub struct Report {
     pub dead_markings: Vec<DeadFinding>,
     /// Cycles of immediate transitions.
     pub livelocks: Vec<LivelockFinding>,
+    /// Cascades of events produced at one instant that never settle.
+    pub cascades: Vec<CascadeFinding>,
+    /// The bound of a zero-time cascade the check looked for (the player's).
+    pub cascade_bound: u32,
+    /// Configurations (a state and a queue of produced events) the cascade check went through.
+    pub cascade_configurations: u64,
+    /// The cascade check stopped before it went through them all (too many).
+    pub cascades_incomplete: bool,
     /// Invariants checked in every reachable stable state.
     pub invariants: Vec<String>,
     /// Invariants broken, each with the shortest trace to a state that breaks it.
@@ -379,12 +411,14 @@ pub struct Report {
 }
 
 impl Report {
-    /// True when nothing needs fixing: safe, no unintended dead marking, no livelock, every
-    /// invariant holding, an end always reachable, no net stuck.
+    /// True when nothing needs fixing: safe, no unintended dead marking, no livelock, no
+    /// cascade that never settles, every invariant holding, an end always reachable, no net
+    /// stuck.
     pub fn is_clean(&self) -> bool {
         self.safe
             && !self.deadlock
             && self.livelocks.is_empty()
+            && self.cascades.is_empty()
             && self.invariant_violations.is_empty()
             && self.no_progress.is_none()
             && self.stuck_nets.is_empty()
@@ -396,6 +430,7 @@ impl Report {
         self.unsafe_places.len()
             + self.dead_markings.iter().filter(|d| !d.intended).count()
             + self.livelocks.len()
+            + self.cascades.len()
             + self.invariant_violations.len()
             + usize::from(self.no_progress.is_some())
             + self.stuck_nets.len()
@@ -565,7 +600,11 @@ fn verify_inner(
         }
     };
     let started = Instant::now();
-    let sem = Semantics::new(p);
+    let mut sem = Semantics::new(p);
+    if let Some(b) = opts.cascade_bound {
+        sem.cascade_bound = b;
+    }
+    let sem = sem;
     let l = &sem.layout;
     let free = match alone {
         Some(id) => free_places(project, id, p, l),
@@ -816,6 +855,21 @@ fn verify_inner(
                 .collect()
         }
     };
+    let cascades = cascade::cascades(
+        p,
+        &sem,
+        &env,
+        &g,
+        explore::rule_guards(p, &sem),
+        start.is_none(),
+        opts.max_states
+            .unwrap_or(cascade::BUDGET)
+            .min(cascade::BUDGET),
+    );
+    report.cascades = cascades.findings;
+    report.cascade_bound = sem.cascade_bound;
+    report.cascade_configurations = cascades.configurations;
+    report.cascades_incomplete = !cascades.complete;
     report.unsafe_places = g.unsafe_places.clone();
     report.livelocks = g.livelocks.clone();
     report.conflicts = g.conflicts.clone();

@@ -16,6 +16,25 @@ fn trace_text(t: &Trace) -> String {
     }
 }
 
+/// What a cascade finding says (E0608): the loop's turn, or the events that reach the bound.
+fn cascade_text(c: &super::CascadeFinding, bound: u32) -> String {
+    if c.endless {
+        format!(
+            "events produced at one instant loop for ever: {} → {} → ... (each turn fires {})",
+            c.events.join(" → "),
+            c.events.first().map_or("", String::as_str),
+            c.transitions.join(", ")
+        )
+    } else {
+        format!(
+            "events produced at one instant do not settle: the cascade of {} takes {} steps with events still queued (it fires {})",
+            c.events.join(", "),
+            bound,
+            c.transitions.join(", ")
+        )
+    }
+}
+
 fn marking_text(m: &[String]) -> String {
     if m.is_empty() {
         "nothing marked".to_string()
@@ -73,7 +92,7 @@ fn render(project_name: &str, r: &Report, all: bool, details: bool) -> String {
     if r.partial {
         let _ = writeln!(
             o,
-            "partial-order reduction: {} state(s) expanded with one independent group of nets only; dead markings, safety, loops of immediate transitions, invariants, conflicts, progress and stuck nets are exact, traces other than to dead markings are witnesses (not always the shortest); starvation and loops need every state: not checked (--no-reduction checks them)",
+            "partial-order reduction: {} state(s) expanded with one independent group of nets only; dead markings, safety, loops of immediate transitions, cascades of produced events, invariants, conflicts, progress and stuck nets are exact, traces other than to dead markings are witnesses (not always the shortest); starvation and loops need every state: not checked (--no-reduction checks them)",
             r.reduced_states
         );
     }
@@ -232,6 +251,31 @@ fn render(project_name: &str, r: &Report, all: bool, details: bool) -> String {
                 "immediate transitions loop forever: {}, {}",
                 l.transitions.join(" → "),
                 trace_text(&l.trace)
+            ),
+        );
+    }
+    let _ = writeln!(
+        o,
+        "loops of events produced at one instant: {}{}",
+        r.cascades.len(),
+        if r.cascades_incomplete {
+            format!(
+                " (not checked in full: stopped after {} configurations)",
+                r.cascade_configurations
+            )
+        } else {
+            String::new()
+        }
+    );
+    for c in &r.cascades {
+        item(
+            &mut o,
+            "E0608",
+            "error",
+            format!(
+                "{}, {}",
+                cascade_text(c, r.cascade_bound),
+                trace_text(&c.trace)
             ),
         );
     }
@@ -573,6 +617,32 @@ fn diagnostics_with(
             )
             .label(format!("the player would spin {}", trace_text(&l.trace)))
             .help("give one transition of the loop a triggering event"),
+        ));
+    }
+    for c in &r.cascades {
+        d.push(at(
+            c.transitions.first().and_then(|t| transition_span(t)),
+            Diagnostic::error("E0608", Default::default(), cascade_text(c, r.cascade_bound))
+                .label(format!(
+                    "the player would stop it after {} steps at one instant and raise livelock, {}",
+                    r.cascade_bound,
+                    trace_text(&c.trace)
+                ))
+                .help("nothing in the loop waits for time or for an outside event: let a timer (`start T after D`, then `on` its event) or an outside event drive it, or give it a place it empties on the way"),
+        ));
+    }
+    if r.cascades_incomplete {
+        d.push(at(
+            None,
+            Diagnostic::warning(
+                "W0607",
+                Default::default(),
+                format!(
+                    "the search for cascades of events produced at one instant stopped after {} configurations: a loop may be missed",
+                    r.cascade_configurations
+                ),
+            )
+            .help("its budget is --max-states (at most 1,000,000): raise it, or verify one net with --net"),
         ));
     }
     if let Some(f) = &r.no_progress {
