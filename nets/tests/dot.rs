@@ -1002,7 +1002,11 @@ fn one_instance_alone_has_its_globals_and_its_parents_completion_place_as_ports(
     assert_eq!(dot.clusters.len(), 1);
     // Every node in the net's frame, the global place too, as a port saying what it is.
     for (id, _, cluster) in &dot.nodes {
-        assert_eq!(cluster.as_deref(), Some("cluster_R1"), "{id} outside R1's frame");
+        assert_eq!(
+            cluster.as_deref(),
+            Some("cluster_R1"),
+            "{id} outside R1's frame"
+        );
     }
     let port = dot.node("global.bottleneck_free");
     assert_eq!(attr(port, "shape"), Some("box"));
@@ -1021,7 +1025,10 @@ fn one_instance_alone_has_its_globals_and_its_parents_completion_place_as_ports(
         attr(dot.node("PHASES.done.TRANSIT"), "label"),
         Some("PHASES: TRANSIT.done")
     );
-    assert_eq!(edge(&dot, "PHASES/TRANSIT.t.arrive", "PHASES.done.TRANSIT").len(), 1);
+    assert_eq!(
+        edge(&dot, "PHASES/TRANSIT.t.arrive", "PHASES.done.TRANSIT").len(),
+        1
+    );
     // A template's name is not one net: the error lists the nets there are.
     let err = instance_dot(&p, "ROBOT").unwrap_err();
     assert!(err.contains("no net named `ROBOT`"), "{err}");
@@ -1039,7 +1046,11 @@ fn the_overview_tree_names_children_briefly_and_draws_each_edge_once() {
     assert_eq!(attr(dot.node("R1"), "label"), Some(r"R1\n= ROBOT"));
     // Between a parent and its child, the tree's edge alone.
     for (from, to, _) in &dot.edges {
-        let n = dot.edges.iter().filter(|e| &e.0 == from && &e.1 == to).count();
+        let n = dot
+            .edges
+            .iter()
+            .filter(|e| &e.0 == from && &e.1 == to)
+            .count();
         assert_eq!(n, 1, "{from} -> {to} drawn {n} times:\n{text}");
     }
 }

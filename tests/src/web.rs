@@ -155,6 +155,11 @@ impl Monitor {
     /// Starts `petrel monitor ARGS --listen 127.0.0.1:0` (with `--operator`, its token written
     /// to a file of a temporary directory, as `--token-file` does) and waits for its address.
     pub fn start(args: &[&str]) -> Monitor {
+        Monitor::start_with(&crate::petrel_bin(), args)
+    }
+
+    /// [`Monitor::start`] with another `petrel` binary (a benchmark's baseline).
+    pub fn start_with(petrel: &Path, args: &[&str]) -> Monitor {
         let operator = args.contains(&"--operator");
         let token_dir = operator.then(|| {
             tempfile::Builder::new()
@@ -163,7 +168,7 @@ impl Monitor {
                 .expect("a directory for the token")
         });
         let token_file = token_dir.as_ref().map(|d| d.path().join("token"));
-        let mut cmd = Command::new(crate::petrel_bin());
+        let mut cmd = Command::new(petrel);
         cmd.arg("monitor")
             .args(args)
             .args(["--listen", "127.0.0.1:0"]);

@@ -474,11 +474,43 @@ fn every_place_of_every_mission_is_in_the_drawing() {
             );
         }
         assert!(!ids.is_empty(), "{dir}");
-        for id in ids {
+        for id in &ids {
             assert!(
-                titles.contains(&id),
+                titles.contains(id),
                 "{dir}: place {id} is not in the drawing"
             );
+        }
+        // Each net alone: its own places, and the global places it uses as ports.
+        for net in model["nets"].as_array().unwrap() {
+            let name = net["name"].as_str().unwrap();
+            let r = monitor.get(&format!("/api/net.svg?name={}", name.replace('/', "%2F")));
+            assert_eq!(r.status, 200, "{dir}: net {name}: {}", r.body);
+            for id in strings(&net["places"])
+                .iter()
+                .chain(&strings(&net["globals"]))
+            {
+                assert!(
+                    r.body.contains(&format!("<title>{id}</title>")),
+                    "{dir}: {id} not in {name}'s view"
+                );
+            }
+        }
+        assert_eq!(monitor.get("/api/net.svg?name=NOPE").status, 404);
+        // The map: drawn for the projects that have a map.toml, a clear 404 for the others.
+        let map = monitor.get("/api/map.svg?w=800&h=600");
+        if mission.join("map.toml").is_file() {
+            assert_eq!(map.status, 200, "{dir}: {}", map.body);
+            assert!(
+                map.body.starts_with("<svg") && map.body.contains("Legend"),
+                "{dir}"
+            );
+            assert_ne!(model["map"], Value::Null);
+        } else {
+            assert_eq!(map.status, 404, "{dir}");
+            assert!(map.json()["error"]
+                .as_str()
+                .unwrap_or_default()
+                .contains("map.toml"));
         }
         drop(monitor);
         petrel_tests::forget_vehicle(&vehicle);
@@ -684,4 +716,62 @@ fn a_damaged_journal_replays_up_to_the_damage_with_an_alarm() {
 
 fn dir_of_uav() -> String {
     uav().display().to_string()
+}
+
+/// The header's connection pill says what the page hears, as the vehicle comes and goes: a
+/// monitor with no player says so (never a green "connected" on the monitor's stream alone),
+/// a player's heartbeats make it "player alive", a player gone makes it "player silent", and a
+/// monitor gone makes it "monitor unreachable". (Issue 35: the page showed a green
+/// "connected" beside "waiting for the player's first heartbeat" once the UAV flight ended.)
+#[test]
+fn the_connection_pill_says_whether_a_player_is_heard() {
+    if !browser_available() {
+        return;
+    }
+    let vehicle = unique_vehicle("monconn");
+    let dir = uav().display().to_string();
+    let monitor = Monitor::start(&[&dir, "--vehicle", &vehicle]);
+    let b = Browser::start();
+    b.open(&monitor.url("/"));
+    b.wait_ready();
+    let pill = "const c = document.getElementById('conn'); return c.dataset.state + '|' + c.className + '|' + c.textContent";
+    let wait_state = |state: &str| -> String {
+        let v = b.wait_for(30.0, pill, |v| {
+            v.as_str()
+                .is_some_and(|s| s.starts_with(&format!("{state}|")))
+        });
+        let s = v.as_str().unwrap_or_default().to_string();
+        assert!(
+            s.starts_with(&format!("{state}|")),
+            "waiting for {state}: {s}"
+        );
+        s
+    };
+    let none = wait_state("no-player");
+    assert!(
+        !none.contains(" ok") && !none.contains("connected"),
+        "{none}"
+    );
+    assert!(none.ends_with("monitor up, no player heard"), "{none}");
+
+    let player = Player::start(&uav(), &vehicle);
+    let alive = wait_state("player-alive");
+    assert!(alive.contains("pill ok"), "{alive}");
+
+    // The player goes (killed: no farewell): three heartbeat periods later it is silent.
+    drop(player);
+    let silent = wait_state("player-silent");
+    assert!(
+        silent.contains("pill bad") && silent.ends_with("player silent (no heartbeat)"),
+        "{silent}"
+    );
+
+    // The monitor goes: the page says it lost it, and retries.
+    drop(monitor);
+    let lost = wait_state("monitor-lost");
+    assert!(
+        lost.contains("pill bad") && lost.ends_with("monitor unreachable, retrying"),
+        "{lost}"
+    );
+    petrel_tests::forget_vehicle(&vehicle);
 }

@@ -54,13 +54,17 @@ function breakable(text, words) {
   }
   return f;
 }
-// A link to a net's view: a click anywhere a net is named opens it.
+// A link to a net's view: a click anywhere a net is named opens it (one listener for the
+// whole page, so that a log row of forty transitions costs no forty listeners).
 function netLink(name, text) {
   const a = el('a', { class: 'net', 'data-net': name, title: 'open net ' + name });
   a.append(breakable(text || name));
-  a.addEventListener('click', (e) => { e.preventDefault(); openNet(name); });
   return a;
 }
+document.addEventListener('click', (e) => {
+  const a = e.target.closest && e.target.closest('a.net');
+  if (a) { e.preventDefault(); openNet(a.dataset.net); }
+});
 
 async function getJson(url) {
   const r = await fetch(url);
@@ -499,28 +503,46 @@ function render() {
   document.body.dataset.synced = String(M.synced);
 }
 
+// Only what changed since the drawing was last coloured: the places whose token came or
+// went, and, when a net was activated or deactivated, the nets' nodes, frames and arcs.
 function renderNets() {
-  for (const [id, g] of M.places) g.classList.toggle('marked', M.marked.has(id));
-  const on = (net) => net === 'global' || M.active.has(net);
-  for (const [g, id] of M.nodes) if (!g.classList.contains('port')) g.classList.toggle('inactive', !on(netOf(id)));
-  for (const [net, g] of M.clusters) g.classList.toggle('inactive', !on(net));
-  for (const [g, a, b] of M.edges) g.classList.toggle('inactive', !(on(a) && on(b)));
+  const shown = M.shown;
+  const changed = shown ? [...M.marked].filter((p) => !shown.marked.has(p)).concat([...shown.marked].filter((p) => !M.marked.has(p)))
+    : [...M.places.keys()];
+  for (const id of changed) {
+    const g = M.places.get(id);
+    if (g) g.classList.toggle('marked', M.marked.has(id));
+  }
+  const activity = !shown || shown.active.size !== M.active.size || [...M.active].some((n) => !shown.active.has(n));
+  if (activity) {
+    const on = (net) => net === 'global' || M.active.has(net);
+    for (const [g, id] of M.nodes) if (!g.classList.contains('port')) g.classList.toggle('inactive', !on(netOf(id)));
+    for (const [net, g] of M.clusters) g.classList.toggle('inactive', !on(net));
+    for (const [g, a, b] of M.edges) g.classList.toggle('inactive', !(on(a) && on(b)));
+  }
+  M.shown = { marked: new Set(M.marked), active: new Set(M.active) };
 }
 
+// The boxes whose state, count or "last" changed (writing the same again would still cost a
+// style pass of the drawing).
 function renderOverview() {
   for (const [name, g] of M.treeNodes) {
     const n = M.nets.get(name);
     if (!n) continue;
     const st = netState(n);
-    for (const s of ['active', 'ended', 'stuck', 'inactive']) g.classList.toggle('st-' + s, s === st);
-    g.classList.toggle('last', name === M.lastNet);
-    g.dataset.state = st;
+    if (g.dataset.state !== st) {
+      for (const s of ['active', 'ended', 'stuck', 'inactive']) g.classList.toggle('st-' + s, s === st);
+      g.dataset.state = st;
+    }
+    const last = name === M.lastNet;
+    if (g.classList.contains('last') !== last) g.classList.toggle('last', last);
     badge(g, markedCount(n));
   }
 }
 
 // A net's count of marked places, at the top right of its box.
 function badge(g, count) {
+  if (g._badge && g._badge.count === count) return;
   let b = g._badge;
   if (!b) {
     const box = g.getBBox();
@@ -542,14 +564,15 @@ function badge(g, count) {
   }
   b.rect.setAttribute('visibility', count ? 'visible' : 'hidden');
   b.text.textContent = count ? String(count) : '';
+  b.count = count;
 }
 
+// Lights the transitions that fired for a second and a half (a class, no animation: nothing
+// to restart, so no layout is forced here).
 function flash(fired) {
   for (const id of fired || []) {
     const g = M.transitions && M.transitions.get(id);
     if (!g) continue;
-    g.classList.remove('fired');
-    void g.getBoundingClientRect();
     g.classList.add('fired');
     clearTimeout(g._flash);
     g._flash = setTimeout(() => g.classList.remove('fired'), 1500);
@@ -606,7 +629,8 @@ function logRow(s, prepend) {
     fired,
     actions);
   const body = $('log').tBodies[0];
-  if (prepend) body.prepend(tr); else body.append(tr);
+  if (prepend === true) body.prepend(tr);
+  else if (prepend === false) body.append(tr);
   while (prepend && body.rows.length > 300) body.deleteRow(body.rows.length - 1);
   return tr;
 }
@@ -701,7 +725,11 @@ function drawPending() {
   header(last.time);
   render();
   // Only the latest steps are worth a row and a flash: a burst scrolls by anyway.
-  for (const s of steps.slice(-50)) { flash(s.fired); logRow(s, true); }
+  const rows = document.createDocumentFragment();
+  for (const s of steps.slice(-50)) { flash(s.fired); rows.prepend(logRow(s)); }
+  const body = $('log').tBodies[0];
+  body.prepend(rows);
+  while (body.rows.length > 300) body.deleteRow(body.rows.length - 1);
   if (!$('notice').textContent.startsWith('this page')) $('notice').textContent = '';
   followLast();
   requestAnimationFrame(() => {
