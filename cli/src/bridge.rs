@@ -1,6 +1,7 @@
 //! `petrel bridge`: the CAN data server, serving a bus or replaying a recorded one.
 
 use crate::common::{out, require_clean, vehicle_of, wait_strategy, Outcome, Scope};
+use petrel_nets::plural::count;
 use std::path::PathBuf;
 
 /// `petrel bridge`.
@@ -90,9 +91,9 @@ pub fn bridge(a: BridgeArgs) -> Outcome {
                 }
                 if s.counters.wrong_length > 0 {
                     eprintln!(
-                        "warning: {}: {} frames had another length than the DBC gives their message: dropped, their signals not updated",
+                        "warning: {}: {} had another length than the DBC gives their message: dropped, their signals not updated",
                         log.display(),
-                        s.counters.wrong_length
+                        count(s.counters.wrong_length, "frame")
                     );
                 }
                 eprintln!("{}: {s}", log.display());

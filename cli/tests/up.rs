@@ -44,6 +44,17 @@ struct Up {
 
 impl Up {
     fn start(work: &Workdir, dir: &Path, vehicle: &str, extra: &[&str]) -> Up {
+        Up::start_with_env(work, dir, vehicle, extra, &[])
+    }
+
+    /// [`Up::start`] with these environment variables besides.
+    fn start_with_env(
+        work: &Workdir,
+        dir: &Path,
+        vehicle: &str,
+        extra: &[&str],
+        env: &[(&str, &str)],
+    ) -> Up {
         let out = work.path().join("up.out");
         let err = work.path().join("up.err");
         let run = work.path().join("run");
@@ -54,6 +65,7 @@ impl Up {
             .arg("--logs")
             .arg(&run)
             .args(extra)
+            .envs(env.iter().copied())
             .stdout(std::fs::File::create(&out).unwrap())
             .stderr(std::fs::File::create(&err).unwrap())
             .spawn()
@@ -365,7 +377,7 @@ fn fifty_starts_deliver_the_first_call_every_time() {
                         out.contains("reached --until: place `FIRST.done`"),
                         "{what}\n{out}"
                     );
-                    assert!(log.contains("1 calls sent"), "{what}\n{log}");
+                    assert!(log.contains("1 call sent"), "{what}\n{log}");
                     assert!(log.contains(" 0 failed;"), "{what}\n{log}");
                     assert!(!log.contains("call not delivered"), "{what}\n{log}");
                     assert_vehicle_left_clean(&up.vehicle);
@@ -447,7 +459,7 @@ fn a_program_is_ready_only_once_it_receives_its_calls() {
         "{echo}\n{out}"
     );
     assert!(echo.contains("answered ping"), "{echo}");
-    assert!(log.contains("1 calls sent, 0 held, 0 failed"), "{log}");
+    assert!(log.contains("1 call sent, 0 held, 0 failed"), "{log}");
 }
 
 #[test]
@@ -802,7 +814,7 @@ args = ["-c", "echo vehicle $PETREL_VEHICLE process $PETREL_PROCESS > {logs}/log
     let out = up.stdout();
     assert_eq!(status.code(), Some(0), "{out}\n{}", up.stderr());
     assert!(
-        out.contains("1 processes on computer `ground` (10.0.0.1), ground station"),
+        out.contains("1 process on computer `ground` (10.0.0.1), ground station"),
         "{out}"
     );
     assert!(out.contains("every process ended"), "{out}");
@@ -873,4 +885,157 @@ event = "start_misson"
     assert!(first["file"].as_str().unwrap().ends_with("vehicle.toml"));
     assert_eq!(first["line"], 8);
     assert_eq!(first["column"], 20);
+}
+
+/// `petrel` as if built into `work/target/PROFILE/`: a copy of this build's binary there (a
+/// hard link when the file system allows), which makes that directory the `{target}` of
+/// vehicle files.
+fn petrel_built_as(work: &Workdir, profile: &str) -> PathBuf {
+    let dir = work.path().join("target").join(profile);
+    std::fs::create_dir_all(&dir).unwrap();
+    let exe = dir.join("petrel");
+    let built = Path::new(env!("CARGO_BIN_EXE_petrel"));
+    if std::fs::hard_link(built, &exe).is_err() {
+        std::fs::copy(built, &exe).unwrap();
+    }
+    exe
+}
+
+#[test]
+fn a_missing_program_gets_the_cargo_command_that_builds_it_with_petrel_s_profile() {
+    // Redermor's programs are a binary of petrel-redermor-live, the UAV's examples of
+    // petrel-programs; neither is in the fresh target directory the running petrel comes
+    // from. cargo, asked in the repository's workspace, would build into it
+    // (CARGO_TARGET_DIR), so the hint is the one command that fills `{target}`.
+    let work = Workdir::new();
+    let cases = [
+        (
+            "release",
+            "missions/redermor",
+            "redermor-program",
+            "`cargo build --release -p petrel-redermor-live --bin redermor-program`",
+        ),
+        (
+            "debug",
+            "missions/uav",
+            "examples/uav_gui",
+            "`cargo build -p petrel-programs --example uav_gui`",
+        ),
+    ];
+    for (profile, project, missing, command) in cases {
+        let exe = petrel_built_as(&work, profile);
+        let vehicle = unique_vehicle("hint");
+        let o = Command::new(&exe)
+            .arg("up")
+            .arg(repo().join(project))
+            .args(["--vehicle", &vehicle])
+            .arg("--logs")
+            .arg(work.path().join(format!("run-{profile}")))
+            .env("CARGO_TARGET_DIR", work.path().join("target"))
+            .output()
+            .expect("petrel up runs");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        let looked_for = exe.parent().unwrap().join(missing);
+        assert!(
+            err.contains(&format!("{} does not exist", looked_for.display())),
+            "{err}"
+        );
+        assert!(err.contains(command), "{command} missing:\n{err}");
+        let root = repo().canonicalize().unwrap();
+        assert!(err.contains(&format!("(in {})", root.display())), "{err}");
+        if let Ok(v) = petrel_ipc::Vehicle::new(&vehicle) {
+            let _ = petrel_ipc::remove_vehicle_files(&v);
+        }
+    }
+}
+
+#[test]
+fn under_systemd_ready_comes_once_the_vehicle_is_up_and_the_watchdog_is_fed() {
+    // systemd's side: a datagram socket named by NOTIFY_SOCKET, a watchdog of one second
+    // (WATCHDOG_USEC), which `petrel up` must feed more often than that.
+    let work = Workdir::new();
+    let dir = uav_copy(&work, "[[process]]\nname = \"player\"\nkind = \"player\"\n");
+    let socket_path = work.path().join("notify");
+    let manager = std::os::unix::net::UnixDatagram::bind(&socket_path).unwrap();
+    manager
+        .set_read_timeout(Some(Duration::from_millis(100)))
+        .unwrap();
+    let vehicle = unique_vehicle("notify");
+    let mut up = Up::start_with_env(
+        &work,
+        &dir,
+        &vehicle,
+        &[],
+        &[
+            ("NOTIFY_SOCKET", socket_path.to_str().unwrap()),
+            ("WATCHDOG_USEC", "1000000"),
+        ],
+    );
+    let mut heard: Vec<(Instant, String)> = Vec::new();
+    // Listens until `done` holds of what was heard, or `secs` pass.
+    let listen =
+        |heard: &mut Vec<(Instant, String)>, up: &Up, secs: u64, done: &dyn Fn(&str) -> bool| {
+            let deadline = Instant::now() + Duration::from_secs(secs);
+            let mut buf = [0u8; 512];
+            while Instant::now() < deadline {
+                let Ok(n) = manager.recv(&mut buf) else {
+                    continue;
+                };
+                let text = String::from_utf8_lossy(&buf[..n]).into_owned();
+                if text.starts_with("READY=1") {
+                    // Sent once the vehicle is up, not before.
+                    assert!(up.stdout().contains("vehicle up in"), "{}", up.stdout());
+                }
+                heard.push((Instant::now(), text.clone()));
+                if done(&text) {
+                    return;
+                }
+            }
+        };
+    listen(&mut heard, &up, 60, &|t| t.starts_with("READY=1"));
+    assert!(
+        heard.iter().any(|(_, t)| t.starts_with("READY=1")),
+        "no READY=1 within 60 s: {heard:?}\n{}\n{}",
+        up.stdout(),
+        up.stderr()
+    );
+    // The player it started does not inherit the notification socket.
+    let player = up.pid_of("player");
+    let environ = std::fs::read(format!("/proc/{player}/environ")).unwrap();
+    let environ = String::from_utf8_lossy(&environ);
+    assert!(!environ.contains("NOTIFY_SOCKET"), "{environ}");
+    assert!(environ.contains("PETREL_PROCESS=player"), "{environ}");
+    // Three seconds of watchdog while the vehicle is up, then a stop.
+    listen(&mut heard, &up, 3, &|_| false);
+    Command::new("kill")
+        .args(["-TERM", &up.pid().to_string()])
+        .status()
+        .unwrap();
+    listen(&mut heard, &up, 30, &|t| t.starts_with("STOPPING=1"));
+    assert!(up.wait(30).success(), "{}", up.stderr());
+    let texts: Vec<&str> = heard.iter().map(|(_, t)| t.as_str()).collect();
+    assert_eq!(
+        texts.iter().filter(|t| t.starts_with("READY=1")).count(),
+        1,
+        "{texts:?}"
+    );
+    assert!(
+        texts[0].starts_with("STATUS=starting 1 process"),
+        "{texts:?}"
+    );
+    assert!(
+        texts.iter().any(|t| t.starts_with("STOPPING=1")),
+        "{texts:?}"
+    );
+    // Fed at half the period: never a whole second without it while up.
+    let pings: Vec<Instant> = heard
+        .iter()
+        .filter(|(_, t)| t == "WATCHDOG=1")
+        .map(|(at, _)| *at)
+        .collect();
+    assert!(pings.len() >= 4, "{} pings: {texts:?}", pings.len());
+    let longest = pings.windows(2).map(|w| w[1] - w[0]).max().unwrap();
+    assert!(longest < Duration::from_secs(1), "a gap of {longest:?}");
+    assert_vehicle_left_clean(&vehicle);
 }

@@ -9,6 +9,7 @@
 
 use super::display::{Display, Line};
 use super::file::{Kind, Restart};
+use super::notify::{Notifier, VARIABLES};
 use super::signals::Signals;
 use super::{Plan, Planned, Until};
 use crate::common::Outcome;
@@ -166,6 +167,8 @@ struct Supervisor {
     /// The programs of this computer's processes: ready when they receive their calls (taken
     /// away at the end: it keeps our node).
     watch: Option<petrel_ipc::ProgramWatch>,
+    /// systemd's notifications (readiness, watchdog), when it runs us.
+    notify: Notifier,
 }
 
 /// Runs the plan; prints the summary; the outcome gives the exit code.
@@ -227,11 +230,16 @@ pub fn run(plan: Plan, t0: Instant) -> Outcome {
         None => String::new(),
     };
     display.message(&format!(
-        "petrel up: vehicle `{}` (project `{}`), {} processes{on}; run directory {}",
+        "petrel up: vehicle `{}` (project `{}`), {}{on}; run directory {}",
         plan.vehicle.name(),
         plan.project.name,
-        plan.processes.len(),
+        petrel_nets::plural::count(plan.processes.len(), "process"),
         plan.run_dir.display()
+    ));
+    let mut notify = Notifier::from_env();
+    notify.status(&format!(
+        "starting {}",
+        petrel_nets::plural::count(plan.processes.len(), "process")
     ));
     let procs = plan
         .processes
@@ -265,6 +273,7 @@ pub fn run(plan: Plan, t0: Instant) -> Outcome {
         origin,
         petrel,
         watch: Some(watch),
+        notify,
     };
     let end = sup.supervise(&signals, &beats, &deltas, &events);
     sup.stop_all(&signals, &beats, &deltas);
@@ -310,9 +319,9 @@ impl Supervisor {
                 {
                     if let Some(s) = &self.player {
                         text.push_str(&format!(
-                            "  mission {:.1} s, {} events, {} marked{}",
+                            "  mission {:.1} s, {}, {} marked{}",
                             s.time,
-                            s.processed,
+                            petrel_nets::plural::count(s.processed, "event"),
                             s.marked.len(),
                             if s.over { ", OVER" } else { "" }
                         ));
@@ -370,6 +379,10 @@ impl Supervisor {
             .env("PETREL_LOGS", &self.plan.run_dir)
             .env("PETREL_PROCESS", &plan.spec.name)
             .env("PETREL_RESTARTS", p.restarts.to_string())
+            // systemd's notifications are ours alone (notify.rs).
+            .env_remove(VARIABLES[0])
+            .env_remove(VARIABLES[1])
+            .env_remove(VARIABLES[2])
             .current_dir(&self.plan.run_dir)
             .stdin(Stdio::null())
             .stdout(log)
@@ -499,7 +512,8 @@ impl Supervisor {
             let failure = match p.plan.spec.restart {
                 Restart::Never => format!("{why} (restart = \"never\")"),
                 Restart::OnFailure { max, .. } if p.restarts >= max => {
-                    format!("{why}, after {max} restarts: none left")
+                    let restarts = petrel_nets::plural::count(max, "restart");
+                    format!("{why}, after {restarts}: none left")
                 }
                 Restart::OnFailure { .. } => why.clone(),
             };
@@ -781,6 +795,8 @@ impl Supervisor {
     ) -> End {
         loop {
             self.display.update(&self.lines());
+            // The watchdog watches this loop: fed every round it turns.
+            self.notify.watchdog(Instant::now());
             if let Some(s) = signals.wait(ROUND) {
                 return End::Signal(s);
             }
@@ -803,6 +819,12 @@ impl Supervisor {
                 }
                 self.display
                     .message(&format!("vehicle up in {:.2} s", self.elapsed()));
+                let status = format!(
+                    "vehicle `{}` up: {} running",
+                    self.plan.vehicle.name(),
+                    petrel_nets::plural::count(self.procs.len(), "process")
+                );
+                self.notify.ready(&status);
             }
             if self.up_at.is_some() {
                 if let Some(why) = self.send_due(events) {
@@ -836,6 +858,7 @@ impl Supervisor {
         beats: &petrel_ipc::HeartbeatSubscriber,
         deltas: &petrel_ipc::MarkingSubscriber,
     ) {
+        self.notify.stopping("stopping the vehicle");
         for p in &mut self.procs {
             match p.state {
                 State::Waiting => p.state = State::NotStarted,
@@ -869,6 +892,7 @@ impl Supervisor {
             }
             while members.iter().any(|&i| self.procs[i].alive()) {
                 self.display.update(&self.lines());
+                self.notify.watchdog(Instant::now());
                 if let Some(s) = signals.wait(ROUND) {
                     if !hurry {
                         self.display
@@ -939,8 +963,10 @@ impl Supervisor {
         }
         if let Some(s) = &self.player {
             text.push_str(&format!(
-                "  last player status: mission time {:.1} s, {} events processed, marking {}\n",
-                s.time, s.processed, s.doc["marking"]
+                "  last player status: mission time {:.1} s, {} processed, marking {}\n",
+                s.time,
+                petrel_nets::plural::count(s.processed, "event"),
+                s.doc["marking"]
             ));
         }
         text.push_str(&format!("logs: {}\n", self.plan.run_dir.display()));
