@@ -70,19 +70,7 @@ fn run(a: &PlotArgs) -> Result<Vec<(&'static str, PathBuf)>, Outcome> {
     let journal = journal_dir(&a.run);
     let read = petrel_player::journal::read_journal(&journal)
         .map_err(|e| Outcome::Usage(format!("{}: {e}", journal.display())))?;
-    let (project_dir, digest) = match read.entries.first() {
-        Some(petrel_player::journal::Entry::Header {
-            project_dir,
-            digest,
-            ..
-        }) => (PathBuf::from(project_dir), *digest),
-        _ => {
-            return Err(Outcome::Usage(format!(
-                "{} does not start with a journal header",
-                journal.display()
-            )))
-        }
-    };
+    let (project_dir, digest) = crate::monitor::replay::header(&read.entries, &journal)?;
     let dir = a.project.clone().unwrap_or(project_dir);
     let scope = Scope {
         can: true,

@@ -23,7 +23,7 @@ mod layout;
 mod live;
 mod names;
 mod operator;
-mod replay;
+pub(crate) mod replay;
 mod server;
 
 use crate::common::{require_clean, Outcome, Scope};
