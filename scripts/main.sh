@@ -58,7 +58,7 @@ until "$petrel" status "$mission" --vehicle "$vehicle" >/dev/null 2>&1; do sleep
 target/release/examples/uav_gui --vehicle "$vehicle" --speed 60 >/dev/null 2>&1 & pids+=($!)
 target/release/examples/uav_dec --vehicle "$vehicle" --speed 60 >/dev/null 2>&1 & pids+=($!)
 # The web monitor of the flight (docs/monitor.md), and its screenshot mid-flight in
-# docs/img/monitor-uav.png (README) when headless Chromium is there.
+# target/screenshots/ when headless Chromium is there (this script changes no tracked file).
 "$petrel" monitor "$mission" --vehicle "$vehicle" --listen 127.0.0.1:0 --run-for 60 \
     > "target/monitor-$vehicle.out" &
 pids+=($!)
@@ -68,10 +68,10 @@ echo "== petrel monitor: $monitor_url"
 sleep 0.5
 "$petrel" send "$mission" --vehicle "$vehicle" start_mission
 if command -v chromedriver >/dev/null 2>&1; then
-    mkdir -p docs/img
+    mkdir -p target/screenshots
     # Headless Chromium under WebDriver: it waits for the page to be in step and to show 8
     # steps (the aircraft in transit) before the shot.
-    target/release/examples/monitor_shot "$monitor_url" docs/img/monitor-uav.png 8 || true
+    target/release/examples/monitor_shot "$monitor_url" target/screenshots/monitor-uav.png 8 || true
 else
     echo "== no chromium here: no screenshot of the monitor (apt-get install chromium chromium-driver)"
 fi
@@ -85,31 +85,7 @@ wait "${pids[0]}" 2>/dev/null || true
 echo "== the flight recorder: target/journal/$vehicle"
 "$petrel" replay "target/journal/$vehicle"
 
-# Redermor's 22 nets in the monitor, after the first events of its current scenario (its
-# programs are not processes yet: the events are sent as an operator would): the screenshot
-# docs/img/monitor-redermor.png.
 red=missions/redermor
-if [ -f "$red/petrel.toml" ] && command -v chromedriver >/dev/null 2>&1; then
-    rv="red$$"
-    echo "== petrel monitor on $red (vehicle $rv)"
-    pids=()
-    RUST_LOG=error "$petrel" play "$red" --vehicle "$rv" --run-for 60 --no-journal & pids+=($!)
-    until "$petrel" status "$red" --vehicle "$rv" >/dev/null 2>&1; do sleep 0.1; done
-    "$petrel" monitor "$red" --vehicle "$rv" --listen 127.0.0.1:0 --run-for 60 \
-        > "target/monitor-$rv.out" &
-    pids+=($!)
-    until grep -q listening "target/monitor-$rv.out" 2>/dev/null; do sleep 0.1; done
-    red_url=$(sed -n 's/^petrel monitor: listening on //p' "target/monitor-$rv.out")
-    grep -E '^[0-9.]+ ' "$red/scripts/current.script" | head -n 12 | cut -d' ' -f2- |
-        while read -r event; do "$petrel" send "$red" --vehicle "$rv" "$event" >/dev/null; done
-    target/release/examples/monitor_shot "$red_url" docs/img/monitor-redermor.png 12 \
-        MISSION/MISSION_PHASES || true
-    kill "${pids[1]}" 2>/dev/null || true
-    wait "${pids[1]}" 2>/dev/null || true
-    kill "${pids[0]}" 2>/dev/null || true
-    wait "${pids[0]}" 2>/dev/null || true
-fi
-
 auv=missions/auv
 echo "== petrel check $auv (nets, can.toml and its DBC)"
 "$petrel" check "$auv"
@@ -147,12 +123,35 @@ echo "== the flight recorder: target/journal/$dive"
 # Redermor (issue 14), scenario 1 flown live: `petrel up` brings up the player, the CAN data
 # server on the in-memory bus with the Redermor simulator (20 times the wall clock) and the
 # programs PLN, NAV (GDD, GUI, IDC) and EVT, until the vehicle is stopped at the surface in the
-# end area; then `petrel plot` draws the run (Figure 9).
+# end area. A monitor follows it (screenshots of its overview, a net and the map under
+# target/screenshots/); then `petrel plot` draws the run (its map.toml: areas, routes, track,
+# events; and the depth profile).
 cargo build --release --quiet -p petrel-redermor-live --bin redermor-program
 run="target/redermor-run"
 rm -rf "$run"
+rv="rdm$$"
 echo "== petrel up $red: scenario 1 (nominal), live"
-RUST_LOG=${RUST_LOG:-warn} "$petrel" up "$red" --vehicle "rdm$$" --logs "$run" --timeout 300
-"$petrel" plot "$run" --mission "$red/bench/mission.toml"
-echo "== Redermor scenario 1: journal $run/journal (petrel replay $run/journal), logs $run/*.log, bus $run/bus.log, track $run/trace.csv, plots $run/map.svg and $run/depth.svg"
+RUST_LOG=${RUST_LOG:-warn} "$petrel" up "$red" --vehicle "$rv" --logs "$run" --timeout 300 &
+up=$!
+pids=("$up")
+if command -v chromedriver >/dev/null 2>&1; then
+    until "$petrel" status "$red" --vehicle "$rv" >/dev/null 2>&1; do sleep 0.2; done
+    "$petrel" monitor "$red" --vehicle "$rv" --listen 127.0.0.1:0 --run-for 120 \
+        > "target/monitor-$rv.out" &
+    pids+=($!)
+    until grep -q listening "target/monitor-$rv.out" 2>/dev/null; do sleep 0.1; done
+    red_url=$(sed -n 's/^petrel monitor: listening on //p' "target/monitor-$rv.out")
+    echo "== petrel monitor: $red_url"
+    mkdir -p target/screenshots
+    for shot in "view=overview:overview:12" "net=MISSION/MISSION_PHASES:net:14" "view=map:map:30"; do
+        IFS=: read -r query name steps <<<"$shot"
+        target/release/examples/monitor_shot "$red_url?$query" \
+            "target/screenshots/monitor-redermor-$name.png" "$steps" || true
+    done
+    kill "${pids[1]}" 2>/dev/null || true
+    wait "${pids[1]}" 2>/dev/null || true
+fi
+wait "$up"
+"$petrel" plot "$run"
+echo "== Redermor scenario 1: journal $run/journal (petrel replay $run/journal; petrel monitor --journal $run/journal), logs $run/*.log, bus $run/bus.log, track $run/trace.csv, plots $run/map.svg and $run/profile.svg"
 "$petrel" replay "$run/journal"

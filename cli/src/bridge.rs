@@ -57,6 +57,7 @@ pub fn bridge(a: BridgeArgs) -> Outcome {
             can: true,
             quick_verify: false,
             vehicle: false,
+            map: false,
         },
         "bridge",
     ) {

@@ -86,6 +86,9 @@ pub struct Scope {
     /// The vehicle file (vehicle.toml, when the project has one), against the project's
     /// programs and events.
     pub vehicle: bool,
+    /// The map (map.toml, when the project has one), against the project's events and, with
+    /// `can`, its DBC's signals.
+    pub map: bool,
 }
 
 /// A project read and checked: what every command starts from.
@@ -100,6 +103,8 @@ pub struct Checked {
     pub can: Option<(petrel_can_bridge::CanConfig, petrel_can_bridge::Dbc)>,
     /// The vehicle file, when asked for, present and free of errors.
     pub vehicle: Option<crate::up::file::VehicleFile>,
+    /// The map, when asked for, present and free of errors.
+    pub map: Option<crate::map::Map>,
 }
 
 /// What `petrel check` means: the project (syntax, names, types, markings), then, within
@@ -135,6 +140,24 @@ pub fn check_project(dir: &Path, scope: Scope) -> Result<Checked, Outcome> {
         })?;
         d.sort();
     }
+    let mut map = None;
+    if let (Some(c), true) = (&compiled, scope.map) {
+        let path = dir.join(crate::map::file::MAP_TOML);
+        let signals: Option<std::collections::BTreeSet<String>> = can
+            .as_ref()
+            .map(|(_, dbc): &(_, petrel_can_bridge::Dbc)| dbc.signal_paths().collect());
+        match crate::map::file::load(&path, c, signals.as_ref(), &mut loaded.sources, &mut d) {
+            Ok(m) => map = m,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => {
+                return Err(Outcome::Usage(format!(
+                    "cannot read {}: {e}",
+                    path.display()
+                )))
+            }
+        }
+        d.sort();
+    }
     if let (Some(c), true) = (&compiled, scope.quick_verify) {
         let opts = petrel_verify::VerifyOptions {
             max_states: Some(QUICK_VERIFY_STATES),
@@ -163,6 +186,7 @@ pub fn check_project(dir: &Path, scope: Scope) -> Result<Checked, Outcome> {
         diagnostics: d,
         can,
         vehicle,
+        map,
     })
 }
 

@@ -43,6 +43,7 @@ pub fn gateway(a: GatewayArgs) -> Outcome {
             can: true,
             quick_verify: false,
             vehicle: true,
+            map: false,
         },
         "gateway",
     ) {

@@ -55,6 +55,7 @@ pub fn keys(a: KeysArgs) -> Outcome {
         can: false,
         quick_verify: false,
         vehicle: true,
+        map: false,
     };
     let checked = match require_clean(&a.dir, scope, "keys") {
         Ok(c) => c,

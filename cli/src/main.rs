@@ -17,6 +17,7 @@ mod gateway;
 mod gen;
 mod help;
 mod keys;
+mod map;
 mod monitor;
 mod plot;
 mod project;
@@ -141,10 +142,11 @@ enum Command {
         #[command(subcommand)]
         command: recorder::JournalCommand,
     },
-    /// The pictures of a Redermor run: map.svg and depth.svg
+    /// Draw a recorded run's map (map.svg) and depth profile (profile.svg)
     ///
-    /// Figure 9 of the paper: map.svg (areas, forbidden zones, planned routes, the vehicle's
-    /// track, events) and depth.svg, from a `petrel up` run directory.
+    /// map.svg: the project's map.toml, the vehicle's track, the planned routes and the events
+    /// where they happened, with a legend and a scale (the monitor's map, by the same code);
+    /// profile.svg: a track's depth against time. From a `petrel up` run directory or a journal.
     Plot(plot::PlotArgs),
     /// Internal to `petrel up`, not for people: starts PROGRAM with ARGS in place of this
     /// process, every signal unblocked (`petrel up` keeps its stop signals blocked, and a

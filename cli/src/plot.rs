@@ -1,157 +1,180 @@
-//! `petrel plot`: the pictures of a Redermor run (Figure 9 of the paper): the map (survey
-//! areas blue, forbidden areas red, planned routes yellow, the vehicle's track green, events
-//! where they happened) and the depth against time, from a run directory of `petrel up`: the
-//! simulator's true track (`trace.csv`, `petrel bridge --sim-trace`) and the player's journal
-//! (the routes PLN gave, the events).
+//! `petrel plot`: the map of a recorded run, as SVG, by the code that draws the monitor's
+//! map ([`crate::map`]): the project's map.toml (areas, lines, points; where positions come
+//! from), the journal's steps (positions and routes in events, events marked where they
+//! happened) and, for positions from signals, the data server's recording of the bus. With a
+//! track that has a third value (a depth), its profile against time too.
 
 use std::path::{Path, PathBuf};
 
-use crate::common::Outcome;
-use petrel_redermor::geom::{self, Position};
-use petrel_redermor::mission::Mission;
-use petrel_redermor::plot::{self, Trace, TraceEvent, TracePoint};
+use crate::common::{require_clean, Outcome, Scope};
+use crate::map::{self, record, Map};
 
 /// `petrel plot`.
 #[derive(clap::Args)]
 pub struct PlotArgs {
-    /// The run directory (`petrel up --logs`): its trace.csv and journal/.
-    logs: PathBuf,
-    /// The mission file the run flew (its areas, forbidden zones and end area).
+    /// The run: a `petrel up` run directory (its journal/ and bus.log), or a journal directory.
+    run: PathBuf,
+    /// The project (default: the directory the journal recorded).
+    #[arg(long, value_name = "DIR")]
+    project: Option<PathBuf>,
+    /// The map file (default: the project's map.toml).
     #[arg(long, value_name = "FILE")]
-    mission: PathBuf,
-    /// How many times faster than the wall clock the simulator ran (its --sim-speed), to
-    /// place the journal's events on the track.
-    #[arg(long, default_value_t = 20.0, value_parser = crate::common::finite)]
-    speed: f64,
-    /// Where to write map.svg and depth.svg; default: the run directory.
+    map: Option<PathBuf>,
+    /// The data server's recording of the bus (`petrel bridge --record`), for positions from
+    /// signals (default: bus.log of the run directory, when there is one).
+    #[arg(long, value_name = "FILE")]
+    bus_log: Option<PathBuf>,
+    /// Where to write map.svg (and profile.svg); default: the run directory.
     #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
+    /// The drawing's size in pixels, WIDTHxHEIGHT.
+    #[arg(long, default_value = "1200x900", value_parser = size)]
+    size: (u32, u32),
 }
 
-/// The events drawn on the map.
-const SHOWN: [&str; 12] = [
-    "next_area",
-    "areas_done",
-    "current_differs",
-    "alarm",
-    "inspect_request",
-    "inspection_flown",
-    "battery_low",
-    "depth_sensor_lost",
-    "leak",
-    "bus_lost",
-    "planning_failed",
-    "surfaced",
-];
-
-/// Reads `trace.csv`: one line a second of the vehicle's time; an error names the line.
-fn read_trace(path: &Path) -> Result<Vec<TracePoint>, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-    let mut points = Vec::new();
-    for (i, line) in text.lines().enumerate().skip(1) {
-        let v: Result<Vec<f64>, _> = line.split(',').map(str::parse::<f64>).collect();
-        match v {
-            Ok(v) if v.len() >= 4 => points.push(TracePoint {
-                time: v[0],
-                position: geom::pos(v[1], v[2]),
-                depth: v[3],
-                surveying: None,
-            }),
-            _ => {
-                return Err(format!(
-                    "{}:{}: not a trace line: {line}",
-                    path.display(),
-                    i + 1
-                ))
-            }
-        }
+/// Reads `WIDTHxHEIGHT`.
+fn size(text: &str) -> Result<(u32, u32), String> {
+    let bad = || format!("`{text}`: give WIDTHxHEIGHT in pixels, from 320x240 to 8000x8000");
+    let (w, h) = text.split_once('x').ok_or_else(bad)?;
+    let (w, h): (u32, u32) = (w.parse().map_err(|_| bad())?, h.parse().map_err(|_| bad())?);
+    if !(320..=8000).contains(&w) || !(240..=8000).contains(&h) {
+        return Err(bad());
     }
-    Ok(points)
+    Ok((w, h))
 }
 
-fn floats(v: Option<&petrel_nets::compiled::Value>) -> Vec<Position> {
-    match v {
-        Some(petrel_nets::compiled::Value::FloatList(f)) => {
-            f.chunks_exact(2).map(|c| geom::pos(c[0], c[1])).collect()
-        }
-        _ => Vec::new(),
-    }
-}
-
-/// Draws the run's map and depth plot.
+/// Draws the run's map (and profile).
 pub fn plot(a: PlotArgs) -> Outcome {
     match run(&a) {
-        Ok((map, depth)) => {
-            println!("map: {}\ndepth: {}", map.display(), depth.display());
+        Ok(written) => {
+            for (what, path) in written {
+                crate::common::out(&format!("{what}: {}\n", path.display()));
+            }
             Outcome::Clean
         }
-        Err(e) => Outcome::Usage(e),
+        Err(o) => o,
     }
 }
 
-fn run(a: &PlotArgs) -> Result<(PathBuf, PathBuf), String> {
-    use petrel_player::journal::Entry;
-    if a.speed <= 0.0 {
-        return Err(format!("--speed {}: a factor above 0", a.speed));
+/// The journal directory of `run`: its `journal/`, or `run` itself.
+fn journal_dir(run: &Path) -> PathBuf {
+    let inner = run.join("journal");
+    if inner.is_dir() {
+        inner
+    } else {
+        run.to_path_buf()
     }
-    let text =
-        std::fs::read_to_string(&a.mission).map_err(|e| format!("{}: {e}", a.mission.display()))?;
-    let mission = Mission::from_toml(&text).map_err(|e| format!("{}: {e}", a.mission.display()))?;
-    let points = read_trace(&a.logs.join("trace.csv"))?;
-    let journal = a.logs.join("journal");
+}
+
+fn run(a: &PlotArgs) -> Result<Vec<(&'static str, PathBuf)>, Outcome> {
+    let journal = journal_dir(&a.run);
     let read = petrel_player::journal::read_journal(&journal)
-        .map_err(|e| format!("{}: {e}", journal.display()))?;
-    let mut trace = Trace {
-        points,
-        ..Trace::default()
+        .map_err(|e| Outcome::Usage(format!("{}: {e}", journal.display())))?;
+    let (project_dir, digest) = crate::monitor::replay::header(&read.entries, &journal)?;
+    let dir = a.project.clone().unwrap_or(project_dir);
+    let scope = Scope {
+        can: true,
+        map: a.map.is_none(),
+        ..Scope::default()
     };
-    // The vehicle's time starts when the thrusters are first enabled, at the mission's start.
-    let mut start_us = None;
-    for e in &read.entries {
-        let Entry::Step {
-            time,
-            event,
-            params,
-            outcome,
-            ..
-        } = e
-        else {
-            continue;
-        };
-        if event == "start_mission" && start_us.is_none() {
-            start_us = Some(*time);
-        }
-        match event.as_str() {
-            "trajectory" | "inspection_planned" => trace.planned.push(floats(params.first())),
-            "sequence" => trace.planned.push(floats(params.get(1))),
-            _ => {}
-        }
-        if outcome == "processed" && SHOWN.contains(&event.as_str()) {
-            let since = time.saturating_sub(start_us.unwrap_or(0)) as f64 / 1e6;
-            let t = since * a.speed;
-            let at = trace
-                .points
-                .iter()
-                .min_by(|p, q| (p.time - t).abs().total_cmp(&(q.time - t).abs()))
-                .map_or(mission.start, |p| p.position);
-            let args: Vec<String> = params.iter().map(|v| v.literal()).collect();
-            let label = if args.is_empty() {
-                event.clone()
-            } else {
-                format!("{event}({})", args.join(", "))
-            };
-            trace.events.push(TraceEvent {
-                time: t,
-                position: at,
-                label,
-            });
+    let mut checked = require_clean(&dir, scope, "plot")?;
+    let Some(project) = checked.compiled.take() else {
+        return Err(Outcome::Usage("the project did not compile".into()));
+    };
+    if petrel_player::journal::project_digest(&project) != digest {
+        return Err(Outcome::Usage(format!(
+            "{} is not the project the journal recorded (its nets or manifest changed): give the right one with --project",
+            dir.display()
+        )));
+    }
+    let map = match &a.map {
+        Some(path) => load_given(path, &project, &mut checked)?,
+        None => checked.map.take().ok_or_else(|| {
+            Outcome::Usage(format!(
+                "{} has no {}: a map says what to draw and where the positions come from (docs/monitor.md, \"The map\"), or give one with --map FILE",
+                dir.display(),
+                map::file::MAP_TOML
+            ))
+        })?,
+    };
+    let records = bus_records(a, &map)?;
+    let bus = match (&records, &checked.can) {
+        (Some(r), Some((_, dbc))) => Some(record::BusLog { dbc, records: r }),
+        _ => None,
+    };
+    let state = record::replay(&map, &read.entries, bus);
+    for (i, t) in map.tracks.iter().enumerate() {
+        if state.tracks[i].is_empty() {
+            eprintln!("warning: track `{}` has no position in this run", t.name);
         }
     }
-    let out = a.out.clone().unwrap_or_else(|| a.logs.clone());
-    std::fs::create_dir_all(&out).map_err(|e| format!("{}: {e}", out.display()))?;
-    let map = out.join("map.svg");
-    let depth = out.join("depth.svg");
-    plot::write_map(&map, &mission, &trace).map_err(|e| format!("{}: {e}", map.display()))?;
-    plot::write_depth(&depth, &trace).map_err(|e| format!("{}: {e}", depth.display()))?;
-    Ok((map, depth))
+    let out = a.out.clone().unwrap_or_else(|| a.run.clone());
+    std::fs::create_dir_all(&out)
+        .map_err(|e| Outcome::Usage(format!("cannot create {}: {e}", out.display())))?;
+    let (w, h) = a.size;
+    let mut written = Vec::new();
+    let path = out.join("map.svg");
+    crate::common::write_output(Some(&path), &map::svg::map_svg(&map, &state, w, h, None))?;
+    written.push(("map", path));
+    if let Some(profile) = map::svg::profile_svg(&map, &state, w, h / 2) {
+        let path = out.join("profile.svg");
+        crate::common::write_output(Some(&path), &profile)?;
+        written.push(("profile", path));
+    }
+    Ok(written)
+}
+
+/// The map of `--map FILE`, checked like the project's.
+fn load_given(
+    path: &Path,
+    project: &petrel_nets::compiled::CompiledProject,
+    checked: &mut crate::common::Checked,
+) -> Result<Map, Outcome> {
+    let signals: Option<std::collections::BTreeSet<String>> = checked
+        .can
+        .as_ref()
+        .map(|(_, dbc)| dbc.signal_paths().collect());
+    let mut d = petrel_diag::report::Diagnostics::new();
+    let loaded = map::file::load(
+        path,
+        project,
+        signals.as_ref(),
+        &mut checked.loaded.sources,
+        &mut d,
+    )
+    .map_err(|e| Outcome::Usage(format!("cannot read {}: {e}", path.display())))?;
+    crate::common::report(&d, &checked.loaded.sources);
+    loaded.ok_or(Outcome::Errors)
+}
+
+/// The bus's recording, when the map reads signals: `--bus-log`, or the run's bus.log.
+fn bus_records(
+    a: &PlotArgs,
+    map: &Map,
+) -> Result<Option<Vec<petrel_can_bridge::log::LogRecord>>, Outcome> {
+    if map.signals().is_empty() {
+        return Ok(None);
+    }
+    let path = match &a.bus_log {
+        Some(p) => p.clone(),
+        None => {
+            let p = a.run.join("bus.log");
+            if !p.is_file() {
+                eprintln!(
+                    "warning: the map's positions from signals come from the bus's recording, and {} has none (give --bus-log FILE)",
+                    a.run.display()
+                );
+                return Ok(None);
+            }
+            p
+        }
+    };
+    read_bus_log(&path).map(Some).map_err(Outcome::Usage)
+}
+
+/// Reads a `candump -L` recording; an error names the file and the line.
+pub fn read_bus_log(path: &Path) -> Result<Vec<petrel_can_bridge::log::LogRecord>, String> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    petrel_can_bridge::log::read_log(&text).map_err(|e| format!("{}: {e}", path.display()))
 }

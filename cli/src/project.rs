@@ -32,6 +32,7 @@ pub fn check(a: CheckArgs) -> Outcome {
             can: true,
             quick_verify: !a.no_verify,
             vehicle: true,
+            map: true,
         },
     ) {
         Ok(c) => c,

@@ -1028,7 +1028,7 @@ fn the_top_level_help_groups_the_commands_one_line_each() {
         "{out}"
     );
     assert!(
-        out.contains("\n  plot     The pictures of a Redermor run"),
+        out.contains("\n  plot     Draw a recorded run's map (map.svg) and depth profile"),
         "{out}"
     );
     assert!(out.lines().all(|l| l.chars().count() <= 100), "{out}");

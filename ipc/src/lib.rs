@@ -79,8 +79,9 @@ pub use iceoryx2;
 pub use access::{AccessError, Group, GROUP_ENV, RUNTIME_DIR_ENV};
 pub use liveness::{
     cleanup_dead_nodes, dead_nodes, is_program_alive, list_nodes, program_status,
-    remove_vehicle_files, wait_acknowledged, Acknowledgement, CleanupReport, IsolatedVehicle,
-    LivenessError, NodeInfo, NodeStatus, ProgramChange, ProgramStatus, ProgramWatch,
+    remove_vehicle_files, wait_acknowledged, wait_verdict, Acknowledgement, CleanupReport,
+    IsolatedVehicle, LivenessError, NodeInfo, NodeStatus, ProgramChange, ProgramStatus,
+    ProgramWatch,
 };
 pub use naming::{NameError, Role, Vehicle};
 pub use participant::{

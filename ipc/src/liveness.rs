@@ -507,6 +507,33 @@ pub fn wait_acknowledged(
     seq: u64,
     grace: Duration,
 ) -> Acknowledgement {
+    wait_until(beats, sender, grace, |a| a.settles(seq))
+}
+
+/// Waits up to `grace` for the player's verdict on message `seq` of sender `sender`: it is
+/// refused (with the player's reason), or every message up to it is settled, as
+/// [`wait_acknowledged`] waits for. One message's verdict (an operator's send from
+/// `petrel monitor`) is known as soon as the player refused it: the wait ends there, whatever
+/// the player says of the sender's other messages.
+pub fn wait_verdict(
+    beats: &crate::HeartbeatSubscriber,
+    sender: u64,
+    seq: u64,
+    grace: Duration,
+) -> Acknowledgement {
+    wait_until(beats, sender, grace, |a| {
+        a.settles(seq) || a.refusals.iter().any(|r| r.seq == seq)
+    })
+}
+
+/// Reads the heartbeats until the verdict on `sender`'s messages (the gateway's, once it has
+/// one, else the player's) satisfies `done`, or `grace` has passed.
+fn wait_until(
+    beats: &crate::HeartbeatSubscriber,
+    sender: u64,
+    grace: Duration,
+    done: impl Fn(&crate::wire::Ack) -> bool,
+) -> Acknowledgement {
     let deadline = std::time::Instant::now() + grace;
     let mut heard = Acknowledgement::default();
     let (mut player, mut gateway): (Option<crate::wire::Ack>, Option<crate::wire::Ack>) =
@@ -532,12 +559,9 @@ pub fn wait_acknowledged(
         });
         // The gateway's verdict, once it has one, includes the player's: wait for it to settle
         // (it lags the player's by one of its heartbeats at most).
-        let settled = match &gateway {
-            Some(g) => g.settles(seq),
-            None => player.as_ref().is_some_and(|p| p.settles(seq)),
-        };
         heard.ack = gateway.clone().or_else(|| player.clone());
-        if settled || std::time::Instant::now() >= deadline {
+        let answered = heard.ack.as_ref().is_some_and(&done);
+        if answered || std::time::Instant::now() >= deadline {
             return heard;
         }
         std::thread::sleep(Duration::from_millis(5));

@@ -137,12 +137,102 @@ pub fn project_to_dot(project: &Project, only_net: Option<&str>) -> Result<Strin
     Ok(out)
 }
 
+/// The Graphviz DOT text of one net the project runs (`name`: an instance's exact name, as
+/// `petrel status` and the player name it), for a view of that net alone, where no arc leaves
+/// its frame: the global places its transitions use are drawn inside the frame as ports (a
+/// box `global NAME`, id `global.NAME`), and so is, for a child, its parent's completion place
+/// that its `finish` marks (a box `PARENT: CHILD.done`, id `PARENT.done.CHILD`). Ids are
+/// [`project_to_dot`]'s, so a marking colours both drawings the same way.
+///
+/// Fails only when `name` is not a net the project runs; the message lists the nets there are.
+pub fn instance_dot(project: &Project, name: &str) -> Result<String, String> {
+    let decls: Vec<&NetDecl> = project.nets().collect();
+    let expanded = instances(project);
+    let prefixes = net_prefixes(&expanded);
+    let Some(me) = expanded.list.iter().position(|i| i.name == name) else {
+        return Err(no_such_net(&expanded, &decls, name));
+    };
+    let globals = global_names(project);
+    let parent = expanded.list[me].parent;
+    // The parent counts as drawn so that the `finish` arcs are made; its completion place
+    // becomes a port below.
+    let drawn: BTreeSet<usize> = std::iter::once(me).chain(parent.map(|(p, _)| p)).collect();
+    let ctx = Context {
+        project,
+        decls: &decls,
+        expanded: &expanded,
+        prefixes: &prefixes,
+        drawn,
+        globals: &globals,
+    };
+    let d = ctx.draw_net(me);
+    let mut cluster = d
+        .cluster
+        .strip_suffix("  }\n")
+        .unwrap_or(&d.cluster)
+        .to_string();
+    for g in globals.iter().filter(|g| d.globals_used.contains(g.name)) {
+        let _ = writeln!(
+            cluster,
+            "    {} [shape=box, style=\"rounded,bold\", label={}, color={}, fontcolor={}, tooltip={}];",
+            q(&format!("{GLOBAL_PREFIX}.{}", g.name)),
+            q(&format!("global {}", g.name)),
+            q(GLOBAL_COLOR),
+            q(GLOBAL_COLOR),
+            q(&format!("global place {}, shared with other nets", g.name))
+        );
+    }
+    if let Some((p, pos)) = parent {
+        let parent_inst = &expanded.list[p];
+        let finishes = d.arcs.iter().any(|a| a.contains("label=\"finish\""));
+        if let (Some(child), true) = (decls[parent_inst.net].children().nth(pos), finishes) {
+            let _ = writeln!(
+                cluster,
+                "    {} [shape=box, style=\"rounded,bold\", label={}, color={}, fontcolor={}, tooltip={}];",
+                q(&completion_id(&prefixes[p], &child.net.text)),
+                q(&format!("{}: {}.done", parent_inst.name, child.net)),
+                q(COMPLETION_COLOR),
+                q(COMPLETION_COLOR),
+                q(&format!(
+                    "completion place {}.done of the parent {}, marked by this net's finish",
+                    child.net, parent_inst.name
+                ))
+            );
+        }
+    }
+    cluster.push_str("  }\n");
+    let mut out = String::new();
+    let title = format!("{}: net {name}", project.manifest.name);
+    header(&mut out, &project.manifest.name, &title, "LR", "");
+    out.push('\n');
+    out.push_str(&cluster);
+    if !d.arcs.is_empty() {
+        out.push('\n');
+        for arc in &d.arcs {
+            out.push_str(arc);
+        }
+    }
+    out.push_str("}\n");
+    Ok(out)
+}
+
 /// The Graphviz DOT text of the tree of nets (Figure 8 of the ProCoSA paper): one box per net
 /// the project runs, a solid arrow from each parent to each child its `children` lines declare,
 /// and a dashed arrow labelled `activate` from each net to each net one of its transitions
 /// activates. Nets active at start are filled. The places and transitions are left out, so a
 /// mission of forty nets reads at a glance; [`project_to_dot`] draws them.
 pub fn project_tree_dot(project: &Project) -> String {
+    tree_dot(project, false)
+}
+
+/// [`project_tree_dot`] for a mission's overview (`petrel monitor`), laid out left to right:
+/// a child says only the last part of its name (its parent is the box its arrow comes from),
+/// and an `activate` edge that goes along a child's arrow is left out.
+pub fn overview_tree_dot(project: &Project) -> String {
+    tree_dot(project, true)
+}
+
+fn tree_dot(project: &Project, overview: bool) -> String {
     let decls: Vec<&NetDecl> = project.nets().collect();
     let expanded = instances(project);
     let prefixes = net_prefixes(&expanded);
@@ -160,7 +250,7 @@ pub fn project_tree_dot(project: &Project) -> String {
         &mut out,
         &project.manifest.name,
         &title,
-        "TB",
+        if overview { "LR" } else { "TB" },
         "shape=box, style=rounded, ",
     );
     if !expanded.list.is_empty() {
@@ -171,9 +261,18 @@ pub fn project_tree_dot(project: &Project) -> String {
         let origin = origin(inst, decl);
         // An instance says its template on a second line; a net bound at activation its
         // parameters after its name.
-        let label = match origin.strip_prefix(" = ") {
-            Some(template) => format!("{}\\n{}", escape(&inst.name), escape(template)),
-            None => escape(&format!("{}{origin}", inst.name)),
+        let shown = match (overview, inst.parent) {
+            (true, Some(_)) => inst.name.rsplit('/').next().unwrap_or(&inst.name),
+            _ => inst.name.as_str(),
+        };
+        let label = match (origin.strip_prefix(" = "), overview) {
+            // The overview names the template only when it is another name, without its
+            // parameters: the box stays as narrow as its name.
+            (Some(_), true) if decl.name.text == shown => escape(shown),
+            (Some(_), true) => format!("{}\\n= {}", escape(shown), escape(&decl.name.text)),
+            (None, true) => escape(shown),
+            (Some(template), false) => format!("{}\\n{}", escape(shown), escape(template)),
+            (None, false) => escape(&format!("{shown}{origin}")),
         };
         let style = if start.contains(inst.name.as_str()) {
             ", style=\"rounded,filled\", fillcolor=\"#d8d8d8\""
@@ -215,6 +314,9 @@ pub fn project_tree_dot(project: &Project) -> String {
             "\n  // Activations: `activate NET` in a transition of the net at the tail.\n",
         );
         for &(from, to) in &activations {
+            if overview && tree.contains(&(from, to)) {
+                continue;
+            }
             // Along a parent-child edge the tree already places the nodes: this one must not
             // pull on the layout a second time.
             let constraint = if tree.contains(&(from, to)) {

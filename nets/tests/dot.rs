@@ -12,7 +12,7 @@
 
 use petrel_diag::duration::TimeUnit;
 use petrel_diag::source::Span;
-use petrel_nets::dot::{project_to_dot, project_tree_dot};
+use petrel_nets::dot::{instance_dot, overview_tree_dot, project_to_dot, project_tree_dot};
 use petrel_nets::model::*;
 
 // ---------------------------------------------------------------------------------------------
@@ -990,6 +990,70 @@ fn a_template_name_draws_all_its_instances() {
             && err.contains("templates (all their instances): ROBOT"),
         "{err}"
     );
+}
+
+/// Before `instance_dot`, a net's view was the whole drawing zoomed on its frame: the arcs to
+/// the global places it uses crossed the canvas. Alone, everything is inside its frame.
+#[test]
+fn one_instance_alone_has_its_globals_and_its_parents_completion_place_as_ports() {
+    let p = language();
+    let text = instance_dot(&p, "R1").expect("R1 is a net");
+    let dot = validate(&text).unwrap_or_else(|e| panic!("invalid DOT: {e}\n{text}"));
+    graphviz(&text);
+    assert_eq!(dot.clusters.len(), 1);
+    // Every node in the net's frame, the global place too, as a port saying what it is.
+    for (id, _, cluster) in &dot.nodes {
+        assert_eq!(
+            cluster.as_deref(),
+            Some("cluster_R1"),
+            "{id} outside R1's frame"
+        );
+    }
+    let port = dot.node("global.bottleneck_free");
+    assert_eq!(attr(port, "shape"), Some("box"));
+    assert_eq!(attr(port, "label"), Some("global bottleneck_free"));
+    assert_eq!(edge(&dot, "global.bottleneck_free", "R1.t.pass").len(), 1);
+    assert!(!text.contains("R2."), "only R1:\n{text}");
+    // A child: its parent's completion place, which its `finish` marks, is a port too.
+    let text = instance_dot(&p, "PHASES/TRANSIT").expect("a child");
+    let dot = validate(&text).unwrap_or_else(|e| panic!("invalid DOT: {e}\n{text}"));
+    graphviz(&text);
+    assert_eq!(
+        cluster_of(&dot, "PHASES.done.TRANSIT"),
+        Some("cluster_PHASES/TRANSIT")
+    );
+    assert_eq!(
+        attr(dot.node("PHASES.done.TRANSIT"), "label"),
+        Some("PHASES: TRANSIT.done")
+    );
+    assert_eq!(
+        edge(&dot, "PHASES/TRANSIT.t.arrive", "PHASES.done.TRANSIT").len(),
+        1
+    );
+    // A template's name is not one net: the error lists the nets there are.
+    let err = instance_dot(&p, "ROBOT").unwrap_err();
+    assert!(err.contains("no net named `ROBOT`"), "{err}");
+}
+
+#[test]
+fn the_overview_tree_names_children_briefly_and_draws_each_edge_once() {
+    let p = language();
+    let text = overview_tree_dot(&p);
+    let dot = validate(&text).unwrap_or_else(|e| panic!("invalid DOT: {e}\n{text}"));
+    graphviz(&text);
+    assert!(text.contains("rankdir=LR"));
+    // A child says its last name only; an instance its template, without its parameters.
+    assert_eq!(attr(dot.node("PHASES/TRANSIT"), "label"), Some("TRANSIT"));
+    assert_eq!(attr(dot.node("R1"), "label"), Some(r"R1\n= ROBOT"));
+    // Between a parent and its child, the tree's edge alone.
+    for (from, to, _) in &dot.edges {
+        let n = dot
+            .edges
+            .iter()
+            .filter(|e| &e.0 == from && &e.1 == to)
+            .count();
+        assert_eq!(n, 1, "{from} -> {to} drawn {n} times:\n{text}");
+    }
 }
 
 #[test]

@@ -11,6 +11,11 @@ use petrel_redermor::sensors::{Reading, Sample};
 /// The message of the bench clock, and its signal (milliseconds of simulated time).
 pub const TIME_SIGNAL: &str = "BenchTime.time_ms";
 
+/// The message of the bench's ground truth: the simulated vehicle's true position (`x`, `y`,
+/// m) and `depth`, sent with every tick for the monitor's map (missions/redermor/map.toml);
+/// no program reads it.
+pub const TRUTH_MESSAGE: &str = "BenchTruth";
+
 /// The message name and signals of a reading, in the DBC's units.
 pub fn encode(reading: &Reading) -> (&'static str, Vec<(&'static str, f64)>) {
     let b = |v: bool| f64::from(u8::from(v));

@@ -297,6 +297,16 @@ impl RedermorPlant {
         if let Ok(f) = self.dbc.encode("BenchTime", &[("time_ms", time_ms)]) {
             frames.push(f);
         }
+        // The ground truth, for the monitor's map (no program reads it).
+        let s = self.sim.vehicle().state();
+        let truth = [
+            ("x", s.position.x),
+            ("y", s.position.y),
+            ("depth", s.depth.max(0.0)),
+        ];
+        if let Ok(f) = self.dbc.encode(bench::TRUTH_MESSAGE, &truth) {
+            frames.push(f);
+        }
         for s in newest.into_iter().rev() {
             let (message, signals) = bench::encode(&s.reading);
             // A value out of the DBC's range is not sent: the sensor says nothing this tick.

@@ -1,7 +1,9 @@
 //! The cost of `petrel monitor` to the player, and the time from a step to its display.
 //!
-//! `cargo run --release -p petrel-tests --example bench_monitor -- [EVENTS] [ROUNDS] [EVERY_MS]`
-//! (after `cargo build --release --bin petrel`; docs/benchmarks.md has the figures).
+//! `cargo run --release -p petrel-tests --example bench_monitor -- [EVENTS] [ROUNDS] [EVERY_MS]
+//! [BEFORE]` (after `cargo build --release --bin petrel`; docs/benchmarks.md has the figures).
+//! BEFORE: another `petrel` binary (the one of main, built in a scratch copy): everything is
+//! measured with both, interleaved, and the ratios after / before come from the same run.
 //!
 //! 1. Throughput: a 40-net project (every event moves the token of each net: 80 places change
 //!    per step) and a `petrel play --no-journal`; a sender floods it with EVENTS events as fast
@@ -19,6 +21,7 @@ use petrel_ipc::{EventMsg, Participant, Role, SendError, Vehicle};
 use petrel_tests::web::{http, Browser, Monitor};
 use petrel_tests::{petrel_bin, unique_vehicle, TempProject};
 use std::io::Read;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant, SystemTime};
 
@@ -40,8 +43,8 @@ fn many_nets(n: usize) -> TempProject {
 struct Play(Child, String);
 
 impl Play {
-    fn start(dir: &str, vehicle: &str) -> Play {
-        let child = Command::new(petrel_bin())
+    fn start(bin: &Path, dir: &str, vehicle: &str) -> Play {
+        let child = Command::new(bin)
             .args(["play", dir, "--vehicle", vehicle, "--no-journal"])
             .env("RUST_LOG", "error")
             .stderr(Stdio::null())
@@ -101,9 +104,9 @@ fn cpu_seconds(pid: u32) -> f64 {
 }
 
 /// Events per second, the player's CPU microseconds per event, and the monitors' (all of them).
-fn throughput(dir: &str, monitors: usize, events: u64) -> (f64, f64, f64) {
+fn throughput(bin: &Path, dir: &str, monitors: usize, events: u64) -> (f64, f64, f64) {
     let vehicle = unique_vehicle("benchmon");
-    let _player = Play::start(dir, &vehicle);
+    let _player = Play::start(bin, dir, &vehicle);
     let v = Vehicle::new(&vehicle).unwrap();
     let me = Participant::join(&v, Role::tool("bench").unwrap()).unwrap();
     let _ = &_player;
@@ -115,7 +118,7 @@ fn throughput(dir: &str, monitors: usize, events: u64) -> (f64, f64, f64) {
         std::thread::sleep(Duration::from_millis(10));
     }
     let mons: Vec<Monitor> = (0..monitors)
-        .map(|_| Monitor::start(&[dir, "--vehicle", &vehicle]))
+        .map(|_| Monitor::start_with(bin, &[dir, "--vehicle", &vehicle]))
         .collect();
     for m in &mons {
         while m.get("/api/marking").json()["synced"] != true {
@@ -162,9 +165,12 @@ fn percentile(v: &mut [f64], p: f64) -> f64 {
     v[((v.len() - 1) as f64 * p).round() as usize]
 }
 
-fn latency(dir: &str, events: u64, every: Duration) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
+/// The four times of each of `events` steps (see the module's doc), the page opened at `page`.
+type Latencies = (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>);
+
+fn latency(bin: &Path, dir: &str, events: u64, every: Duration, page: &str) -> Latencies {
     let vehicle = unique_vehicle("benchlat");
-    let _player = Play::start(dir, &vehicle);
+    let _player = Play::start(bin, dir, &vehicle);
     let v = Vehicle::new(&vehicle).unwrap();
     let me = Participant::join(&v, Role::tool("benchlat").unwrap()).unwrap();
     let deltas = me.marking_subscriber().unwrap();
@@ -173,7 +179,7 @@ fn latency(dir: &str, events: u64, every: Duration) -> (Vec<f64>, Vec<f64>, Vec<
     while progress(&beats, &mut last) == 0 {
         std::thread::sleep(Duration::from_millis(10));
     }
-    let monitor = Monitor::start(&[dir, "--vehicle", &vehicle]);
+    let monitor = Monitor::start_with(bin, &[dir, "--vehicle", &vehicle]);
     // A plain event-stream client beside the page: when each step leaves the monitor.
     let streamed = std::sync::Arc::new(std::sync::Mutex::new(std::collections::HashMap::new()));
     {
@@ -199,7 +205,7 @@ fn latency(dir: &str, events: u64, every: Duration) -> (Vec<f64>, Vec<f64>, Vec<
         });
     }
     let b = Browser::start();
-    b.open(&monitor.url("/"));
+    b.open(&monitor.url(page));
     b.wait_ready();
     b.wait_for(30.0, "return document.body.dataset.synced", |v| v == "true");
     let first = b
@@ -262,62 +268,92 @@ fn main() {
     let events: u64 = args.first().and_then(|a| a.parse().ok()).unwrap_or(200_000);
     let rounds: usize = args.get(1).and_then(|a| a.parse().ok()).unwrap_or(3);
     let every_ms: u64 = args.get(2).and_then(|a| a.parse().ok()).unwrap_or(20);
+    let mut bins: Vec<(&str, PathBuf)> = vec![("after", petrel_bin())];
+    if let Some(before) = args.get(3) {
+        bins.insert(0, ("before", PathBuf::from(before)));
+    }
     let project = many_nets(40);
     let dir = project.path().display().to_string();
-    println!("petrel: {}", petrel_bin().display());
+    for (what, bin) in &bins {
+        println!("{what}: {}", bin.display());
+    }
     let counts = [0usize, 1, 5];
-    let mut best = [0f64; 3];
-    let mut cpu = [f64::MAX; 3];
-    let mut mon_cpu = [f64::MAX; 3];
+    // Per binary: best rate, least player CPU, least monitors' CPU, for each count.
+    let mut best = vec![[0f64; 3]; bins.len()];
+    let mut cpu = vec![[f64::MAX; 3]; bins.len()];
+    let mut mon_cpu = vec![[f64::MAX; 3]; bins.len()];
     for round in 0..rounds {
         if events == 0 {
             break;
         }
         for (k, &m) in counts.iter().enumerate() {
-            let (r, us, mus) = throughput(&dir, m, events);
-            println!("round {round}: {m} monitor(s): {r:.0} events/s, player {us:.1} us CPU/event, monitors {mus:.1} us CPU/event");
-            best[k] = best[k].max(r);
-            cpu[k] = cpu[k].min(us);
-            mon_cpu[k] = mon_cpu[k].min(mus);
+            for (b, (what, bin)) in bins.iter().enumerate() {
+                let (r, us, mus) = throughput(bin, &dir, m, events);
+                println!("round {round}: {what}: {m} monitor(s): {r:.0} events/s, player {us:.1} us CPU/event, monitors {mus:.1} us CPU/event");
+                best[b][k] = best[b][k].max(r);
+                cpu[b][k] = cpu[b][k].min(us);
+                mon_cpu[b][k] = mon_cpu[b][k].min(mus);
+            }
         }
     }
     if events > 0 {
-        print_throughput(&counts, &best, &cpu, &mon_cpu, rounds);
+        println!("\n| petrel | monitors | events/s (best of {rounds}) | ratio to none | player CPU us/event (least) | ratio to none | monitors' CPU us/event | events/s after / before |\n|---|---:|---:|---:|---:|---:|---:|---:|");
+        for (b, (what, _)) in bins.iter().enumerate() {
+            for (k, &m) in counts.iter().enumerate() {
+                let versus = if bins.len() == 2 {
+                    format!("{:.2}", best[bins.len() - 1][k] / best[0][k])
+                } else {
+                    "-".into()
+                };
+                println!(
+                    "| {what} | {m} | {:.0} | {:.2} | {:.1} | {:.2} | {:.1} | {versus} |",
+                    best[b][k],
+                    best[b][k] / best[b][0],
+                    cpu[b][k],
+                    cpu[b][k] / cpu[b][0],
+                    mon_cpu[b][k]
+                );
+            }
+        }
     }
     if !petrel_tests::web::browser_available() {
         return;
     }
-    let (mut player, mut streamed, mut arrived, mut page) =
-        latency(&dir, 200, Duration::from_millis(every_ms));
-    println!("\n200 events, one every {every_ms} ms:");
-    println!("\n| from sending an event to | p50 ms | p90 ms | p99 ms | max ms |\n|---|---:|---:|---:|---:|");
-    for (what, v) in [
-        ("the player's delta (a plain subscriber)", &mut player),
-        ("its arrival at a plain event-stream client", &mut streamed),
-        ("its arrival in the page (event stream)", &mut arrived),
-        ("its display in the page (next frame)", &mut page),
-    ] {
-        println!(
-            "| {what} | {:.1} | {:.1} | {:.1} | {:.1} |",
-            percentile(v, 0.5),
-            percentile(v, 0.9),
-            percentile(v, 0.99),
-            percentile(v, 1.0)
-        );
+    // The page as each opens it, and the new page's whole drawing too (the old one's view).
+    let mut pages: Vec<(String, &Path, &str)> = Vec::new();
+    for (what, bin) in &bins {
+        pages.push((format!("{what}, page /"), bin.as_path(), "/"));
     }
-    println!("({} of 200 steps seen by the page)", page.len());
-}
-
-fn print_throughput(counts: &[usize], best: &[f64], cpu: &[f64], mon_cpu: &[f64], rounds: usize) {
-    println!("\n| monitors | events/s (best of {rounds}) | ratio to none | player CPU us/event (least) | ratio to none | monitors' CPU us/event |\n|---:|---:|---:|---:|---:|---:|");
-    for (k, &m) in counts.iter().enumerate() {
+    pages.push((
+        "after, page /?view=all".into(),
+        bins[bins.len() - 1].1.as_path(),
+        "/?view=all",
+    ));
+    println!("\n200 events, one every {every_ms} ms; from sending an event to (ms):");
+    println!("\n| petrel | what | p50 | p90 | p99 | max |\n|---|---|---:|---:|---:|---:|");
+    for (what, bin, page) in pages {
+        let (mut player, mut streamed, mut arrived, mut shown) =
+            latency(bin, &dir, 200, Duration::from_millis(every_ms), page);
+        for (step, v) in [
+            ("the player's delta (a plain subscriber)", &mut player),
+            ("its arrival at a plain event-stream client", &mut streamed),
+            ("its arrival in the page", &mut arrived),
+            ("its display in the page (next frame)", &mut shown),
+        ] {
+            if v.is_empty() {
+                continue;
+            }
+            println!(
+                "| {what} | {step} | {:.1} | {:.1} | {:.1} | {:.1} |",
+                percentile(v, 0.5),
+                percentile(v, 0.9),
+                percentile(v, 0.99),
+                percentile(v, 1.0)
+            );
+        }
         println!(
-            "| {m} | {:.0} | {:.2} | {:.1} | {:.2} | {:.1} |",
-            best[k],
-            best[k] / best[0],
-            cpu[k],
-            cpu[k] / cpu[0],
-            mon_cpu[k]
+            "| {what} | steps seen by the page | {} of 200 | | | |",
+            shown.len()
         );
     }
 }

@@ -155,6 +155,11 @@ impl Monitor {
     /// Starts `petrel monitor ARGS --listen 127.0.0.1:0` (with `--operator`, its token written
     /// to a file of a temporary directory, as `--token-file` does) and waits for its address.
     pub fn start(args: &[&str]) -> Monitor {
+        Monitor::start_with(&crate::petrel_bin(), args)
+    }
+
+    /// [`Monitor::start`] with another `petrel` binary (a benchmark's baseline).
+    pub fn start_with(petrel: &Path, args: &[&str]) -> Monitor {
         let operator = args.contains(&"--operator");
         let token_dir = operator.then(|| {
             tempfile::Builder::new()
@@ -163,7 +168,7 @@ impl Monitor {
                 .expect("a directory for the token")
         });
         let token_file = token_dir.as_ref().map(|d| d.path().join("token"));
-        let mut cmd = Command::new(crate::petrel_bin());
+        let mut cmd = Command::new(petrel);
         cmd.arg("monitor")
             .args(args)
             .args(["--listen", "127.0.0.1:0"]);
@@ -267,8 +272,13 @@ pub fn browser_available() -> bool {
 }
 
 impl Browser {
-    /// Starts chromedriver and a headless Chromium session.
+    /// Starts chromedriver and a headless Chromium session, its window 1600 x 900.
     pub fn start() -> Browser {
+        Browser::start_sized(1600, 900)
+    }
+
+    /// Starts chromedriver and a headless Chromium session, its window `width` x `height`.
+    pub fn start_sized(width: u32, height: u32) -> Browser {
         let port = {
             let l = std::net::TcpListener::bind("127.0.0.1:0").expect("a free port");
             l.local_addr().expect("its address").port()
@@ -301,7 +311,7 @@ impl Browser {
             "goog:chromeOptions": {
                 "binary": CHROMIUM,
                 "args": ["--headless", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
-                         "--window-size=1600,900",
+                         format!("--window-size={width},{height}"),
                          format!("--user-data-dir={}", profile.path().display()),
                          format!("--disk-cache-dir={}", profile.path().join("cache").display())],
             }
@@ -317,6 +327,14 @@ impl Browser {
             .as_str()
             .unwrap_or_else(|| panic!("no WebDriver session: {r}"))
             .to_string();
+        // The page's own area is the size asked for (a headless window's chrome would take
+        // some of it): what a page measures and a screenshot shows.
+        b.call(
+            "POST",
+            &format!("/session/{}/goog/cdp/execute", b.session),
+            &json!({"cmd": "Emulation.setDeviceMetricsOverride", "params": {
+                "width": width, "height": height, "deviceScaleFactor": 1, "mobile": false}}),
+        );
         b
     }
 

@@ -368,7 +368,7 @@ fn many_nets(n: usize) -> petrel_tests::TempProject {
 }
 
 #[test]
-fn forty_nets_stay_readable_select_zoom_and_filter() {
+fn forty_nets_stay_readable_select_zoom_and_search() {
     if !browser_available() {
         return;
     }
@@ -378,7 +378,8 @@ fn forty_nets_stay_readable_select_zoom_and_filter() {
     let dir = project.path().display().to_string();
     let monitor = Monitor::start(&[&dir, "--vehicle", &vehicle]);
     let b = Browser::start();
-    b.open(&monitor.url("/"));
+    // Every net in one drawing.
+    b.open(&monitor.url("/?view=all"));
     b.wait_ready();
     let mut start: Vec<String> = (0..40).map(|i| format!("N{i}.a")).collect();
     start.push("global.shared".into());
@@ -393,27 +394,50 @@ fn forty_nets_stay_readable_select_zoom_and_filter() {
     let after = sorted(after);
     let refs: Vec<&str> = after.iter().map(String::as_str).collect();
     assert_eq!(wait_marked(&b, &refs), after);
-
-    // Selecting a net in the list zooms on its cluster (the view's area shrinks).
-    let width = |b: &Browser| {
+    // Zoomed in, then fitted again: the view's area shrinks and comes back.
+    let area = |b: &Browser| {
         b.eval("const v = document.querySelector('#canvas svg').viewBox.baseVal; return v.width * v.height")
             .as_f64()
             .unwrap_or(0.0)
     };
-    let full = width(&b);
+    let full = area(&b);
+    b.eval("document.getElementById('zoomin').click(); document.getElementById('zoomin').click(); return null");
+    assert!(area(&b) < full * 0.5, "{} of {full}", area(&b));
+    b.eval("document.getElementById('fit').click(); return null");
+    assert!((area(&b) - full).abs() < full * 1e-6);
+
+    // A net of the list opens its own view, with its places and the global place it uses.
     b.eval("document.querySelector('#netlist li[data-net=\"N17\"]').click(); return null");
+    let shown = b.wait_for(
+        10.0,
+        "return document.body.dataset.view + ' ' + document.body.dataset.net",
+        |v| v == "net N17",
+    );
+    assert_eq!(shown, "net N17");
     assert_eq!(
         b.eval("return document.getElementById('selected').textContent"),
         "net N17"
     );
-    let zoomed = width(&b);
-    assert!(zoomed > 0.0 && zoomed < full / 10.0, "{zoomed} of {full}");
-    b.eval("document.getElementById('fit').click(); return null");
-    assert_eq!(width(&b), full);
-    // The list filters by name.
-    b.eval("const f = document.getElementById('filter'); f.value = 'N3'; f.dispatchEvent(new Event('input')); return null");
-    let shown = b.eval("return Array.from(document.querySelectorAll('#netlist li')).filter(li => !li.hidden).map(li => li.dataset.net)");
-    assert_eq!(strings(&shown).len(), 11, "{shown}");
+    assert_eq!(wait_marked(&b, &["N17.b"]), ["N17.b"]);
+    assert_eq!(b.eval("return location.search"), "?net=N17");
+    b.eval("document.querySelector('#netlist li[data-net=\"N2\"]').click(); return null");
+    assert_eq!(
+        wait_marked(&b, &["N2.b", "global.shared"]),
+        ["N2.b", "global.shared"]
+    );
+    // The overview: a box per net, each with its state and its count of marked places.
+    b.open(&monitor.url("/?view=overview"));
+    b.wait_ready();
+    let boxes = b.wait_for(10.0, "return Array.from(document.querySelectorAll('#canvas g.node')).filter(g => g.dataset.state === 'active').length", |v| v == 40);
+    assert_eq!(boxes, 40);
+    // The search finds nets, places and transitions by name; a result opens its net.
+    b.eval("const f = document.getElementById('search'); f.value = 'N3'; f.dispatchEvent(new Event('input')); return null");
+    let nets = b.eval("return Array.from(document.querySelectorAll('#results li')).filter(li => li.querySelector('.kind').textContent === 'net').map(li => li.dataset.net)");
+    assert_eq!(strings(&nets).len(), 11, "{nets}");
+    b.eval("const f = document.getElementById('search'); f.value = 'N39.t.back'; f.dispatchEvent(new Event('input')); return null");
+    b.eval("document.querySelector('#results li[data-net]').click(); return null");
+    let found = b.wait_for(10.0, "const g = document.querySelector('#canvas g.node.found'); return document.body.dataset.net + ' ' + (g ? g.dataset.name : '')", |v| v == "N39 N39.t.back");
+    assert_eq!(found, "N39 N39.t.back");
 }
 
 #[test]
@@ -450,11 +474,43 @@ fn every_place_of_every_mission_is_in_the_drawing() {
             );
         }
         assert!(!ids.is_empty(), "{dir}");
-        for id in ids {
+        for id in &ids {
             assert!(
-                titles.contains(&id),
+                titles.contains(id),
                 "{dir}: place {id} is not in the drawing"
             );
+        }
+        // Each net alone: its own places, and the global places it uses as ports.
+        for net in model["nets"].as_array().unwrap() {
+            let name = net["name"].as_str().unwrap();
+            let r = monitor.get(&format!("/api/net.svg?name={}", name.replace('/', "%2F")));
+            assert_eq!(r.status, 200, "{dir}: net {name}: {}", r.body);
+            for id in strings(&net["places"])
+                .iter()
+                .chain(&strings(&net["globals"]))
+            {
+                assert!(
+                    r.body.contains(&format!("<title>{id}</title>")),
+                    "{dir}: {id} not in {name}'s view"
+                );
+            }
+        }
+        assert_eq!(monitor.get("/api/net.svg?name=NOPE").status, 404);
+        // The map: drawn for the projects that have a map.toml, a clear 404 for the others.
+        let map = monitor.get("/api/map.svg?w=800&h=600");
+        if mission.join("map.toml").is_file() {
+            assert_eq!(map.status, 200, "{dir}: {}", map.body);
+            assert!(
+                map.body.starts_with("<svg") && map.body.contains("Legend"),
+                "{dir}"
+            );
+            assert_ne!(model["map"], Value::Null);
+        } else {
+            assert_eq!(map.status, 404, "{dir}");
+            assert!(map.json()["error"]
+                .as_str()
+                .unwrap_or_default()
+                .contains("map.toml"));
         }
         drop(monitor);
         petrel_tests::forget_vehicle(&vehicle);
@@ -597,7 +653,12 @@ fn the_operator_sends_from_the_page_only_with_the_token() {
     let href = b.wait_for(10.0, "return location.href", |v| {
         v.as_str().is_some_and(|h| !h.contains("token"))
     });
-    assert_eq!(href, monitor.url("/"));
+    // (The page then says its view in the address: `/?view=all`.)
+    let href = href.as_str().unwrap_or_default();
+    assert!(
+        href.starts_with(&monitor.url("/")) && !href.contains("token") && !href.contains('#'),
+        "{href}"
+    );
     b.eval(submit);
     let r = b.wait_for(30.0, result, |v| {
         v.as_str().is_some_and(|s| s.starts_with("ok"))
@@ -655,4 +716,62 @@ fn a_damaged_journal_replays_up_to_the_damage_with_an_alarm() {
 
 fn dir_of_uav() -> String {
     uav().display().to_string()
+}
+
+/// The header's connection pill says what the page hears, as the vehicle comes and goes: a
+/// monitor with no player says so (never a green "connected" on the monitor's stream alone),
+/// a player's heartbeats make it "player alive", a player gone makes it "player silent", and a
+/// monitor gone makes it "monitor unreachable". (Issue 35: the page showed a green
+/// "connected" beside "waiting for the player's first heartbeat" once the UAV flight ended.)
+#[test]
+fn the_connection_pill_says_whether_a_player_is_heard() {
+    if !browser_available() {
+        return;
+    }
+    let vehicle = unique_vehicle("monconn");
+    let dir = uav().display().to_string();
+    let monitor = Monitor::start(&[&dir, "--vehicle", &vehicle]);
+    let b = Browser::start();
+    b.open(&monitor.url("/"));
+    b.wait_ready();
+    let pill = "const c = document.getElementById('conn'); return c.dataset.state + '|' + c.className + '|' + c.textContent";
+    let wait_state = |state: &str| -> String {
+        let v = b.wait_for(30.0, pill, |v| {
+            v.as_str()
+                .is_some_and(|s| s.starts_with(&format!("{state}|")))
+        });
+        let s = v.as_str().unwrap_or_default().to_string();
+        assert!(
+            s.starts_with(&format!("{state}|")),
+            "waiting for {state}: {s}"
+        );
+        s
+    };
+    let none = wait_state("no-player");
+    assert!(
+        !none.contains(" ok") && !none.contains("connected"),
+        "{none}"
+    );
+    assert!(none.ends_with("monitor up, no player heard"), "{none}");
+
+    let player = Player::start(&uav(), &vehicle);
+    let alive = wait_state("player-alive");
+    assert!(alive.contains("pill ok"), "{alive}");
+
+    // The player goes (killed: no farewell): three heartbeat periods later it is silent.
+    drop(player);
+    let silent = wait_state("player-silent");
+    assert!(
+        silent.contains("pill bad") && silent.ends_with("player silent (no heartbeat)"),
+        "{silent}"
+    );
+
+    // The monitor goes: the page says it lost it, and retries.
+    drop(monitor);
+    let lost = wait_state("monitor-lost");
+    assert!(
+        lost.contains("pill bad") && lost.ends_with("monitor unreachable, retrying"),
+        "{lost}"
+    );
+    petrel_tests::forget_vehicle(&vehicle);
 }

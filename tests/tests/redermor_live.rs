@@ -14,7 +14,7 @@ use std::process::Command;
 use petrel_tests::petrel_bin;
 use redermor_flight::{
     assert_clear_of_the_buoys, assert_covered, assert_flown_and_stopped, assert_only_emergency,
-    bench, check_alarm, check_leak, check_nominal, check_nominal_route, fly, fly_killing, fly_with,
+    check_alarm, check_leak, check_nominal, check_nominal_route, fly, fly_killing, fly_with,
     thruster_commands,
 };
 
@@ -23,34 +23,58 @@ fn scenario_1_nominal_two_areas_surveyed_then_the_end_area() {
     let f = fly("nominal", false);
     check_nominal(&f);
 
-    // `petrel plot` draws the run: the map with the planned routes (one polyline for each
-    // trajectory and sequence PLN gave) and the track, and the depth plot.
-    let mission = bench().join("mission.toml");
+    // `petrel plot` draws the run from its journal and its bus recording, as map.toml says:
+    // the areas, the planned routes (one polyline for each trajectory and sequence PLN gave),
+    // the simulator's track, the events where they happened; and the depth profile.
     let o = Command::new(petrel_bin())
         .arg("plot")
         .arg(&f.logs)
-        .arg("--mission")
-        .arg(&mission)
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let map = std::fs::read_to_string(f.logs.join("map.svg")).unwrap();
-    let depth = std::fs::read_to_string(f.logs.join("depth.svg")).unwrap();
-    assert!(map.starts_with("<svg") && depth.starts_with("<svg"));
+    let profile = std::fs::read_to_string(f.logs.join("profile.svg")).unwrap();
+    assert!(map.starts_with("<svg") && profile.starts_with("<svg"));
+    for area in ["alpha", "bravo", "buoy_field", "end"] {
+        assert!(
+            map.contains(&format!("data-area=\"{area}\"")),
+            "{area} on the map"
+        );
+    }
     assert!(
         map.contains("surfaced") && map.contains("areas_done"),
         "events on the map"
     );
-    // Without a trace, a clear refusal naming the file.
+    let routes = f.took("trajectory") + f.took("sequence");
+    assert!(
+        map.contains(&format!("data-layer=\"routes\" data-count=\"{routes}\"")),
+        "{routes} planned routes"
+    );
+    // The track is the simulator's, about one position a metre flown (the trace has one a
+    // second of the vehicle's time, at 1.5 m/s).
+    let points: usize = map
+        .split("data-track=\"0\" data-points=\"")
+        .nth(1)
+        .and_then(|s| s.split('"').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or(0);
+    assert!(
+        points > f.trace.len(),
+        "{points} positions, {} in the trace",
+        f.trace.len()
+    );
+    assert!(map.contains("Legend") && map.contains("data-layer=\"scale\""));
+    // Without a bus recording, the track from signals is empty, and said so; the map is
+    // drawn from the journal alone.
     let o = Command::new(petrel_bin())
         .arg("plot")
         .arg(f.logs.join("journal"))
-        .arg("--mission")
-        .arg(&mission)
+        .arg("--out")
+        .arg(f.logs.join("journal-only"))
         .output()
         .unwrap();
-    assert_eq!(o.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&o.stderr).contains("trace.csv"));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no position in this run"));
 }
 
 /// A slow or loaded vehicle computer: the simulator three times faster than in vehicle.toml, so

@@ -9,6 +9,7 @@
 //! shows as a gap, and it takes the next heartbeat's marking again.
 
 use super::names::{self, Names};
+use crate::map::{feed::MapState, Map};
 use petrel_ipc::{Participant, Reactor, Role, Vehicle, WaitStrategy};
 use serde_json::{json, Value as Json};
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
@@ -25,11 +26,15 @@ const PENDING_DELTAS: usize = 4_096;
 pub const PAGE_BACKLOG: usize = 1_024;
 /// How often the programs' liveness is read and the status pushed (at most).
 const STATUS_PERIOD: Duration = Duration::from_millis(500);
+/// How often the pages are told that the map grew (at most): they fetch its drawing again.
+const MAP_PERIOD: Duration = Duration::from_millis(250);
 
 /// What the monitor knows of the mission, shared by the follower thread and the pages.
 pub struct Live {
     state: Mutex<State>,
     tx: broadcast::Sender<Arc<str>>,
+    /// The vehicle's map, when the project has one: what it shows so far.
+    pub map: Option<(Map, Mutex<MapState>)>,
     /// Set to end the follower thread.
     pub stop: AtomicBool,
 }
@@ -53,8 +58,8 @@ struct State {
 }
 
 impl Live {
-    /// An empty monitor, not in step.
-    pub fn new() -> Arc<Self> {
+    /// An empty monitor, not in step, with the project's `map` if it has one.
+    pub fn new(map: Option<Map>) -> Arc<Self> {
         let (tx, _) = broadcast::channel(PAGE_BACKLOG);
         Arc::new(Live {
             state: Mutex::new(State {
@@ -62,8 +67,19 @@ impl Live {
                 ..State::default()
             }),
             tx,
+            map: map.map(|m| {
+                let s = MapState::new(&m);
+                (m, Mutex::new(s))
+            }),
             stop: AtomicBool::new(false),
         })
+    }
+
+    /// What the map shows now (empty when the project has no map).
+    pub fn map_state(&self) -> Option<(&Map, MapState)> {
+        self.map
+            .as_ref()
+            .map(|(m, s)| (m, s.lock().unwrap_or_else(|e| e.into_inner()).clone()))
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, State> {
@@ -188,6 +204,7 @@ pub fn follow(
     let mut latest_signals: Option<petrel_ipc::SignalsMsg> = None;
     let mut next_status = Instant::now();
     let mut last_status_text = String::new();
+    let mut map_feed = MapFeed::default();
     while !live.stop.load(Ordering::Relaxed) {
         if let Err(e) = reactor.wait(&[&deltas], Some(Duration::from_millis(100))) {
             tracing::warn!(error = %e, "waiting for the player's steps failed; retrying");
@@ -208,6 +225,9 @@ pub fn follow(
                         restarted = true;
                     }
                     player_uptime = rcv.msg.uptime_ms;
+                    if let Some(t) = doc["time"].as_f64() {
+                        map_feed.clock(t);
+                    }
                     if let Some(m) = names::status_marking(&doc) {
                         beat_marking = Some((
                             rcv.msg.progress,
@@ -222,10 +242,11 @@ pub fn follow(
                 _ => {}
             }
         });
+        let mut signal_msgs = Vec::new();
         if let Some(sub) = &signals {
             let _ = sub.drain(|r| {
                 if let Ok(rcv) = r {
-                    latest_signals = Some(rcv.msg);
+                    signal_msgs.push(rcv.msg);
                 }
             });
         }
@@ -235,6 +256,25 @@ pub fn follow(
             Ok(_) => {}
             Err(e) => tracing::warn!(error = %e, "a marking delta could not be read"),
         });
+        if let Some((map, state)) = &live.map {
+            let mut state = state.lock().unwrap_or_else(|e| e.into_inner());
+            for m in &received {
+                map_feed.step(map, &mut state, m);
+            }
+            for m in &signal_msgs {
+                map_feed.signals(map, &mut state, m);
+            }
+            if let Some(version) = map_feed.announce(&state) {
+                let mut s = live.lock();
+                let msg: Arc<str> = json!({"type": "map", "version": version})
+                    .to_string()
+                    .into();
+                s.send(&live.tx, msg);
+            }
+        }
+        if let Some(m) = signal_msgs.pop() {
+            latest_signals = Some(m);
+        }
         {
             let mut s = live.lock();
             if restarted && s.synced {
@@ -302,6 +342,69 @@ pub fn follow(
         }
     }
     Ok(())
+}
+
+/// Feeds the map from what the follower reads: the player's steps (their events' parameters)
+/// and the data server's signals, on the mission's clock.
+#[derive(Default)]
+struct MapFeed {
+    /// The next step to feed (a step is fed once, in or out of step with the player).
+    next: u64,
+    /// The mission's start on the wall clock (µs since the Unix epoch), from the player's
+    /// latest mission time: the signals' times are on the wall clock.
+    start_us: Option<f64>,
+    /// The version the pages were last told of, and when.
+    told: (u64, Option<Instant>),
+}
+
+impl MapFeed {
+    /// The player's mission time `t` (s), now.
+    fn clock(&mut self, t: f64) {
+        self.start_us = Some(unix_us() - t * 1e6);
+    }
+
+    fn step(&mut self, map: &Map, state: &mut MapState, m: &petrel_ipc::MarkingMsg) {
+        if m.snapshot {
+            // A (new) player's start: its steps count from here.
+            self.next = m.step + 1;
+            self.clock(m.time_us as f64 / 1e6);
+            return;
+        }
+        if m.step < self.next {
+            return;
+        }
+        self.next = m.step + 1;
+        self.clock(m.time_us as f64 / 1e6);
+        if let Some(event) = &m.event {
+            let t = m.time_us as f64 / 1e6;
+            state.on_step(map, t, event, &m.params, !m.fired.is_empty());
+        }
+    }
+
+    fn signals(&mut self, map: &Map, state: &mut MapState, m: &petrel_ipc::SignalsMsg) {
+        // Before the player's first word, the mission's clock is unknown: nothing to place.
+        let Some(start) = self.start_us else { return };
+        let t = ((m.time_us as f64 - start) / 1e6).max(0.0);
+        state.on_signals(map, t, |n| m.get(n));
+    }
+
+    /// The version to tell the pages of, at most every [`MAP_PERIOD`].
+    fn announce(&mut self, state: &MapState) -> Option<u64> {
+        let (told, at) = self.told;
+        if state.version == told || at.is_some_and(|a| a.elapsed() < MAP_PERIOD) {
+            return None;
+        }
+        self.told = (state.version, Some(Instant::now()));
+        Some(state.version)
+    }
+}
+
+/// Microseconds since the Unix epoch, now.
+fn unix_us() -> f64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs_f64() * 1e6)
+        .unwrap_or(0.0)
 }
 
 /// What a heartbeat of the player says of the marking.
@@ -459,7 +562,7 @@ mod tests {
     fn a_late_monitor_takes_the_heartbeat_then_the_newer_deltas() {
         let p = project();
         let names = Names::new(&p);
-        let live = Live::new();
+        let live = Live::new(None);
         let mut pending = VecDeque::new();
         let mut s = State::default();
         // Deltas 4 and 5 come before the heartbeat that says 5 were published (0 to 4).
@@ -525,7 +628,7 @@ mod tests {
     fn a_page_that_lags_skips_to_the_latest_marking_and_is_told() {
         let p = project();
         let names = Names::new(&p);
-        let live = Live::new();
+        let live = Live::new(None);
         {
             let mut s = live.lock();
             s.synced = true;

@@ -23,7 +23,7 @@ mod layout;
 mod live;
 mod names;
 mod operator;
-mod replay;
+pub(crate) mod replay;
 mod server;
 
 use crate::common::{require_clean, Outcome, Scope};
@@ -66,6 +66,11 @@ pub struct MonitorArgs {
     /// idle connections are closed first.
     #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(16..))]
     max_connections: u32,
+    /// With --journal: the data server's recording of the bus (`petrel bridge --record`), for a
+    /// map whose positions come from signals (default: bus.log beside the journal directory,
+    /// as `petrel up` leaves them, when there is one).
+    #[arg(long, value_name = "FILE", requires = "journal")]
+    bus_log: Option<PathBuf>,
     /// Stop after this many seconds (for tests and demos).
     #[arg(long, value_parser = crate::common::seconds)]
     run_for: Option<f64>,
@@ -99,23 +104,48 @@ pub fn monitor(a: MonitorArgs) -> Outcome {
             )
         }
     };
-    let checked = match require_clean(&dir, Scope::default(), "monitor") {
+    let scope = Scope {
+        can: true,
+        map: true,
+        ..Scope::default()
+    };
+    let checked = match require_clean(&dir, scope, "monitor") {
         Ok(c) => c,
         Err(o) => return o,
     };
     let Some(compiled) = checked.compiled else {
         return Outcome::Usage("the project did not compile".into());
     };
+    let map = checked.map;
     let drawing = match layout::draw(&checked.loaded.project) {
         Ok(d) => d,
         Err(e) => return Outcome::Usage(e),
     };
     let names = names::Names::new(&compiled);
     let mode = match journal_entries {
-        Some(read) => match replay::timeline(&compiled, &names, read) {
-            Ok(t) => server::Mode::Replay(t),
-            Err(o) => return o,
-        },
+        Some(read) => {
+            let replay_map = match &map {
+                Some(m) => {
+                    let records = match replay_bus_log(&a, m) {
+                        Ok(r) => r,
+                        Err(e) => return Outcome::Usage(e),
+                    };
+                    let bus = match (&records, &checked.can) {
+                        (Some(r), Some((_, dbc))) => {
+                            Some(crate::map::record::BusLog { dbc, records: r })
+                        }
+                        _ => None,
+                    };
+                    let state = crate::map::record::replay(m, read.entries(), bus);
+                    Some(Box::new((m.clone(), state)))
+                }
+                None => None,
+            };
+            match replay::timeline(&compiled, &names, read) {
+                Ok(t) => server::Mode::Replay(t, replay_map),
+                Err(o) => return o,
+            }
+        }
         None => {
             let vehicle = match crate::common::vehicle_of(&compiled, a.vehicle.clone()) {
                 Ok(v) => v,
@@ -140,5 +170,30 @@ pub fn monitor(a: MonitorArgs) -> Outcome {
         gate,
         limits,
     };
-    server::serve(compiled, names, drawing, mode, web, run_for)
+    server::serve(compiled, names, drawing, (mode, map), web, run_for)
+}
+
+/// The bus recording a replay's map reads, when the map takes positions from signals:
+/// `--bus-log`, or bus.log beside the journal directory (a `petrel up` run's).
+fn replay_bus_log(
+    a: &MonitorArgs,
+    map: &crate::map::Map,
+) -> Result<Option<Vec<petrel_can_bridge::log::LogRecord>>, String> {
+    if map.signals().is_empty() {
+        return Ok(None);
+    }
+    let path = match (&a.bus_log, &a.journal) {
+        (Some(p), _) => p.clone(),
+        (None, Some(j)) => match j.parent().map(|d| d.join("bus.log")) {
+            Some(p) if p.is_file() => p,
+            _ => {
+                eprintln!(
+                    "note: the map's positions from signals come from the bus's recording, and none is beside the journal (give --bus-log FILE)"
+                );
+                return Ok(None);
+            }
+        },
+        (None, None) => return Ok(None),
+    };
+    crate::plot::read_bus_log(&path).map(Some)
 }

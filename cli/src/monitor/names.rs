@@ -29,19 +29,7 @@ impl Names {
             .iter()
             .map(|e| (e.name.clone(), category_name(e.category)))
             .collect();
-        let nets: Vec<Json> = project
-            .nets
-            .iter()
-            .map(|n| {
-                json!({
-                    "name": n.name,
-                    "template": n.template,
-                    "parent": n.parent.map(|(p, _)| project.nets[p as usize].name.clone()),
-                    "children": n.children.iter().map(|&c| project.nets[c as usize].name.clone()).collect::<Vec<_>>(),
-                    "places": n.places.iter().map(|p| place_id(&format!("{}.{}", n.name, p.name))).collect::<Vec<_>>(),
-                })
-            })
-            .collect();
+        let nets: Vec<Json> = project.nets.iter().map(|n| net_json(project, n)).collect();
         let events: Vec<Json> = project
             .events
             .iter()
@@ -100,6 +88,58 @@ impl Names {
             "deactivated": deactivated,
         })
     }
+}
+
+/// What the page knows of net `n`: its tree, its places (and which of them no transition of it
+/// takes: a net whose marked places are all such has ended), its transitions' input places
+/// and emptiness tests (to tell a net that waits from one that can fire), all as the
+/// drawing's ids.
+fn net_json(project: &CompiledProject, n: &petrel_nets::compiled::Net) -> Json {
+    use petrel_nets::compiled::PlaceRef;
+    let id = |r: &PlaceRef| match *r {
+        PlaceRef::Local(i) => place_id(&format!("{}.{}", n.name, n.places[i as usize].name)),
+        PlaceRef::Global(g) => format!("global.{}", project.globals[g as usize].name),
+    };
+    let taken: BTreeSet<String> = n
+        .transitions
+        .iter()
+        .flat_map(|t| t.inputs.iter().map(id))
+        .collect();
+    let places: Vec<String> = n
+        .places
+        .iter()
+        .map(|p| place_id(&format!("{}.{}", n.name, p.name)))
+        .collect();
+    let terminal: Vec<&String> = places.iter().filter(|p| !taken.contains(*p)).collect();
+    let globals: BTreeSet<String> = n
+        .transitions
+        .iter()
+        .flat_map(|t| t.inputs.iter().chain(&t.empty).chain(&t.outputs))
+        .filter(|r| matches!(r, PlaceRef::Global(_)))
+        .map(id)
+        .collect();
+    let transitions: Vec<Json> = n
+        .transitions
+        .iter()
+        .map(|t| {
+            json!({
+                "id": format!("{}.t.{}", n.name, t.name),
+                "in": t.inputs.iter().map(id).collect::<Vec<_>>(),
+                "empty": t.empty.iter().map(id).collect::<Vec<_>>(),
+                "event": t.event.map(|e| project.events[e as usize].name.clone()),
+            })
+        })
+        .collect();
+    json!({
+        "name": n.name,
+        "template": n.template,
+        "parent": n.parent.map(|(p, _)| project.nets[p as usize].name.clone()),
+        "children": n.children.iter().map(|&c| project.nets[c as usize].name.clone()).collect::<Vec<_>>(),
+        "places": places,
+        "terminal": terminal,
+        "globals": globals,
+        "transitions": transitions,
+    })
 }
 
 /// The drawing's id of place `name` as the player names it: `NET.place` and `global.place`

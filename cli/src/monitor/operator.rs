@@ -111,12 +111,10 @@ pub fn serve(vehicle: Vehicle, requests: mpsc::Receiver<Request>) {
         let msg = petrel_ipc::EventMsg::new(r.name.clone(), r.params);
         let verdict = match sender.send(&msg) {
             Ok(sent) => {
-                let ack = petrel_ipc::wait_acknowledged(
-                    &beats,
-                    sender.sender_id(),
-                    sent.seq,
-                    VERDICT_TIMEOUT,
-                );
+                // The verdict is known as soon as the player refused the event: no waiting
+                // for the rest of this sender's messages to settle.
+                let ack =
+                    petrel_ipc::wait_verdict(&beats, sender.sender_id(), sent.seq, VERDICT_TIMEOUT);
                 let refusal = ack
                     .ack
                     .as_ref()

@@ -21,6 +21,13 @@ pub struct Read {
     corrupt: bool,
 }
 
+impl Read {
+    /// The journal's entries, in order.
+    pub fn entries(&self) -> &[Entry] {
+        &self.entries
+    }
+}
+
 /// Reads journal `path` (a directory of segments, or one segment).
 pub fn read(path: &Path) -> Result<Read, Outcome> {
     let read =
@@ -37,19 +44,7 @@ pub fn read(path: &Path) -> Result<Read, Outcome> {
             "the journal is damaged at {c}: the replay stops before it"
         ));
     }
-    let (project_dir, digest) = match read.entries.first() {
-        Some(Entry::Header {
-            project_dir,
-            digest,
-            ..
-        }) => (PathBuf::from(project_dir), *digest),
-        _ => {
-            return Err(Outcome::Usage(format!(
-                "{} does not start with a journal header",
-                path.display()
-            )))
-        }
-    };
+    let (project_dir, digest) = header(&read.entries, path)?;
     Ok(Read {
         corrupt: read.corrupt.is_some(),
         entries: read.entries,
@@ -57,6 +52,22 @@ pub fn read(path: &Path) -> Result<Read, Outcome> {
         project_dir,
         warnings,
     })
+}
+
+/// The project directory and the project's digest that the header of journal `path` names
+/// (`petrel monitor --journal` and `petrel plot` both start from them).
+pub(crate) fn header(entries: &[Entry], path: &Path) -> Result<(PathBuf, u64), Outcome> {
+    match entries.first() {
+        Some(Entry::Header {
+            project_dir,
+            digest,
+            ..
+        }) => Ok((PathBuf::from(project_dir), *digest)),
+        _ => Err(Outcome::Usage(format!(
+            "{} does not start with a journal header",
+            path.display()
+        ))),
+    }
 }
 
 /// The page's timeline of the journal: `frames` (each state the journal records, with the

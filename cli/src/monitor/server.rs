@@ -6,6 +6,8 @@
 //! | `GET /api/model`       | the project as the page needs it, the mode, whether it may send |
 //! | `GET /api/nets.svg`    | the nets, laid out by Graphviz                                |
 //! | `GET /api/tree.svg`    | the tree of nets                                              |
+//! | `GET /api/net.svg?name=NET` | one net alone, its global places as ports                |
+//! | `GET /api/map.svg?w=W&h=H` | the map (map.toml), as drawn now; replay: `&t=T` at a time |
 //! | `GET /api/events`      | live: Server-Sent Events (a snapshot, then steps and status)  |
 //! | `GET /api/marking`     | live: the current marking as JSON                             |
 //! | `GET /api/replay`      | replay: the journal's timeline                                |
@@ -28,6 +30,7 @@ use super::live::{self, Live};
 use super::names::Names;
 use super::operator;
 use crate::common::Outcome;
+use crate::map::{feed::MapState, Map};
 use axum::extract::{RawQuery, State};
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::response::sse::{Event, KeepAlive, Sse};
@@ -62,8 +65,8 @@ pub enum Mode {
         /// Whether the page may send events, and where the token goes.
         sending: Sending,
     },
-    /// A recorded mission: its timeline.
-    Replay(Json),
+    /// A recorded mission: its timeline, and its map when the project has one.
+    Replay(Json, Option<Box<(Map, MapState)>>),
 }
 
 /// Whether the page may send events (`--operator`), and where the token is shown.
@@ -86,6 +89,9 @@ pub struct Web {
     pub limits: Limits,
 }
 
+/// A drawing of the map, by the version of what it shows and its width and height.
+type DrawnMap = ((u64, u32, u32), Arc<str>);
+
 /// The server's state, shared by every request.
 struct App {
     project: Arc<CompiledProject>,
@@ -93,6 +99,11 @@ struct App {
     model: Json,
     live: Option<Arc<Live>>,
     replay: Option<Json>,
+    /// A replay's map: everything the run showed, cut at the page's time.
+    replay_map: Option<Box<(Map, MapState)>>,
+    /// The map's latest drawing, by (version, width, height): pages that ask together get
+    /// it drawn once.
+    map_drawn: Mutex<Option<DrawnMap>>,
     /// The operator's token and the queue of the thread that sends, with `--operator`.
     operator: Option<(String, Mutex<mpsc::Sender<operator::Request>>)>,
     /// Event streams open, and the most allowed: half the connections, so that a page can
@@ -111,7 +122,7 @@ pub fn serve(
     project: CompiledProject,
     names: Names,
     drawing: Drawing,
-    mode: Mode,
+    (mode, map): (Mode, Option<Map>),
     web: Web,
     run_for: Option<Duration>,
 ) -> Outcome {
@@ -119,6 +130,7 @@ pub fn serve(
     let names = Arc::new(names);
     let mut model = names.model.clone();
     let mut token_file = None;
+    let mut replay_map = None;
     let (live, replay, operator, vehicle) = match mode {
         Mode::Live { vehicle, sending } => {
             model["mode"] = json!("live");
@@ -139,11 +151,14 @@ pub fn serve(
             } else {
                 None
             };
-            (Some(Live::new()), None, op, Some(*vehicle))
+            model["map"] = json!(map.as_ref().map(|m| m.title.clone()));
+            (Some(Live::new(map)), None, op, Some(*vehicle))
         }
-        Mode::Replay(t) => {
+        Mode::Replay(t, m) => {
             model["mode"] = json!("replay");
             model["operator"] = json!(false);
+            model["map"] = json!(m.as_deref().map(|(m, _)| m.title.clone()));
+            replay_map = m;
             (None, Some(t), None, None)
         }
     };
@@ -154,6 +169,8 @@ pub fn serve(
         model,
         live: live.clone(),
         replay,
+        replay_map,
+        map_drawn: Mutex::new(None),
         operator,
         streams: Arc::new(AtomicUsize::new(0)),
         max_streams: (web.limits.max_connections / 2).max(1),
@@ -215,6 +232,8 @@ pub fn serve(
             .route("/api/model", get(model_route))
             .route("/api/nets.svg", get(nets_svg))
             .route("/api/tree.svg", get(tree_svg))
+            .route("/api/net.svg", get(net_svg))
+            .route("/api/map.svg", get(map_svg))
             .route("/api/events", get(events))
             .route("/api/marking", get(marking))
             .route("/api/replay", get(replay_route))
@@ -305,6 +324,96 @@ async fn tree_svg(State(app): State<Arc<App>>) -> Response {
         app.drawing.tree.clone(),
     )
         .into_response()
+}
+
+/// The value of `key` in a query string (`a=1&b=x%2Fy`), percent-decoded.
+fn query_value(query: &str, key: &str) -> Option<String> {
+    query.split('&').find_map(|kv| {
+        let (k, v) = kv.split_once('=').unwrap_or((kv, ""));
+        (k == key).then(|| percent_decode(v))
+    })
+}
+
+/// `%XX` and `+` decoded (a net's name has `/` in it); bytes that are not UTF-8 are replaced.
+fn percent_decode(s: &str) -> String {
+    let hex = |c: u8| (c as char).to_digit(16).map(|d| d as u8);
+    let b = s.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        let pair = (b[i] == b'%')
+            .then(|| Some((hex(*b.get(i + 1)?)?, hex(*b.get(i + 2)?)?)))
+            .flatten();
+        match (b[i], pair) {
+            (_, Some((hi, lo))) => {
+                out.push(hi * 16 + lo);
+                i += 3;
+                continue;
+            }
+            (b'+', _) => out.push(b' '),
+            (c, _) => out.push(c),
+        }
+        i += 1;
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+async fn net_svg(State(app): State<Arc<App>>, RawQuery(query): RawQuery) -> Response {
+    let Some(name) = query_value(query.as_deref().unwrap_or(""), "name") else {
+        return error(
+            StatusCode::BAD_REQUEST,
+            "give the net: /api/net.svg?name=NET",
+        );
+    };
+    let laid = tokio::task::spawn_blocking(move || app.drawing.each.get(&name)).await;
+    match laid {
+        Ok(Ok(svg)) => ([(header::CONTENT_TYPE, "image/svg+xml")], svg.to_string()).into_response(),
+        Ok(Err(e)) => error(StatusCode::NOT_FOUND, e),
+        Err(e) => error(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            format!("the layout failed: {e}"),
+        ),
+    }
+}
+
+/// The map as drawn now (live), or at `t` (replay), `w` x `h` px: the page asks for its
+/// canvas's size, so that the text is drawn at its size.
+async fn map_svg(State(app): State<Arc<App>>, RawQuery(query): RawQuery) -> Response {
+    let q = query.unwrap_or_default();
+    let px = |k: &str, default: u32| {
+        query_value(&q, k)
+            .and_then(|v| v.parse::<f64>().ok())
+            .filter(|v| v.is_finite())
+            .map_or(default, |v| v.clamp(320.0, 8000.0) as u32)
+    };
+    let (w, h) = (px("w", 1000), px("h", 800));
+    let svg: Arc<str> = if let Some((map, state)) = app.replay_map.as_deref() {
+        let t = query_value(&q, "t")
+            .and_then(|v| v.parse::<f64>().ok())
+            .filter(|t| t.is_finite());
+        let (shown, note) = match t {
+            Some(t) => (state.until(t), Some(format!("mission time {t:.1} s"))),
+            None => (state.clone(), None),
+        };
+        crate::map::svg::map_svg(map, &shown, w, h, note.as_deref()).into()
+    } else if let Some((map, state)) = app.live.as_ref().and_then(|l| l.map_state()) {
+        let key = (state.version, w, h);
+        let mut drawn = app.map_drawn.lock().unwrap_or_else(|e| e.into_inner());
+        match drawn.as_ref() {
+            Some((k, svg)) if *k == key => svg.clone(),
+            _ => {
+                let svg: Arc<str> = crate::map::svg::map_svg(map, &state, w, h, None).into();
+                *drawn = Some((key, svg.clone()));
+                svg
+            }
+        }
+    } else {
+        return error(
+            StatusCode::NOT_FOUND,
+            "this project has no map: write its map.toml (docs/monitor.md, \"The map\")",
+        );
+    };
+    ([(header::CONTENT_TYPE, "image/svg+xml")], svg.to_string()).into_response()
 }
 
 async fn not_found(uri: axum::http::Uri) -> Response {
@@ -501,4 +610,21 @@ fn query_has_token(query: &str) -> bool {
     query
         .split('&')
         .any(|kv| kv.split_once('=').map_or(kv, |(k, _)| k) == "token")
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn query_values_are_decoded() {
+        let q = "name=MISSION%2FPHASES&t=1.5&x=%zz%4&y=a+b";
+        assert_eq!(
+            super::query_value(q, "name").as_deref(),
+            Some("MISSION/PHASES")
+        );
+        assert_eq!(super::query_value(q, "t").as_deref(), Some("1.5"));
+        assert_eq!(super::query_value(q, "x").as_deref(), Some("%zz%4"));
+        assert_eq!(super::query_value(q, "y").as_deref(), Some("a b"));
+        assert_eq!(super::query_value(q, "z"), None);
+        assert_eq!(super::percent_decode("%C3%A9%e9"), "\u{e9}\u{fffd}");
+    }
 }

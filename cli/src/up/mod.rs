@@ -338,6 +338,7 @@ fn plan(a: UpArgs) -> Result<RunPlan, Outcome> {
             can: true,
             quick_verify: false,
             vehicle: a.file.is_none(),
+            map: true,
         },
         "up",
     )?;
