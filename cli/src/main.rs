@@ -53,7 +53,7 @@ enum Command {
     Play(vehicle::PlayArgs),
     /// The CAN data server: frames from the vehicle bus become events for the player (by the
     /// rules of the project's can.toml), calls to the commands program become frames.
-    Bridge(bridge::BridgeArgs),
+    Bridge(petrel_can_bridge::command::BridgeArgs),
     /// The pictures of a Redermor run (Figure 9): map.svg (areas, forbidden zones, planned
     /// routes, the vehicle's track, events) and depth.svg, from a `petrel up` run directory.
     Plot(plot::PlotArgs),

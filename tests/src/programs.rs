@@ -1,11 +1,10 @@
-//! Helpers of the cross-process tests: a throw-away vehicle, the example programs as child
-//! processes, and a fake player (a plain ipc participant with `Role::Player`).
-
-#![allow(dead_code)]
+//! Helpers of the programs' tests (the SDK's, and the vehicles' programs'): a throw-away
+//! vehicle, programs as child processes, and a fake player (a plain ipc participant with
+//! `Role::Player`).
 
 use std::collections::HashMap;
 use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::mpsc;
@@ -46,6 +45,12 @@ impl TestVehicle {
     }
 }
 
+impl Default for TestVehicle {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 impl Drop for TestVehicle {
     fn drop(&mut self) {
         let _ = cleanup_dead_nodes(&self.vehicle, Duration::from_secs(1));
@@ -55,26 +60,6 @@ impl Drop for TestVehicle {
     }
 }
 
-/// The path of example `name`, as the test command built it: `cargo test` builds a package's
-/// examples before running its tests (`cargo test --test NAME` alone does not: then build them
-/// with `cargo build -p petrel-programs --examples`).
-pub fn example(name: &str) -> PathBuf {
-    let exe = std::env::current_exe().expect("test executable path");
-    // target/<profile>/deps/<test> -> target/<profile>/examples/
-    let path = exe
-        .parent()
-        .and_then(Path::parent)
-        .expect("test binary lives in target/<profile>/deps")
-        .join("examples")
-        .join(name);
-    assert!(
-        path.exists(),
-        "the example `{name}` is not built ({}): run `cargo test -p petrel-programs`, or `cargo build -p petrel-programs --examples` first",
-        path.display()
-    );
-    path
-}
-
 /// Which output of a child a line came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Stream {
@@ -82,7 +67,7 @@ pub enum Stream {
     Err,
 }
 
-/// An example program running as a child process, its output collected line by line.
+/// A program running as a child process, its output collected line by line.
 pub struct Proc {
     pub name: String,
     pub child: Child,
@@ -92,14 +77,21 @@ pub struct Proc {
 }
 
 impl Proc {
-    pub fn spawn(example_name: &str, args: &[&str]) -> Self {
-        let mut child = Command::new(example(example_name))
+    /// Starts `program` (a binary of this build: `env!("CARGO_BIN_EXE_name")` in its own
+    /// package's tests, [`crate::vehicle_bin`], [`crate::example_bin`]) with `args`.
+    pub fn spawn(program: impl AsRef<Path>, args: &[&str]) -> Self {
+        let program = program.as_ref();
+        let name = program.file_name().map_or_else(
+            || program.display().to_string(),
+            |n| n.to_string_lossy().into_owned(),
+        );
+        let mut child = Command::new(program)
             .args(args)
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .spawn()
-            .unwrap_or_else(|e| panic!("cannot start example {example_name}: {e}"));
+            .unwrap_or_else(|e| panic!("cannot start {}: {e}", program.display()));
         let (tx, lines) = mpsc::channel();
         let out = child.stdout.take().expect("stdout");
         let err = child.stderr.take().expect("stderr");
@@ -115,7 +107,7 @@ impl Proc {
             }
         });
         Proc {
-            name: example_name.to_owned(),
+            name,
             child,
             lines,
             seen: Vec::new(),

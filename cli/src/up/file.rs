@@ -24,7 +24,8 @@ pub const VEHICLE_TOML: &str = "vehicle.toml";
 pub enum Kind {
     /// `petrel play` on this project: ready when its heartbeat comes.
     Player,
-    /// `petrel bridge` on this project (the CAN data server): ready when its heartbeat comes.
+    /// The CAN data server on this project, `petrel bridge` or the vehicle's own data server
+    /// (`executable`, with the same arguments): ready when its heartbeat comes.
     Bridge,
     /// An executable that joins the vehicle as the manifest's programs it names: ready when
     /// the node of each is alive.
@@ -90,10 +91,11 @@ pub struct ProcessSpec {
     pub name: String,
     /// What it is.
     pub kind: Kind,
-    /// The executable (template), for programs and commands.
+    /// The executable (template), for programs and commands; for a bridge, the vehicle's own
+    /// data server (`None`: `petrel bridge`).
     pub executable: Option<String>,
     /// Arguments (templates). For a player or a bridge they follow `petrel play|bridge DIR
-    /// --vehicle V`.
+    /// --vehicle V` (a bridge's own executable: `EXECUTABLE DIR --vehicle V`).
     pub args: Vec<String>,
     /// Environment variables set for it (values are templates).
     pub env: Vec<(String, String)>,
@@ -730,19 +732,19 @@ pub fn check_file(
                     p.kind.get_ref()
                 ),
                 "not a kind",
-                "the kinds are player (petrel play), bridge (petrel bridge), program (an executable running programs of the manifest) and command (any other executable)",
+                "the kinds are player (petrel play), bridge (the CAN data server: petrel bridge, or the vehicle's own data server as `executable`), program (an executable running programs of the manifest) and command (any other executable)",
             );
             continue;
         };
         // The executable.
         let executable = match (&p.executable, kind) {
-            (Some(e), Kind::Player | Kind::Bridge) => {
+            (Some(e), Kind::Player) => {
                 c.not_for_kind(
                     c.span(e),
                     "executable",
                     &pname,
                     kind,
-                    "a player or a bridge is the running `petrel` itself; for another build, use kind = \"command\" with executable = \"...\" and its arguments",
+                    "a player is the running `petrel` itself; for another build, use kind = \"command\" with executable = \"...\" and its arguments",
                 );
                 None
             }
@@ -1340,7 +1342,7 @@ name = "gui"
 kind = "program"
 programs = ["GUI", "PLD"]
 computer = "avionics"
-executable = "{target}/examples/uav_gui"
+executable = "{target}/uav-gui"
 args = ["--vehicle", "{vehicle}"]
 env = { RUST_LOG = "info" }
 
@@ -1368,6 +1370,39 @@ after = []
             }
         );
         assert_eq!(v.processes[1].stop_grace, Duration::from_secs(2));
+    }
+
+    /// A bridge may be the vehicle's own data server (its simulator with it); a player is
+    /// always the running petrel.
+    #[test]
+    fn a_bridge_may_name_its_executable_and_a_player_may_not() {
+        let (v, d, _) = check(
+            r#"
+[[process]]
+name = "player"
+kind = "player"
+
+[[process]]
+name = "can"
+kind = "bridge"
+executable = "{target}/auv-bridge"
+args = ["--bus", "memory", "--leak-at", "5"]
+"#,
+        );
+        assert!(d.is_empty(), "{d:?}");
+        let can = &v.unwrap().processes[1];
+        assert_eq!(can.executable.as_deref(), Some("{target}/auv-bridge"));
+        let (v, d, _) = check(
+            "[[process]]\nname = \"player\"\nkind = \"player\"\nexecutable = \"{target}/petrel\"\n",
+        );
+        assert!(v.is_none());
+        assert_eq!(codes(&d), ["E0805"]);
+        // An empty one is refused as any process's.
+        let (v, d, _) = check(
+            "[[process]]\nname = \"p\"\nkind = \"player\"\n[[process]]\nname = \"can\"\nkind = \"bridge\"\nexecutable = \" \"\n",
+        );
+        assert!(v.is_none());
+        assert_eq!(codes(&d), ["E0806"]);
     }
 
     #[test]

@@ -476,14 +476,30 @@ fn plan(a: UpArgs) -> Result<Plan, Outcome> {
         let mut journal = None;
         let program = match spec.kind {
             Kind::Player | Kind::Bridge => {
-                args.push(
-                    if spec.kind == Kind::Player {
-                        "play"
-                    } else {
-                        "bridge"
-                    }
-                    .into(),
-                );
+                // A bridge with an executable is the vehicle's own data server (built on
+                // petrel-can-bridge: `petrel bridge`'s arguments, and its simulator's).
+                let own = match (&spec.executable, spec.kind) {
+                    (Some(text), Kind::Bridge) => match ex(text)
+                        .and_then(|t| resolve_executable(&t, &project_dir, &spec.name))
+                    {
+                        Ok(p) => Some(p),
+                        Err(e) => {
+                            problems.push(e);
+                            continue;
+                        }
+                    },
+                    _ => None,
+                };
+                if own.is_none() {
+                    args.push(
+                        if spec.kind == Kind::Player {
+                            "play"
+                        } else {
+                            "bridge"
+                        }
+                        .into(),
+                    );
+                }
                 args.push(project_dir.display().to_string());
                 args.extend(["--vehicle".to_string(), vehicle.name().to_string()]);
                 if let Some(w) = &spec.wait {
@@ -508,7 +524,7 @@ fn plan(a: UpArgs) -> Result<Plan, Outcome> {
                         }
                     }
                 }
-                petrel.clone()
+                own.unwrap_or_else(|| petrel.clone())
             }
             Kind::Program | Kind::Command => {
                 let text = spec.executable.clone().unwrap_or_default();

@@ -1,26 +1,24 @@
 //! The simulated AUV of the memory bus, in virtual time: it obeys the supervisor's commands
 //! only while the heartbeat comes, and its sensors say where it is.
 
-mod common;
+use std::sync::Arc;
 
-use common::dbc;
+use auv::plant::{AuvPlant, SimFaults};
 use petrel_can_bridge::dbc::DecodeOutcome;
-use petrel_can_bridge::sim::{AuvPlant, SimFaults};
-use petrel_can_bridge::Frame;
+use petrel_can_bridge::{Dbc, Frame};
+
+/// The AUV's DBC (missions/auv/auv.dbc).
+fn dbc() -> Arc<Dbc> {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../../missions/auv/auv.dbc");
+    Arc::new(Dbc::load(std::path::Path::new(path)).unwrap())
+}
 
 /// The physical value of `MESSAGE.signal` in the frames, if one of them is that message.
 fn value(frames: &[Frame], message: &str, signal: &str) -> Option<f64> {
     let dbc = dbc();
     frames.iter().find_map(|f| match dbc.decode(f) {
-        DecodeOutcome::Message(dm) => {
-            let m = dbc.message(dm.message)?;
-            if m.name != message {
-                return None;
-            }
-            dm.signals
-                .iter()
-                .find(|s| m.signals[s.signal.signal].name == signal)
-                .map(|s| s.physical)
+        DecodeOutcome::Message(dm) if dbc.message(dm.message)?.name == message => {
+            dm.value(&dbc, signal)
         }
         _ => None,
     })

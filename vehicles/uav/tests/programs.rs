@@ -1,15 +1,16 @@
-//! The example programs as real processes over real iceoryx2, driven by a fake player (a plain
-//! ipc participant with `Role::Player`) in the test process, or in a child process of the test
-//! binary when it has to be killed.
-
-mod common;
+//! The UAV's programs (uav-gui, uav-dec) as real processes over real iceoryx2, driven by a fake
+//! player (a plain ipc participant with `Role::Player`) in the test process, or in a child
+//! process of the test binary when it has to be killed.
 
 use std::io::Read;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{FakePlayer, Proc, Stream, TestVehicle};
 use petrel_ipc::{program_status, ProgramStatus, Value, Vehicle};
+use petrel_tests::programs::{FakePlayer, Proc, Stream, TestVehicle};
+
+const GUI: &str = env!("CARGO_BIN_EXE_uav-gui");
+const DEC: &str = env!("CARGO_BIN_EXE_uav-dec");
 
 fn position(values: &[Value]) -> Vec<f64> {
     match values.first() {
@@ -28,7 +29,7 @@ fn text(values: &[Value], i: usize) -> String {
 #[test]
 fn gui_answers_roll_with_rotation_speed() {
     let v = TestVehicle::new();
-    let _gui = Proc::spawn("uav_gui", &["--vehicle", v.name()]);
+    let _gui = Proc::spawn(GUI, &["--vehicle", v.name()]);
     let mut player = FakePlayer::join(&v.vehicle);
     player.call("GUI", "roll", vec![]);
     // 8 simulated seconds at x600 (13 ms): no timing is asserted, machines are shared.
@@ -42,7 +43,7 @@ fn gui_answers_roll_with_rotation_speed() {
 #[test]
 fn dec_gives_the_waypoints_in_order_then_no_more() {
     let v = TestVehicle::new();
-    let _dec = Proc::spawn("uav_dec", &["--vehicle", v.name()]);
+    let _dec = Proc::spawn(DEC, &["--vehicle", v.name()]);
     let mut player = FakePlayer::join(&v.vehicle);
     let mut got = Vec::new();
     for _ in 0..3 {
@@ -71,7 +72,7 @@ fn dec_gives_the_waypoints_in_order_then_no_more() {
 fn dec_replans_without_a_payload_and_takes_waypoint_flags() {
     let v = TestVehicle::new();
     let _dec = Proc::spawn(
-        "uav_dec",
+        DEC,
         &[
             "--vehicle",
             v.name(),
@@ -112,7 +113,7 @@ fn dec_replans_without_a_payload_and_takes_waypoint_flags() {
 #[test]
 fn malformed_calls_are_logged_and_the_program_carries_on() {
     let v = TestVehicle::new();
-    let mut gui = Proc::spawn("uav_gui", &["--vehicle", v.name()]);
+    let mut gui = Proc::spawn(GUI, &["--vehicle", v.name()]);
     let mut player = FakePlayer::join(&v.vehicle);
     // Wrong argument type.
     player.call("GUI", "climb", vec![Value::Text("high".into())]);
@@ -153,7 +154,7 @@ fn malformed_calls_are_logged_and_the_program_carries_on() {
 fn events_emitted_without_a_player_are_delivered_when_one_joins() {
     let v = TestVehicle::new();
     // x20: rotation_speed comes 0.4 s after roll.
-    let _gui = Proc::spawn("uav_gui", &["--vehicle", v.name(), "--speed", "20"]);
+    let _gui = Proc::spawn(GUI, &["--vehicle", v.name(), "--speed", "20"]);
     let mut first = FakePlayer::join(&v.vehicle);
     first.call("GUI", "takeoff", vec![]);
     let airborne = first.next();
@@ -198,7 +199,7 @@ fn child_player() {
 #[test]
 fn a_killed_player_is_replaced_and_no_event_is_lost() {
     let v = TestVehicle::new();
-    let _gui = Proc::spawn("uav_gui", &["--vehicle", v.name(), "--speed", "20"]);
+    let _gui = Proc::spawn(GUI, &["--vehicle", v.name(), "--speed", "20"]);
     let mut old = Command::new(std::env::current_exe().expect("test binary"))
         .args([
             "--exact",
@@ -241,7 +242,7 @@ fn a_killed_player_is_replaced_and_no_event_is_lost() {
 fn injected_failures() {
     let v = TestVehicle::new();
     let _gui = Proc::spawn(
-        "uav_gui",
+        GUI,
         &[
             "--vehicle",
             v.name(),
@@ -285,8 +286,8 @@ fn injected_failures() {
 #[test]
 fn a_nominal_flight_across_three_processes() {
     let v = TestVehicle::new();
-    let mut gui = Proc::spawn("uav_gui", &["--vehicle", v.name(), "--exit-after-land"]);
-    let mut dec = Proc::spawn("uav_dec", &["--vehicle", v.name(), "--idle-exit", "1"]);
+    let mut gui = Proc::spawn(GUI, &["--vehicle", v.name(), "--exit-after-land"]);
+    let mut dec = Proc::spawn(DEC, &["--vehicle", v.name(), "--idle-exit", "1"]);
     let mut player = FakePlayer::join(&v.vehicle);
     let start = Instant::now();
     let mut events = Vec::new();
@@ -348,7 +349,7 @@ fn a_nominal_flight_across_three_processes() {
 #[test]
 fn sigterm_stops_a_program_in_good_order() {
     let v = TestVehicle::new();
-    let mut dec = Proc::spawn("uav_dec", &["--vehicle", v.name()]);
+    let mut dec = Proc::spawn(DEC, &["--vehicle", v.name()]);
     dec.wait_for(Stream::Out, "DEC ready");
     assert_eq!(
         program_status(&v.vehicle, "DEC").unwrap(),
@@ -363,19 +364,4 @@ fn sigterm_stops_a_program_in_good_order() {
         program_status(&v.vehicle, "DEC").unwrap(),
         ProgramStatus::Absent
     );
-}
-
-#[test]
-fn echo_answers_ping_with_pong() {
-    let v = TestVehicle::new();
-    let mut echo = Proc::spawn("echo", &[v.name(), "ECHO"]);
-    let mut player = FakePlayer::join(&v.vehicle);
-    player.call("ECHO", "ping", vec![Value::Int(7), Value::Text("x".into())]);
-    assert_eq!(
-        player.expect("pong"),
-        [Value::Int(7), Value::Text("x".into())]
-    );
-    echo.wait_for(Stream::Out, r#"echo: ECHO.ping(7, "x")"#);
-    echo.signal("INT");
-    assert!(echo.wait_exit().success());
 }

@@ -14,7 +14,7 @@
 //! A command the server does not take (no server running) is reported on standard error and
 //! answered with no event: the mission then waits, and its supervisor sees why in the log.
 //!
-//! `cargo run -p petrel-programs --example auv_gui -- --vehicle auv`
+//! `cargo run -p auv --bin auv-gui -- --vehicle auv`
 
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
@@ -24,7 +24,7 @@ use petrel_programs::{Call, Program, ProgramError, Value};
 
 /// The simulated GUI program of the AUV mission.
 #[derive(Debug, Parser)]
-#[command(name = "auv_gui")]
+#[command(name = "auv-gui")]
 struct Args {
     /// The vehicle to join.
     #[arg(long, value_name = "NAME")]
@@ -58,7 +58,7 @@ fn depth(program: &mut Program) -> String {
 fn command(program: &mut Program, commands: &[(&str, Vec<Value>)]) -> bool {
     for (function, args) in commands {
         if let Err(e) = program.call("CAN", function, args.clone()) {
-            eprintln!("auv_gui: {e}");
+            eprintln!("auv-gui: {e}");
             return false;
         }
     }
@@ -87,14 +87,14 @@ fn handle(
         "transit" => {
             let area = call.text(0)?.to_owned();
             if command(program, &[thrusters(1200)]) {
-                eprintln!("auv_gui: transit to {area} at {}", depth(program));
+                eprintln!("auv-gui: transit to {area} at {}", depth(program));
                 *under_way = Some(start("area_reached", &area, args.transit));
             }
         }
         "survey" => {
             let area = call.text(0)?.to_owned();
             if command(program, &[thrusters(600)]) {
-                eprintln!("auv_gui: survey of {area} at {}", depth(program));
+                eprintln!("auv-gui: survey of {area} at {}", depth(program));
                 *under_way = Some(start("survey_done", &area, args.survey));
             }
         }
@@ -104,12 +104,12 @@ fn handle(
                 program,
                 &[("DepthCmd", vec![Value::Float(0.0)]), thrusters(1000)],
             ) {
-                eprintln!("auv_gui: surfacing from {}", depth(program));
+                eprintln!("auv-gui: surfacing from {}", depth(program));
             }
         }
         "stop" => {
             *under_way = None;
-            eprintln!("auv_gui: stopped at {}", depth(program));
+            eprintln!("auv-gui: stopped at {}", depth(program));
         }
         _ => return Err(call.unknown_function()),
     }
@@ -121,13 +121,13 @@ fn main() -> ExitCode {
     let mut program = match Program::connect(&args.vehicle, "GUI") {
         Ok(p) => p,
         Err(e) => {
-            eprintln!("auv_gui: {e}");
+            eprintln!("auv-gui: {e}");
             return ExitCode::from(2);
         }
     };
     // Subscribe now: the depth is there when the first call asks for it.
     if let Err(e) = program.signals() {
-        eprintln!("auv_gui: {e}");
+        eprintln!("auv-gui: {e}");
     }
     let mut under_way: Option<Manoeuvre> = None;
     loop {
@@ -137,22 +137,22 @@ fn main() -> ExitCode {
         match program.recv(timeout) {
             Ok(Some(call)) => {
                 if let Err(e) = handle(&mut program, &call, &args, &mut under_way) {
-                    eprintln!("auv_gui: {e}");
+                    eprintln!("auv-gui: {e}");
                 }
             }
             Ok(None) => {}
             Err(e) if e.is_termination() || e.is_fatal() => {
                 if e.is_fatal() {
-                    eprintln!("auv_gui: {e}");
+                    eprintln!("auv-gui: {e}");
                 }
                 break;
             }
-            Err(e) => eprintln!("auv_gui: {e}"),
+            Err(e) => eprintln!("auv-gui: {e}"),
         }
         if under_way.as_ref().is_some_and(|m| Instant::now() >= m.due) {
             if let Some(m) = under_way.take() {
                 if let Err(e) = program.emit(m.event, vec![Value::Text(m.area)]) {
-                    eprintln!("auv_gui: {e}");
+                    eprintln!("auv-gui: {e}");
                 }
             }
         }
@@ -160,7 +160,7 @@ fn main() -> ExitCode {
     match program.close(Duration::from_secs(2)) {
         Ok(_) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("auv_gui: {e}");
+            eprintln!("auv-gui: {e}");
             ExitCode::FAILURE
         }
     }

@@ -1,16 +1,16 @@
 //! Flies a mission in pure simulation and writes its map and depth plot.
 //!
 //! ```text
-//! cargo run -p petrel-redermor --example redermor_run -- MISSION.toml OUT_DIR [SCENARIO.toml]
+//! cargo run -p redermor --example redermor_run -- MISSION.toml OUT_DIR [SCENARIO.toml]
 //! ```
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use petrel_redermor::mission::Mission;
-use petrel_redermor::plot;
-use petrel_redermor::sensors::Scenario;
-use petrel_redermor::sim::{MissionRun, RunConfig};
+use redermor::mission::Mission;
+use redermor::plot;
+use redermor::sensors::Scenario;
+use redermor::sim::{MissionRun, RunConfig};
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();

@@ -2,7 +2,7 @@
 //! enter, where it ends, and the vehicle's parameters the planner needs.
 //!
 //! The file is TOML in the local metric frame (`x` east, `y` north, metres), so no geodesy is
-//! needed; `redermor/README.md` documents the format with an example. [`Mission::from_toml`]
+//! needed; `vehicles/redermor/domain/README.md` documents the format with an example. [`Mission::from_toml`]
 //! reads and validates it and reports every problem found, each naming its field the way the
 //! file spells it (`area[1].polygon`, `vehicle.line_overlap`, `start`...).
 

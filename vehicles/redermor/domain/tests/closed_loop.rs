@@ -6,13 +6,13 @@ mod common;
 
 use common::*;
 use geo::{Contains, Intersects, Line, Point};
-use petrel_redermor::evt::{AlarmReason, MissionEvent, OperatorRequest};
-use petrel_redermor::geom::{self, pos, Position};
-use petrel_redermor::mission::{Current, Mission};
-use petrel_redermor::plot::Trace;
-use petrel_redermor::sensors::{Fault, Reading, Scenario, ScheduledFault, Sensor};
-use petrel_redermor::sim::{MissionRun, RunConfig, RunOutcome, Simulator};
-use petrel_redermor::vehicle::{Commands, VehicleConfig};
+use redermor::evt::{AlarmReason, MissionEvent, OperatorRequest};
+use redermor::geom::{self, pos, Position};
+use redermor::mission::{Current, Mission};
+use redermor::plot::Trace;
+use redermor::sensors::{Fault, Reading, Scenario, ScheduledFault, Sensor};
+use redermor::sim::{MissionRun, RunConfig, RunOutcome, Simulator};
+use redermor::vehicle::{Commands, VehicleConfig};
 
 /// The vehicle's track never enters a forbidden zone: no recorded point inside one, and no
 /// segment between consecutive points touching one.

@@ -2,7 +2,7 @@
 
 mod common;
 
-use petrel_redermor::mission::{DepthTarget, EndArea, Mission, Problem};
+use redermor::mission::{DepthTarget, EndArea, Mission, Problem};
 
 /// A valid mission, in pieces so that each test can spoil one.
 fn text(area: &str, forbidden: &str, start: &str, end: &str, vehicle: &str) -> String {

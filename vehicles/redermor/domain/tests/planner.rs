@@ -4,9 +4,9 @@
 mod common;
 
 use common::*;
-use petrel_redermor::geom::{self, pos, Position};
-use petrel_redermor::mission::{representative_point, Current, DepthTarget, Mission};
-use petrel_redermor::plan::{LegKind, PlanError, Planner, StageKind, Trajectory};
+use redermor::geom::{self, pos, Position};
+use redermor::mission::{representative_point, Current, DepthTarget, Mission};
+use redermor::plan::{LegKind, PlanError, Planner, StageKind, Trajectory};
 
 /// Every leg of `t` keeps the safety margin from every forbidden zone (1 mm of rounding
 /// allowed), measured with geo.

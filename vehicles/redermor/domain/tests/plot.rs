@@ -4,13 +4,13 @@
 mod common;
 
 use common::*;
-use petrel_redermor::geom::pos;
-use petrel_redermor::plot::{
+use plotters::style::RGBColor;
+use redermor::geom::pos;
+use redermor::plot::{
     self, Trace, TraceEvent, TracePoint, FORBIDDEN, PLANNED, SURVEY_AREA, VEHICLE,
 };
-use petrel_redermor::sensors::Scenario;
-use petrel_redermor::sim::{MissionRun, RunConfig};
-use plotters::style::RGBColor;
+use redermor::sensors::Scenario;
+use redermor::sim::{MissionRun, RunConfig};
 
 /// Parses `svg` to the end; returns the element names seen.
 fn elements(svg: &str) -> Vec<String> {

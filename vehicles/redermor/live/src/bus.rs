@@ -1,14 +1,15 @@
-//! The bus of the Redermor bench (missions/redermor/redermor.dbc): the sensors' readings as
-//! message signals and back, and the bench clock.
+//! Redermor's bus (missions/redermor/redermor.dbc): the sensors' readings as message signals
+//! and back, and the simulator's clock (the message `BenchTime`, named after the paper's test
+//! bench).
 //!
 //! Every reading goes out as one message whose signals carry its fields under the same names
 //! (`Depth.depth`, `Ahrs.heading`...); `BenchTime.time_ms` is the simulated time, which the
 //! programs stamp the readings with: the simulator may run faster than the wall clock, the
 //! programs then see the vehicle's time, not theirs.
 
-use petrel_redermor::sensors::{Reading, Sample};
+use redermor::sensors::{Reading, Sample};
 
-/// The message of the bench clock, and its signal (milliseconds of simulated time).
+/// The message of the simulator's clock, and its signal (milliseconds of simulated time).
 pub const TIME_SIGNAL: &str = "BenchTime.time_ms";
 
 /// The message name and signals of a reading, in the DBC's units.
@@ -137,12 +138,12 @@ pub fn decode(message: &str, get: impl Fn(&str) -> Option<f64>) -> Option<Readin
 }
 
 /// The readings new since the last call, from a table of latest values
-/// `(MESSAGE.signal, value, received at)`, stamped with the bench's time.
+/// `(MESSAGE.signal, value, received at)`, stamped with the simulator's time.
 #[derive(Debug, Default)]
 pub struct ReadingTracker {
     /// For each message of [`READING_MESSAGES`], when its newest value was received.
     seen: [u64; 8],
-    /// The bench's time (µs), from [`TIME_SIGNAL`].
+    /// The simulator's time (µs), from [`TIME_SIGNAL`].
     time_us: u64,
 }
 
@@ -152,7 +153,7 @@ impl ReadingTracker {
         Self::default()
     }
 
-    /// The bench's time (µs) last seen.
+    /// The simulator's time (µs) last seen.
     pub fn time_us(&self) -> u64 {
         self.time_us
     }

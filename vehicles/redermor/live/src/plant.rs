@@ -1,13 +1,13 @@
 //! The Redermor simulator on the bus: [`RedermorPlant`] runs [`Simulator`] (the vehicle, its
 //! sensors at their rates, the scenario's faults) under the supervisor's frames, and sends its
-//! readings as the bench's messages.
+//! readings as the messages of Redermor's bus.
 //!
 //! The vehicle waits at the surface, its time at 0 and its sensors repeating their first
 //! readings, until the supervisor first enables the thrusters (the mission's start): the
 //! scenario's times count from then. The simulated time then runs `speed` times faster than
 //! the bus's clock, in steps of 100 ms, so a
 //! mission of an hour flies in minutes; the readings of one wall-clock tick are sent once each
-//! (the newest of every sensor), with the bench's time. The thrusters obey the last
+//! (the newest of every sensor), with the simulator's time. The thrusters obey the last
 //! `ThrusterCmd` and `DepthCmd` while the supervisor's heartbeat is fresh on the bus's clock
 //! (300 ms); without it they stop, as the vehicle's engine nodes do.
 
@@ -17,13 +17,13 @@ use std::time::Duration;
 
 use petrel_can_bridge::dbc::{Dbc, DecodeOutcome};
 use petrel_can_bridge::frame::Frame;
-use petrel_can_bridge::sim::Plant;
-use petrel_redermor::mission::Mission;
-use petrel_redermor::sensors::{Fault, Sample, Scenario};
-use petrel_redermor::sim::Simulator;
-use petrel_redermor::vehicle::{Commands, VehicleConfig};
+use petrel_can_bridge::plant::Plant;
+use redermor::mission::Mission;
+use redermor::sensors::{Fault, Sample, Scenario};
+use redermor::sim::Simulator;
+use redermor::vehicle::{Commands, VehicleConfig};
 
-use crate::bench;
+use crate::bus;
 
 /// How long the thrusters run on after the last heartbeat (µs of the bus's clock).
 pub const HEARTBEAT_TIMEOUT_US: u64 = 300_000;
@@ -137,16 +137,7 @@ impl Plant for RedermorPlant {
         let Some(m) = self.dbc.message(dm.message) else {
             return;
         };
-        let value = |name: &str| {
-            dm.signals
-                .iter()
-                .find(|s| {
-                    m.signals
-                        .get(s.signal.signal)
-                        .is_some_and(|g| g.name == name)
-                })
-                .map(|s| s.physical)
-        };
+        let value = |name: &str| dm.value(&self.dbc, name);
         match m.name.as_str() {
             "ThrusterCmd" => {
                 if let Some(v) = value("rpm_left") {
@@ -211,7 +202,7 @@ impl Plant for RedermorPlant {
 }
 
 /// What a Redermor simulator is made of, read from its files and checked before the bus is
-/// opened: `petrel bridge --sim redermor` (the memory bus's thread) and `redermor-sim` (a
+/// opened: `redermor-bridge` (the memory bus's thread) and `redermor-sim` (a
 /// process on a SocketCAN interface) both build their plant from one.
 pub struct PlantFiles {
     mission: Mission,
@@ -232,17 +223,16 @@ impl std::fmt::Debug for PlantFiles {
 impl PlantFiles {
     /// Reads the mission file (where the vehicle starts, the seabed) and the scenario file
     /// (current, faults at their times; none: a calm sea), checks `speed` (finite, above 0)
-    /// and creates the trace file. An error names the file, or the option (`option_prefix`,
-    /// such as `--sim-` or `--`, spells the options as the caller's command line does).
+    /// and creates the trace file. An error names the file, or the option (`--speed`, as
+    /// `redermor-bridge` and `redermor-sim` spell it).
     pub fn read(
         mission: &Path,
         scenario: Option<&Path>,
         speed: f64,
         trace: Option<&Path>,
-        option_prefix: &str,
     ) -> Result<Self, String> {
         if !(speed.is_finite() && speed > 0.0) {
-            return Err(format!("{option_prefix}speed {speed}: a factor above 0"));
+            return Err(format!("--speed {speed}: a factor above 0"));
         }
         let read =
             |p: &Path| std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()));
@@ -280,7 +270,7 @@ impl PlantFiles {
 }
 
 impl RedermorPlant {
-    /// The frames of the newest reading of each sensor in `samples`, after the bench's time.
+    /// The frames of the newest reading of each sensor in `samples`, after the simulator's time.
     fn frames(&self, samples: &[Sample]) -> Vec<Frame> {
         let mut frames = Vec::new();
         // The newest reading of each sensor: the programs read latest values.
@@ -298,7 +288,7 @@ impl RedermorPlant {
             frames.push(f);
         }
         for s in newest.into_iter().rev() {
-            let (message, signals) = bench::encode(&s.reading);
+            let (message, signals) = bus::encode(&s.reading);
             // A value out of the DBC's range is not sent: the sensor says nothing this tick.
             if let Ok(f) = self.dbc.encode(message, &signals) {
                 frames.push(f);

@@ -11,17 +11,17 @@
 //!   thrusters' fault as an alarm.
 
 use petrel_programs::{ArgError, Call, Value};
-use petrel_redermor::evt::{AlarmReason, EventListener, EvtConfig, MissionEvent, OperatorRequest};
-use petrel_redermor::gdd::{Gdd, NavState};
-use petrel_redermor::geom::{self, Position};
-use petrel_redermor::guidance::{Guidance, GuidanceConfig, GuidanceEvent, Setpoint};
-use petrel_redermor::mission::{Current, DepthTarget, Mission};
-use petrel_redermor::pilot::{Pilot, PilotConfig};
-use petrel_redermor::plan::{Leg, LegKind, PlanError, Planner, Survey, Trajectory};
-use petrel_redermor::sensors::{Reading, Sensor};
-use petrel_redermor::vehicle::Commands;
+use redermor::evt::{AlarmReason, EventListener, EvtConfig, MissionEvent, OperatorRequest};
+use redermor::gdd::{Gdd, NavState};
+use redermor::geom::{self, Position};
+use redermor::guidance::{Guidance, GuidanceConfig, GuidanceEvent, Setpoint};
+use redermor::mission::{Current, DepthTarget, Mission};
+use redermor::pilot::{Pilot, PilotConfig};
+use redermor::plan::{Leg, LegKind, PlanError, Planner, Survey, Trajectory};
+use redermor::sensors::{Reading, Sensor};
+use redermor::vehicle::Commands;
 
-use crate::bench::ReadingTracker;
+use crate::bus::ReadingTracker;
 
 /// An event a program sends: as which program, its name and parameters.
 #[derive(Clone, Debug, PartialEq)]
@@ -636,7 +636,7 @@ impl Nav {
         }
         let now = self.tracker.time_us();
         self.gdd.advance(now);
-        // The vehicle's time stands still until the thrusters are first enabled (the bench
+        // The vehicle's time stands still until the thrusters are first enabled (the simulator
         // starts then): the step still runs, with no time passing, so that they are.
         let dt = now.saturating_sub(self.last_time_us) as f64 / 1e6;
         self.last_time_us = self.last_time_us.max(now);
@@ -907,7 +907,7 @@ mod tests {
     fn bench() -> Mission {
         let path = concat!(
             env!("CARGO_MANIFEST_DIR"),
-            "/../missions/redermor/bench/mission.toml"
+            "/../../../missions/redermor/sim/mission.toml"
         );
         Mission::from_toml(&std::fs::read_to_string(path).unwrap()).unwrap()
     }

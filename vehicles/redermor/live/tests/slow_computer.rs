@@ -10,13 +10,13 @@
 use std::collections::BTreeMap;
 
 use petrel_programs::{Call, Value};
-use petrel_redermor::geom::{self, Position};
-use petrel_redermor::mission::Mission;
-use petrel_redermor::sensors::{Sample, Scenario};
-use petrel_redermor::sim::Simulator;
-use petrel_redermor::vehicle::{Commands, VehicleConfig};
-use petrel_redermor_live::bench::{encode, TIME_SIGNAL};
-use petrel_redermor_live::programs::{Answer, Nav};
+use redermor::geom::{self, Position};
+use redermor::mission::Mission;
+use redermor::sensors::{Sample, Scenario};
+use redermor::sim::Simulator;
+use redermor::vehicle::{Commands, VehicleConfig};
+use redermor_live::bus::{encode, TIME_SIGNAL};
+use redermor_live::programs::{Answer, Nav};
 
 /// The simulator's step (µs): the data server repeats the last commands on the bus at this
 /// rate or faster, so the thrusters' heartbeat stays fresh between NAV's steps.
@@ -25,7 +25,7 @@ const SIM_STEP_US: u64 = 100_000;
 fn bench() -> Mission {
     let path = concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../missions/redermor/bench/mission.toml"
+        "/../../../missions/redermor/sim/mission.toml"
     );
     Mission::from_toml(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
@@ -214,7 +214,7 @@ fn on_a_fast_computer_too_the_vehicle_surfaces_at_the_end_and_stays() {
 }
 
 /// A computer so slow or loaded that NAV steers only every 2 to 4 s of the vehicle's time
-/// (the VM bench's emulation has such stalls): braking to a stop at the surface must not
+/// (the VM's emulation has such stalls): braking to a stop at the surface must not
 /// depend on a control step seeing the speed within 0.05 m/s of zero. Before the pilot's
 /// brake faded with the speed, a fixed astern order held between those steps drove the
 /// vehicle astern past zero, NAV braked on for its 30 s limit and the vehicle coasted on
@@ -246,7 +246,7 @@ fn a_control_step_of_seconds_still_brakes_to_a_stop_at_the_route_end() {
 
 /// The operator's `return` mid-transit: the nets stop GUI (`GUI.stop`), ask GDD where the
 /// vehicle is and PLN for a route from there, which on a slow computer takes minutes of the
-/// vehicle's time (two and a half in a VM bench run). The vehicle must wait near where it was
+/// vehicle's time (two and a half in a VM run). The vehicle must wait near where it was
 /// stopped, at its depth: cruising on on its heading, as it did, it goes 270 m further here,
 /// and in that VM run it crossed the buoy field and the new route started far behind it.
 #[test]

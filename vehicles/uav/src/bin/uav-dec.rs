@@ -13,7 +13,7 @@
 //! supervisor, `--crash-after-answers N` exits with code 3 once its Nth answer is acknowledged
 //! by the player, in its first run only (not once `petrel up` has restarted it).
 //!
-//! `cargo run -p petrel-programs --example uav_dec -- --vehicle uav`
+//! `cargo run -p uav --bin uav-dec -- --vehicle uav`
 
 use std::collections::VecDeque;
 use std::process::ExitCode;
@@ -26,7 +26,7 @@ use petrel_programs::{
 
 /// The simulated DEC program of the UAV mission.
 #[derive(Debug, Parser)]
-#[command(name = "uav_dec")]
+#[command(name = "uav-dec")]
 struct Args {
     /// The vehicle to join.
     #[arg(long, value_name = "NAME")]
@@ -171,7 +171,7 @@ impl Dec {
                 let before = self.remaining.len();
                 self.remaining.retain(|w| w.payload != payload);
                 println!(
-                    "uav_dec: replanned without the {payload}: {} of {before} waypoints left",
+                    "uav-dec: replanned without the {payload}: {} of {before} waypoints left",
                     self.remaining.len()
                 );
                 self.answer("replanned", vec![]);
@@ -192,7 +192,7 @@ fn main() -> ExitCode {
     let vehicle = match Vehicle::new(&args.vehicle) {
         Ok(v) => v,
         Err(e) => {
-            eprintln!("uav_dec: {e}");
+            eprintln!("uav-dec: {e}");
             return ExitCode::from(2);
         }
     };
@@ -203,7 +203,7 @@ fn main() -> ExitCode {
     let mut program = match Program::connect_with(&vehicle, &["DEC"], config) {
         Ok(p) => p,
         Err(e) => {
-            eprintln!("uav_dec: {e}");
+            eprintln!("uav-dec: {e}");
             return ExitCode::from(2);
         }
     };
@@ -213,7 +213,7 @@ fn main() -> ExitCode {
         args.waypoints.clone()
     };
     println!(
-        "uav_dec: DEC ready on vehicle {} with {} waypoints (speed x{})",
+        "uav-dec: DEC ready on vehicle {} with {} waypoints (speed x{})",
         args.vehicle,
         waypoints.len(),
         args.speed
@@ -238,13 +238,13 @@ fn main() -> ExitCode {
             let Some(a) = dec.answers.pop_front() else {
                 break;
             };
-            println!("uav_dec: DEC emits {}", event_text(a.event, &a.params));
+            println!("uav-dec: DEC emits {}", event_text(a.event, &a.params));
             if let Err(e) = program.emit(a.event, a.params) {
-                eprintln!("uav_dec: {e}");
+                eprintln!("uav-dec: {e}");
             }
             answered += 1;
             if crash_after == Some(answered) {
-                println!("uav_dec: crashing after {answered} answers (--crash-after-answers)");
+                println!("uav-dec: crashing after {answered} answers (--crash-after-answers)");
                 status = ExitCode::from(3);
                 break 'run;
             }
@@ -253,7 +253,7 @@ fn main() -> ExitCode {
         let idle_deadline = idle.zip(last_call).map(|(d, last)| last + d);
         if dec.answers.is_empty() && idle_deadline.is_some_and(|d| now >= d) {
             println!(
-                "uav_dec: no call for {:.1} s, leaving",
+                "uav-dec: no call for {:.1} s, leaving",
                 args.idle_exit.unwrap_or(0.0)
             );
             break;
@@ -268,30 +268,30 @@ fn main() -> ExitCode {
         match program.recv(next.map(|d| d.saturating_duration_since(now))) {
             Ok(Some(call)) => {
                 last_call = Some(Instant::now());
-                println!("uav_dec: call {call}");
+                println!("uav-dec: call {call}");
                 if let Err(e) = dec.handle(&call) {
-                    eprintln!("uav_dec: error: {e}; the call is ignored");
+                    eprintln!("uav-dec: error: {e}; the call is ignored");
                 }
             }
             Ok(None) => {}
             Err(e) if e.is_termination() => {
-                println!("uav_dec: termination requested, leaving");
+                println!("uav-dec: termination requested, leaving");
                 break;
             }
             Err(e) if e.is_fatal() => {
-                eprintln!("uav_dec: {e}");
+                eprintln!("uav-dec: {e}");
                 status = ExitCode::FAILURE;
                 break;
             }
-            Err(e) => eprintln!("uav_dec: error: {e}"),
+            Err(e) => eprintln!("uav-dec: error: {e}"),
         }
     }
     match program.close(Duration::from_secs(2)) {
         Ok(stats) => println!(
-            "uav_dec: done: {} calls, {} events delivered, {} dropped, {} undelivered",
+            "uav-dec: done: {} calls, {} events delivered, {} dropped, {} undelivered",
             stats.calls, stats.delivered, stats.dropped, stats.queued
         ),
-        Err(e) => eprintln!("uav_dec: {e}"),
+        Err(e) => eprintln!("uav-dec: {e}"),
     }
     status
 }

@@ -21,7 +21,7 @@
 //! half-way through the Nth transit. The process stops on SIGINT or SIGTERM, or after
 //! `touchdown` with `--exit-after-land`.
 //!
-//! `cargo run -p petrel-programs --example uav_gui -- --vehicle uav`
+//! `cargo run -p uav --bin uav-gui -- --vehicle uav`
 
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
@@ -33,7 +33,7 @@ use petrel_programs::{
 
 /// The simulated GUI and PLD programs of the UAV mission.
 #[derive(Debug, Parser)]
-#[command(name = "uav_gui")]
+#[command(name = "uav-gui")]
 struct Args {
     /// The vehicle to join.
     #[arg(long, value_name = "NAME")]
@@ -108,7 +108,7 @@ impl Simulator {
             params: vec![],
         }) {
             println!(
-                "uav_gui: GUI abandons the manoeuvre that would end with {}",
+                "uav-gui: GUI abandons the manoeuvre that would end with {}",
                 old.event
             );
         }
@@ -164,14 +164,14 @@ impl Simulator {
             ("PLD", "use_payload") => {
                 call.expect_arity(1)?;
                 let payload = call.text(0)?;
-                println!("uav_gui: PLD uses the {payload}");
+                println!("uav-gui: PLD uses the {payload}");
                 self.payload = Some(payload.to_owned());
             }
             ("PLD", "stop_payload") => {
                 call.expect_arity(0)?;
                 match self.payload.take() {
-                    Some(payload) => println!("uav_gui: PLD stops the {payload}"),
-                    None => println!("uav_gui: PLD has no payload running"),
+                    Some(payload) => println!("uav-gui: PLD stops the {payload}"),
+                    None => println!("uav-gui: PLD has no payload running"),
                 }
             }
             _ => return Err(call.unknown_function()),
@@ -211,7 +211,7 @@ fn main() -> ExitCode {
     let vehicle = match Vehicle::new(&args.vehicle) {
         Ok(v) => v,
         Err(e) => {
-            eprintln!("uav_gui: {e}");
+            eprintln!("uav-gui: {e}");
             return ExitCode::from(2);
         }
     };
@@ -222,12 +222,12 @@ fn main() -> ExitCode {
     let mut program = match Program::connect_with(&vehicle, &["GUI", "PLD"], config) {
         Ok(p) => p,
         Err(e) => {
-            eprintln!("uav_gui: {e}");
+            eprintln!("uav-gui: {e}");
             return ExitCode::from(2);
         }
     };
     println!(
-        "uav_gui: GUI and PLD ready on vehicle {} (speed x{})",
+        "uav-gui: GUI and PLD ready on vehicle {} (speed x{})",
         args.vehicle, args.speed
     );
     let mut sim = Simulator {
@@ -242,18 +242,18 @@ fn main() -> ExitCode {
     while !(sim.landed && sim.args.exit_after_land) {
         while let Some(due) = sim.take_due(Instant::now()) {
             println!(
-                "uav_gui: {} emits {}",
+                "uav-gui: {} emits {}",
                 due.program,
                 event_text(due.event, &due.params)
             );
             if due.event == "engine_failure" {
                 if let Some(lost) = sim.manoeuvre.take() {
-                    println!("uav_gui: the engine is lost, no {} to come", lost.event);
+                    println!("uav-gui: the engine is lost, no {} to come", lost.event);
                 }
             }
             sim.landed |= due.event == "touchdown";
             if let Err(e) = program.emit_as(due.program, due.event, due.params) {
-                eprintln!("uav_gui: {e}");
+                eprintln!("uav-gui: {e}");
             }
         }
         if sim.landed && sim.args.exit_after_land {
@@ -264,30 +264,30 @@ fn main() -> ExitCode {
             .map(|d| d.saturating_duration_since(Instant::now()));
         match program.recv(timeout) {
             Ok(Some(call)) => {
-                println!("uav_gui: call {call}");
+                println!("uav-gui: call {call}");
                 if let Err(e) = sim.handle(&call) {
-                    eprintln!("uav_gui: error: {e}; the call is ignored");
+                    eprintln!("uav-gui: error: {e}; the call is ignored");
                 }
             }
             Ok(None) => {}
             Err(e) if e.is_termination() => {
-                println!("uav_gui: termination requested, leaving");
+                println!("uav-gui: termination requested, leaving");
                 break;
             }
             Err(e) if e.is_fatal() => {
-                eprintln!("uav_gui: {e}");
+                eprintln!("uav-gui: {e}");
                 status = ExitCode::FAILURE;
                 break;
             }
-            Err(e) => eprintln!("uav_gui: error: {e}"),
+            Err(e) => eprintln!("uav-gui: error: {e}"),
         }
     }
     match program.close(Duration::from_secs(2)) {
         Ok(stats) => println!(
-            "uav_gui: done: {} calls, {} events delivered, {} dropped, {} undelivered",
+            "uav-gui: done: {} calls, {} events delivered, {} dropped, {} undelivered",
             stats.calls, stats.delivered, stats.dropped, stats.queued
         ),
-        Err(e) => eprintln!("uav_gui: {e}"),
+        Err(e) => eprintln!("uav-gui: {e}"),
     }
     status
 }

@@ -3,8 +3,8 @@
 #![allow(dead_code)]
 
 use geo::{Contains, Distance, Euclidean, Intersects, Line, Point, Polygon};
-use petrel_redermor::geom::Position;
-use petrel_redermor::mission::Mission;
+use redermor::geom::Position;
+use redermor::mission::Mission;
 
 pub const TWO_AREAS: &str = include_str!("../../missions/two_areas.toml");
 pub const ISLAND_PASSAGE: &str = include_str!("../../missions/island_passage.toml");

@@ -16,8 +16,8 @@ use std::time::Duration;
 
 use clap::{Parser, ValueEnum};
 use petrel_programs::{Program, ProgramError, Value};
-use petrel_redermor::mission::Mission;
-use petrel_redermor_live::programs::{parse_requests, Answer, Evt, Nav, Pln};
+use redermor::mission::Mission;
+use redermor_live::programs::{parse_requests, Answer, Evt, Nav, Pln};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 #[value(rename_all = "UPPER")]
@@ -40,7 +40,7 @@ struct Args {
     /// Which program(s) this process plays.
     #[arg(long, value_enum)]
     role: Role,
-    /// The mission file (redermor/missions/*.toml).
+    /// The mission file (missions/redermor/sim/mission.toml, vehicles/redermor/domain/missions/*.toml).
     #[arg(long, value_name = "FILE")]
     mission: PathBuf,
     /// EVT: the operator's requests, one a line: `SECONDS return` or `SECONDS inspect X Y`

@@ -3,7 +3,7 @@
 //!
 //! ```text
 //! redermor-sim --bus vcan0 --dbc missions/redermor/redermor.dbc \
-//!     --mission missions/redermor/bench/mission.toml --scenario missions/redermor/bench/leak.toml \
+//!     --mission missions/redermor/sim/mission.toml --scenario missions/redermor/sim/leak.toml \
 //!     --speed 20 --trace trace.csv
 //! ```
 //!
@@ -22,9 +22,9 @@ use std::sync::Arc;
 use clap::Parser;
 use petrel_can_bridge::bus::{SocketCanBus, SocketCanOptions};
 use petrel_can_bridge::dbc::Dbc;
-use petrel_can_bridge::sim::run_plant;
+use petrel_can_bridge::plant::run_plant;
 use petrel_can_bridge::SystemClock;
-use petrel_redermor_live::plant::{PlantFiles, RedermorPlant};
+use redermor_live::plant::{PlantFiles, RedermorPlant};
 
 /// The Redermor simulator on a SocketCAN interface.
 #[derive(Debug, Parser)]
@@ -68,7 +68,6 @@ fn run(args: &Args) -> Result<(), String> {
         args.scenario.as_deref(),
         args.speed,
         args.trace.as_deref(),
-        "--",
     )?;
     let mut plant: RedermorPlant = files.build(Arc::new(dbc));
     // The vehicle's nodes send no error frames and want none: the data server watches the
