@@ -11,7 +11,7 @@
 //! `ThrusterCmd` and `DepthCmd` while the supervisor's heartbeat is fresh on the bus's clock
 //! (300 ms); without it they stop, as the vehicle's engine nodes do.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -201,6 +201,24 @@ impl Plant for RedermorPlant {
     }
 }
 
+/// The simulator's options, the same for both its hosts (`redermor-bridge`, `redermor-sim`).
+#[derive(Clone, Debug, clap::Args)]
+pub struct SimArgs {
+    /// The mission file (where the vehicle starts, the seabed).
+    #[arg(long, value_name = "FILE")]
+    pub mission: PathBuf,
+    /// The scenario file (current, faults at their times); default: a calm sea, no fault.
+    #[arg(long, value_name = "FILE")]
+    pub scenario: Option<PathBuf>,
+    /// How many times faster than the wall clock the vehicle's time runs.
+    #[arg(long, value_name = "FACTOR", default_value_t = 1.0)]
+    pub speed: f64,
+    /// Write the vehicle's true track here (CSV, one line a second of its time), for
+    /// `petrel plot` and the tests.
+    #[arg(long, value_name = "FILE")]
+    pub trace: Option<PathBuf>,
+}
+
 /// What a Redermor simulator is made of, read from its files and checked before the bus is
 /// opened: `redermor-bridge` (the memory bus's thread) and `redermor-sim` (a
 /// process on a SocketCAN interface) both build their plant from one.
@@ -223,14 +241,14 @@ impl std::fmt::Debug for PlantFiles {
 impl PlantFiles {
     /// Reads the mission file (where the vehicle starts, the seabed) and the scenario file
     /// (current, faults at their times; none: a calm sea), checks `speed` (finite, above 0)
-    /// and creates the trace file. An error names the file, or the option (`--speed`, as
-    /// `redermor-bridge` and `redermor-sim` spell it).
-    pub fn read(
-        mission: &Path,
-        scenario: Option<&Path>,
-        speed: f64,
-        trace: Option<&Path>,
-    ) -> Result<Self, String> {
+    /// and creates the trace file, as `args` give them. An error names the file, or the option.
+    pub fn read(args: &SimArgs) -> Result<Self, String> {
+        let (mission, scenario, speed, trace) = (
+            args.mission.as_path(),
+            args.scenario.as_deref(),
+            args.speed,
+            args.trace.as_deref(),
+        );
         if !(speed.is_finite() && speed > 0.0) {
             return Err(format!("--speed {speed}: a factor above 0"));
         }

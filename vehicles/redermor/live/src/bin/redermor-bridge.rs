@@ -13,13 +13,12 @@
 //!
 //! [`RedermorPlant`]: redermor_live::plant::RedermorPlant
 
-use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::Parser;
 use petrel_can_bridge::command::{main as bridge, BridgeArgs};
 use petrel_can_bridge::plant::PlantFactory;
-use redermor_live::plant::PlantFiles;
+use redermor_live::plant::{PlantFiles, SimArgs};
 
 /// Redermor's CAN data server, with its simulator on the memory bus.
 #[derive(Debug, Parser)]
@@ -27,31 +26,14 @@ use redermor_live::plant::PlantFiles;
 struct Args {
     #[command(flatten)]
     bridge: BridgeArgs,
-    /// The mission file (where the vehicle starts, the seabed).
-    #[arg(long, value_name = "FILE")]
-    mission: PathBuf,
-    /// The scenario file (current, faults at their times); default: a calm sea, no fault.
-    #[arg(long, value_name = "FILE")]
-    scenario: Option<PathBuf>,
-    /// How many times faster than the wall clock the vehicle's time runs.
-    #[arg(long, value_name = "FACTOR", default_value_t = 1.0)]
-    speed: f64,
-    /// Write the vehicle's true track here (CSV, one line a second of its time), for
-    /// `petrel plot` and the tests.
-    #[arg(long, value_name = "FILE")]
-    trace: Option<PathBuf>,
+    #[command(flatten)]
+    sim: SimArgs,
 }
 
 fn main() -> ExitCode {
-    let Args {
-        bridge: args,
-        mission,
-        scenario,
-        speed,
-        trace,
-    } = Args::parse();
+    let Args { bridge: args, sim } = Args::parse();
     let plant: PlantFactory = Box::new(move |dbc| {
-        let files = PlantFiles::read(&mission, scenario.as_deref(), speed, trace.as_deref())?;
+        let files = PlantFiles::read(&sim)?;
         Ok(Box::new(files.build(dbc)) as _)
     });
     bridge("redermor-bridge", args, Some(plant))

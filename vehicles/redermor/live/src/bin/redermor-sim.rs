@@ -10,9 +10,9 @@
 //! It reads the commands the data server (`petrel bridge --bus vcan0`) sends (`ThrusterCmd`,
 //! `DepthCmd`, `SupervisorHeartbeat`) and writes the sensors' frames at their rates, as the
 //! vehicle's nodes would: the same plant ([`RedermorPlant`]) and the same host loop
-//! ([`run_plant`]) as `petrel bridge --bus memory --sim redermor` runs on a thread, with the
-//! same options (`--sim-X` there is `--X` here). It runs until killed (SIGTERM, SIGINT); the
-//! trace is written a line at a time, so nothing is lost then.
+//! ([`run_plant`]) as `redermor-bridge --bus memory` runs on a thread, with the same options.
+//! It runs until killed (SIGTERM, SIGINT); the trace is written a line at a time, so nothing
+//! is lost then.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -24,7 +24,7 @@ use petrel_can_bridge::bus::{SocketCanBus, SocketCanOptions};
 use petrel_can_bridge::dbc::Dbc;
 use petrel_can_bridge::plant::run_plant;
 use petrel_can_bridge::SystemClock;
-use redermor_live::plant::{PlantFiles, RedermorPlant};
+use redermor_live::plant::{PlantFiles, RedermorPlant, SimArgs};
 
 /// The Redermor simulator on a SocketCAN interface.
 #[derive(Debug, Parser)]
@@ -36,18 +36,8 @@ struct Args {
     /// The bus's DBC (missions/redermor/redermor.dbc).
     #[arg(long, value_name = "FILE")]
     dbc: PathBuf,
-    /// The mission file (where the vehicle starts, the seabed).
-    #[arg(long, value_name = "FILE")]
-    mission: PathBuf,
-    /// The scenario file (current, faults at their times); default: a calm sea, no fault.
-    #[arg(long, value_name = "FILE")]
-    scenario: Option<PathBuf>,
-    /// How many times faster than the wall clock the vehicle's time runs.
-    #[arg(long, value_name = "FACTOR", default_value_t = 1.0)]
-    speed: f64,
-    /// Write the vehicle's true track here (CSV, one line a second of its time).
-    #[arg(long, value_name = "FILE")]
-    trace: Option<PathBuf>,
+    #[command(flatten)]
+    sim: SimArgs,
 }
 
 fn main() -> ExitCode {
@@ -63,12 +53,7 @@ fn main() -> ExitCode {
 
 fn run(args: &Args) -> Result<(), String> {
     let dbc = Dbc::load(&args.dbc).map_err(|e| format!("{}: {e}", args.dbc.display()))?;
-    let files = PlantFiles::read(
-        &args.mission,
-        args.scenario.as_deref(),
-        args.speed,
-        args.trace.as_deref(),
-    )?;
+    let files = PlantFiles::read(&args.sim)?;
     let mut plant: RedermorPlant = files.build(Arc::new(dbc));
     // The vehicle's nodes send no error frames and want none: the data server watches the
     // bus's health.
@@ -79,7 +64,7 @@ fn run(args: &Args) -> Result<(), String> {
     let mut bus = SocketCanBus::open(&args.bus, &opts).map_err(|e| e.to_string())?;
     eprintln!(
         "redermor-sim: on {} at {} times the wall clock, waiting for the thrusters to be enabled",
-        args.bus, args.speed
+        args.bus, args.sim.speed
     );
     // Never set: the process ends by a signal, as a vehicle's node is switched off.
     let stop = AtomicBool::new(false);
