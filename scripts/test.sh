@@ -11,8 +11,16 @@ need=()
 command -v dot >/dev/null 2>&1 || need+=(graphviz)
 command -v chromium >/dev/null 2>&1 || need+=(chromium)
 command -v chromedriver >/dev/null 2>&1 || need+=(chromium-driver)
-# Installed above: the browser tests fail rather than skip if the browser is missing.
+# The Debian package and its unit (cli/tests/install.rs, docs/install.md): dpkg-shlibdeps
+# (dpkg-dev) and strip (binutils) make it, debootstrap the Debian it is installed into,
+# systemd-analyze (systemd) verifies the unit.
+command -v dpkg-shlibdeps >/dev/null 2>&1 || need+=(dpkg-dev)
+command -v strip >/dev/null 2>&1 || need+=(binutils)
+command -v debootstrap >/dev/null 2>&1 || need+=(debootstrap)
+command -v systemd-analyze >/dev/null 2>&1 || need+=(systemd)
+# Installed above: the browser and package tests fail rather than skip if a tool is missing.
 export PETREL_REQUIRE_BROWSER=1
+export PETREL_REQUIRE_PACKAGE=1
 if [ "${#need[@]}" -gt 0 ]; then
     echo "== installing ${need[*]}"
     apt-get update -qq

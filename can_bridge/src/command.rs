@@ -11,6 +11,8 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
+use petrel_nets::plural::count;
+
 use crate::config::load_project_can;
 use crate::plant::PlantFactory;
 use crate::serve::{replay_log, serve, ServeOptions};
@@ -146,9 +148,9 @@ fn replay(log: &Path, config: crate::CanConfig, dbc: crate::Dbc) -> Result<(), F
     }
     if s.counters.wrong_length > 0 {
         eprintln!(
-            "warning: {}: {} frames had another length than the DBC gives their message: dropped, their signals not updated",
+            "warning: {}: {} had another length than the DBC gives their message: dropped, their signals not updated",
             log.display(),
-            s.counters.wrong_length
+            count(s.counters.wrong_length, "frame")
         );
     }
     eprintln!("{}: {s}", log.display());

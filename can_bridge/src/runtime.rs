@@ -418,6 +418,22 @@ impl<B: Bus> Loop<B> {
     }
 }
 
+/// Says, from the commands program's own sender (origin `program/NAME`), that it leaves in
+/// good order ([`LEAVE`](petrel_ipc::wire::LEAVE)); returns the sender and the leave's
+/// sequence number, for its acknowledgement. `None` when no player receives (nothing to tell)
+/// or the leave could not be sent (the player will take the going for a loss).
+fn say_leave(program: &Participant) -> Option<(petrel_ipc::EventSender, u64)> {
+    let sender = program.event_sender_sized().ok()?;
+    match sender.send(&petrel_ipc::EventMsg::leave()) {
+        Ok(sent) => Some((sender, sent.seq)),
+        Err(petrel_ipc::SendError::NoReceiver { .. }) => None,
+        Err(e) => {
+            tracing::warn!("the commands program could not say it leaves: {e}");
+            None
+        }
+    }
+}
+
 /// Runs the data server until `stop` is set (or SIGINT/SIGTERM with signal handling on).
 ///
 /// `open_bus` is called once the vehicle is joined, just before the loop reads: frames do
@@ -603,6 +619,16 @@ pub fn run<B: Bus>(
         }
     }
     lp.deliver();
+    // The commands program leaves in good order: the player records a stop, not a loss, when
+    // its node goes (its leave is acknowledged with the events, below).
+    let leave = commands.as_ref().and_then(|(prog, _)| say_leave(prog));
+    if let Some((sender, seq)) = &leave {
+        let heard =
+            petrel_ipc::wait_acknowledged(&beats, sender.sender_id(), *seq, lp.opts.ack_grace);
+        if !heard.settled(*seq) {
+            tracing::warn!("the player did not acknowledge that the commands program leaves: it may record it as lost");
+        }
+    }
     if lp.last_seq > 0 {
         let heard = petrel_ipc::wait_acknowledged(
             &beats,

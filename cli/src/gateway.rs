@@ -23,6 +23,10 @@ pub struct GatewayArgs {
     /// Connect to these endpoints instead of the other computers' `gateway` (repeatable).
     #[arg(long)]
     connect: Vec<String>,
+    /// This computer's keys are here (ca.pem, COMPUTER.pem, COMPUTER.key) instead of
+    /// `keys/VEHICLE` in this user's state directory (`petrel keys` makes them).
+    #[arg(long)]
+    keys: Option<PathBuf>,
 }
 
 /// The default detection bound of a lost computer.
@@ -167,15 +171,17 @@ pub fn gateway(a: GatewayArgs) -> Outcome {
             )
         }
     };
-    let name = a
-        .vehicle
-        .clone()
-        .or_else(|| file.name.clone())
-        .unwrap_or_else(|| c.name.clone());
+    let name = crate::keys::vehicle_name(a.vehicle.as_deref(), &file, &c.name);
     let vehicle = match petrel_ipc::Vehicle::new(&name) {
         Ok(v) => v,
         Err(e) => return Outcome::Usage(format!("bad vehicle name `{name}`: {e}")),
     };
+    let endpoints: Vec<String> = listen.iter().chain(&connect).cloned().collect();
+    let security =
+        match crate::keys::link_security(&file, &name, &me.name, a.keys.as_deref(), &endpoints) {
+            Ok(s) => s,
+            Err(e) => return Outcome::Usage(format!("petrel gateway: {e}")),
+        };
     let detection = file.link.detection.unwrap_or(DEFAULT_DETECTION);
     let settings = petrel_gateway::Settings {
         vehicle,
@@ -199,6 +205,7 @@ pub fn gateway(a: GatewayArgs) -> Outcome {
         },
         listen,
         connect,
+        security,
         credentials,
         link_events,
         status_period: Duration::from_millis(100),

@@ -4,6 +4,7 @@ use crate::common::{
     check_project, interactive, out, report, require_clean, write_output, Format, Outcome, Scope,
 };
 use petrel_nets::diag::Diagnostics;
+use petrel_nets::plural::count;
 use petrel_nets::project;
 use petrel_nets::source::SourceMap;
 use petrel_nets::verify;
@@ -37,7 +38,18 @@ pub fn check(a: CheckArgs) -> Outcome {
         Ok(c) => c,
         Err(o) => return o,
     };
-    let d = &checked.diagnostics;
+    // The link between the vehicle's computers: what this machine has of its keys.
+    let mut link = None;
+    let mut diagnostics = checked.diagnostics.clone();
+    if let (Some(v), Some(c)) = (&checked.vehicle, &checked.compiled) {
+        let (line, warning) =
+            crate::keys::check_link(v, &crate::keys::vehicle_name(None, v, &c.name));
+        link = line;
+        if let Some(w) = warning {
+            diagnostics.push(w);
+        }
+    }
+    let d = &diagnostics;
     match a.format {
         Format::Json => {
             let doc = d.to_json(&checked.loaded.sources);
@@ -52,17 +64,17 @@ pub fn check(a: CheckArgs) -> Outcome {
                 let places: usize = c.nets.iter().map(|n| n.places.len()).sum();
                 let transitions: usize = c.nets.iter().map(|n| n.transitions.len()).sum();
                 out(&format!(
-                    "project `{}` checks clean: {} nets ({} active at start), {} places, {} global places, {} transitions, {} events, {} programs, {} timers, {} warnings\n",
+                    "project `{}` checks clean: {} ({} active at start), {}, {}, {}, {}, {}, {}, {}\n",
                     c.name,
-                    c.nets.len(),
+                    count(c.nets.len(), "net"),
                     c.start.len(),
-                    places,
-                    c.globals.len(),
-                    transitions,
-                    c.events.len(),
-                    c.programs.len(),
-                    c.timers.len(),
-                    d.warning_count()
+                    count(places, "place"),
+                    count(c.globals.len(), "global place"),
+                    count(transitions, "transition"),
+                    count(c.events.len(), "event"),
+                    count(c.programs.len(), "program"),
+                    count(c.timers.len(), "timer"),
+                    count(d.warning_count(), "warning")
                 ));
                 if let Some(v) = &checked.vehicle {
                     let names: Vec<String> = v
@@ -71,11 +83,12 @@ pub fn check(a: CheckArgs) -> Outcome {
                         .map(|p| format!("{} ({})", p.name, p.kind.as_str()))
                         .collect();
                     out(&format!(
-                        "vehicle.toml: {} processes ({}), {} computers, {} timed sends\n",
-                        v.processes.len(),
+                        "vehicle.toml: {} ({}), {}, {}{}\n",
+                        count(v.processes.len(), "process"),
                         names.join(", "),
-                        v.computers.len(),
-                        v.sends.len()
+                        count(v.computers.len(), "computer"),
+                        count(v.sends.len(), "timed send"),
+                        link.map(|l| format!("; {l}")).unwrap_or_default()
                     ));
                 }
             }
@@ -530,9 +543,12 @@ pub fn import(a: ImportArgs) -> Outcome {
     let places: usize = project.nets().map(|n| n.places().count()).sum();
     let transitions: usize = project.nets().map(|n| n.transitions().count()).sum();
     out(&format!(
-        "imported {} into {}: {nets} net(s), {places} places, {transitions} transitions\n",
+        "imported {} into {}: {}, {}, {}\n",
         file.display(),
-        dest.display()
+        dest.display(),
+        count(nets, "net"),
+        count(places, "place"),
+        count(transitions, "transition")
     ));
     Outcome::Clean
 }

@@ -1,6 +1,7 @@
 //! The flight recorder's commands: `replay` and `journal show`.
 
 use crate::common::{compiled, out, Outcome};
+use petrel_nets::plural::count;
 use std::path::{Path, PathBuf};
 
 /// `petrel replay`.
@@ -125,8 +126,8 @@ pub fn replay(a: ReplayArgs) -> Outcome {
     }
     if let Some(c) = &read.corrupt {
         eprintln!(
-            "error: the journal is damaged at {c}; the {} entries before it replay to the recorded markings",
-            r.entries
+            "error: the journal is damaged at {c}; the {} before it replay to the recorded markings",
+            count(r.entries, "entry")
         );
         return Outcome::Errors;
     }
@@ -137,21 +138,29 @@ pub fn replay(a: ReplayArgs) -> Outcome {
         .collect();
     if r.gaps > 0 {
         eprintln!(
-            "warning: the flight recorder dropped {} entries (in {} gap(s)) it could not write; the replay went on from the checkpoint after each gap",
-            r.lost, r.gaps
+            "warning: the flight recorder dropped {} (in {}) it could not write; the replay went on from the checkpoint after each gap",
+            count(r.lost, "entry"),
+            count(r.gaps, "gap")
         );
     }
     out(&format!(
-        "replayed {} entries, {} steps{}: every recorded marking reproduced{}{}\nstate at t = {:.6} s: {}\n",
-        r.entries,
-        r.steps,
+        "replayed {}, {}{}: every recorded marking reproduced{}{}\nstate at t = {:.6} s: {}\n",
+        count(r.entries, "entry"),
+        count(r.steps, "step"),
         match r.reloads {
             0 => String::new(),
-            1 => " across 1 reload".to_string(),
-            n => format!(" across {n} reloads"),
+            n => format!(" across {}", count(n, "reload")),
         },
-        if r.gaps > 0 { " (from a checkpoint after each gap)" } else { "" },
-        if r.stopped_early { " (stopped at --until)" } else { "" },
+        if r.gaps > 0 {
+            " (from a checkpoint after each gap)"
+        } else {
+            ""
+        },
+        if r.stopped_early {
+            " (stopped at --until)"
+        } else {
+            ""
+        },
         match until {
             Some(u) if r.stopped_early => u,
             _ => r.last_time as f64 / 1e6,
@@ -255,6 +264,15 @@ fn journal_show(journal: &Path, format: &str) -> Outcome {
                 vec![],
                 dir.clone(),
                 String::new(),
+                vec![],
+                vec![],
+            ),
+            Entry::ProgramStopped { program, .. } => (
+                "stopped",
+                String::new(),
+                vec![],
+                format!("program/{program}"),
+                "left in good order".to_string(),
                 vec![],
                 vec![],
             ),

@@ -2,6 +2,7 @@
 
 use crate::common::{require_clean, Outcome, Scope};
 use petrel_ipc::{ReloadAnswer, ReloadRequest};
+use petrel_nets::plural::count;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -165,12 +166,16 @@ fn render(a: &ReloadAnswer) -> String {
     let mut out = String::new();
     let verdict = match (a.accepted, a.dry_run) {
         (true, false) => format!(
-            "reload accepted: version {} runs from step {} on ({} states verified from the mapped state, {} ms)",
-            a.source_hash, a.step, a.states, a.millis
+            "reload accepted: version {} runs from step {} on ({} verified from the mapped state, {} ms)",
+            a.source_hash,
+            a.step,
+            count(a.states, "state"),
+            a.millis
         ),
         (true, true) => format!(
-            "dry run: the reload would be accepted ({} states verified from the mapped state, {} ms); nothing swapped",
-            a.states, a.millis
+            "dry run: the reload would be accepted ({} verified from the mapped state, {} ms); nothing swapped",
+            count(a.states, "state"),
+            a.millis
         ),
         (false, dry) => format!(
             "{}reload refused: the mission goes on unchanged ({} ms)",

@@ -1,6 +1,7 @@
 //! `petrel run`: a mission script in virtual time, with no process.
 
 use crate::common::{compiled, out, Outcome};
+use petrel_nets::plural::count;
 use std::path::PathBuf;
 
 /// `petrel run`.
@@ -72,9 +73,10 @@ pub fn run(a: RunArgs) -> Outcome {
         }
         None => {
             eprintln!(
-                "{}: {} steps, {expectations} expectations met",
+                "{}: {}, {} met",
                 script_path.display(),
-                outcome.steps.len()
+                count(outcome.steps.len(), "step"),
+                count(expectations, "expectation")
             );
             Outcome::Clean
         }

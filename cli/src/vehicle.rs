@@ -1,6 +1,7 @@
 //! Commands that run a vehicle or talk to one: `play`, `send`, `status`.
 
 use crate::common::{compiled, out, vehicle_of, wait_strategy, Outcome};
+use petrel_nets::plural::{self, count};
 use std::path::PathBuf;
 
 /// `petrel play`.
@@ -100,8 +101,10 @@ pub fn play(a: PlayArgs) -> Outcome {
         return match petrel_player::shadow::shadow(&c, &opts) {
             Ok(r) => {
                 eprintln!(
-                    "shadow stopped: {} vehicle steps followed, {} reload(s) followed, {} divergence alarm(s)",
-                    r.steps, r.reloads, r.alarms
+                    "shadow stopped: {} followed, {} followed, {}",
+                    count(r.steps, "vehicle step"),
+                    count(r.reloads, "reload"),
+                    count(r.alarms, "divergence alarm")
                 );
                 if r.alarms == 0 {
                     Outcome::Clean
@@ -121,10 +124,11 @@ pub fn play(a: PlayArgs) -> Outcome {
                 0.0
             };
             eprintln!(
-                "player stopped: {} messages ({} refused before the engine), {} events received, {} processed, {} unused, {} refused; {} calls sent, {} failed; journal: {} records, {:.1} us each, {} failed writes, {} entries lost{}",
-                r.messages, r.bad_messages, s.received, s.processed, s.unused, s.refused, r.calls_sent, r.calls_failed,
-                r.journal_records, per_record, r.journal_failures, r.journal_lost,
-                if r.resumed_steps > 0 { format!("; resumed after {} steps", r.resumed_steps) } else { String::new() }
+                "player stopped: {} ({} refused before the engine), {} received, {} processed, {} unused, {} refused; {} sent, {} held, {} failed; journal: {}, {:.1} us each, {}, {} lost{}",
+                count(r.messages, "message"), r.bad_messages, count(s.received, "event"), s.processed, s.unused, s.refused,
+                count(r.calls_sent, "call"), r.calls_held, r.calls_failed, count(r.journal_records, "record"), per_record,
+                count(r.journal_failures, "failed write"), count(r.journal_lost, "entry"),
+                if r.resumed_steps > 0 { format!("; resumed after {}", count(r.resumed_steps, "step")) } else { String::new() }
             );
             Outcome::Clean
         }
@@ -250,25 +254,28 @@ pub fn send(a: SendArgs) -> Outcome {
             _ => "the flight recorder had not written them".to_string(),
         };
         eprintln!(
-            "{} event(s) were taken by the player but are not on record ({why}): they would not survive a crash of the player",
-            verdict.not_on_record
+            "taken by the player but not on record: {} ({why}); they would not survive a crash of the player",
+            plural::count(verdict.not_on_record, "event")
         );
     }
     if verdict.unacknowledged > 0 {
         eprintln!(
-            "the player did not acknowledge {} event(s) within {:.1} s: they may be lost",
-            verdict.unacknowledged,
+            "the player did not acknowledge {} within {:.1} s: they may be lost",
+            plural::count(verdict.unacknowledged, "event"),
             timeout.as_secs_f64()
         );
     }
     if verdict.refused > 0 {
         eprintln!(
-            "the player refused {} event(s): see the reasons above",
-            verdict.refused
+            "the player refused {}: see the reasons above",
+            plural::count(verdict.refused, "event")
         );
     }
     if refused > 0 {
-        eprintln!("{refused} event(s) were refused by the transport: the player's buffer was full");
+        eprintln!(
+            "refused by the transport (the player's buffer was full): {}",
+            plural::count(refused, "event")
+        );
         safe = false;
     }
     if safe {
@@ -331,8 +338,8 @@ impl Verdict {
     /// One line per event for a single event; a summary and the refusals otherwise.
     fn text(&self, origin: &str, event: &str) -> String {
         let mut text = format!(
-            "verdict of the player on the {} event(s) of {origin}: {} taken and on record, {} refused, {} taken but not on record, {} unacknowledged\n",
-            self.delivered, self.on_record, self.refused, self.not_on_record, self.unacknowledged
+            "verdict of the player on the {} of {origin}: {} taken and on record, {} refused, {} taken but not on record, {} unacknowledged\n",
+            count(self.delivered, "event"), self.on_record, self.refused, self.not_on_record, self.unacknowledged
         );
         for (seq, reason) in &self.refusals {
             text.push_str(&format!(
@@ -426,6 +433,7 @@ pub fn status(a: StatusArgs) -> Outcome {
         .map(|p| {
             let st = match petrel_ipc::program_status(&v, &p.name) {
                 Ok(petrel_ipc::ProgramStatus::Alive) => "alive",
+                Ok(petrel_ipc::ProgramStatus::Joining) => "joining",
                 Ok(petrel_ipc::ProgramStatus::Dead) => "dead",
                 Ok(petrel_ipc::ProgramStatus::Absent) => "absent",
                 Err(_) => "unknown",
@@ -494,25 +502,25 @@ pub fn status(a: StatusArgs) -> Outcome {
         Some("ok") => text.push_str("  flight recorder: ok\n"),
         Some("none") | None => text.push_str("  flight recorder: none (--no-journal)\n"),
         Some(state) => text.push_str(&format!(
-            "  flight recorder: {}: {} ({} records waiting in memory, {} entries lost); events are processed but not acknowledged\n",
+            "  flight recorder: {}: {} ({} waiting in memory, {} lost); events are processed but not acknowledged\n",
             state.to_uppercase(),
             recorder["reason"].as_str().unwrap_or("?"),
-            recorder["backlog_records"],
-            recorder["lost_entries"],
+            count(recorder["backlog_records"].as_u64().unwrap_or(0), "record"),
+            count(recorder["lost_entries"].as_u64().unwrap_or(0), "entry"),
         )),
     }
     if let Some(b) = &bridge_doc {
         text.push_str(&format!(
-            "  CAN data server on `{}`: bus {}, {} frames ({} unknown, {} of a wrong length, {} error frames), {} events sent ({} waiting), {} commands ({} failed)\n",
+            "  CAN data server on `{}`: bus {}, {} ({} unknown, {} of a wrong length, {}), {} sent ({} waiting), {} ({} failed)\n",
             b["interface"].as_str().unwrap_or("?"),
             b["bus_state"].as_str().unwrap_or("?"),
-            b["frames"],
+            count(b["frames"].as_u64().unwrap_or(0), "frame"),
             b["unknown_id"],
             b["wrong_length"],
-            b["error_frames"],
-            b["events_sent"],
+            count(b["error_frames"].as_u64().unwrap_or(0), "error frame"),
+            count(b["events_sent"].as_u64().unwrap_or(0), "event"),
             b["events_pending"],
-            b["commands"],
+            count(b["commands"].as_u64().unwrap_or(0), "command"),
             b["commands_failed"],
         ));
     }
@@ -532,9 +540,22 @@ pub fn status(a: StatusArgs) -> Outcome {
                     .collect()
             })
             .unwrap_or_default();
+        // Second gateways claiming a computer whose gateway is up, refused (one per computer).
+        let claims: Vec<String> = g["counters"]["claims_refused"]
+            .as_object()
+            .into_iter()
+            .flatten()
+            .map(|(c, n)| format!("{n} message(s) of a second gateway of `{c}`"))
+            .collect();
         text.push_str(&format!(
-            "  gateway of `{computer}`: peers {}\n",
-            peers.join(", ")
+            "  gateway of `{computer}`: peers {}; link: {}{}\n",
+            peers.join(", "),
+            g["security"].as_str().unwrap_or("?"),
+            if claims.is_empty() {
+                String::new()
+            } else {
+                format!("; refused {}", claims.join(", "))
+            }
         ));
         if let Some(kinds) = g["counters"]["kinds"].as_object() {
             for (kind, c) in kinds {

@@ -405,7 +405,7 @@ fn verify_groups_findings_and_all_lists_each() {
         out.contains("error[E0602]: dead marking: R1{done} R2{waiting}, after start_mission → ... → granted(\"r2\") → shock(\"r2\")"),
         "{out}"
     );
-    assert!(out.ends_with("result: 6 error(s), 0 warning(s)\n"), "{out}");
+    assert!(out.ends_with("result: 6 errors, 0 warnings\n"), "{out}");
 
     let o = petrel(&["verify", &leaked, "--all"]);
     assert_eq!(o.status.code(), Some(1));
@@ -442,7 +442,7 @@ fn verify_exits_1_for_errors_only_and_json_locates_each_finding() {
     let o = petrel(&["verify", &progress_data("starvation")]);
     assert_eq!(o.status.code(), Some(0), "{}{}", stdout(&o), stderr(&o));
     assert!(stdout(&o).contains("[W0606] Warning"), "{}", stdout(&o));
-    assert!(stdout(&o).ends_with("result: verified, no error, 1 warning(s)\n"));
+    assert!(stdout(&o).ends_with("result: verified, no error, 1 warning\n"));
 
     // The lock-order deadlock: exit 1, and JSON with the resource cycle and the locations.
     let o = petrel(&["verify", &progress_data("lock_order"), "--format", "json"]);
@@ -473,7 +473,7 @@ fn verify_reduces_independent_nets_unless_told_not_to() {
     for o in [&reduced, &full] {
         assert_eq!(o.status.code(), Some(1), "{}", stdout(o));
         assert!(
-            stdout(o).ends_with("result: 2 error(s), 0 warning(s)\n"),
+            stdout(o).ends_with("result: 2 errors, 0 warnings\n"),
             "{}",
             stdout(o)
         );
@@ -1006,4 +1006,35 @@ fn verify_finds_the_same_with_edges_kept_or_replayed() {
     let o = petrel(&["verify", &dir, "--edges", "some"]);
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("keep"));
+}
+
+#[test]
+fn the_top_level_help_groups_the_commands_one_line_each() {
+    let o = petrel(&["--help"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let out = stdout(&o);
+    // The groups in order, each command on one line under its group (cli/src/help.rs checks
+    // that every command is in exactly one group).
+    let at = |text: &str| {
+        out.find(text)
+            .unwrap_or_else(|| panic!("no `{text}`:\n{out}"))
+    };
+    assert!(
+        at("Design a mission:\n  check ") < at("Run a vehicle:\n  up "),
+        "{out}"
+    );
+    assert!(
+        at("Run a vehicle:\n  up ") < at("After a run:\n  replay "),
+        "{out}"
+    );
+    assert!(
+        out.contains("\n  plot     The pictures of a Redermor run"),
+        "{out}"
+    );
+    assert!(out.lines().all(|l| l.chars().count() <= 100), "{out}");
+    assert!(!out.contains("__exec"), "{out}");
+    // `petrel help` is the same page; a command's own help keeps its details.
+    assert_eq!(stdout(&petrel(&["help"])), out);
+    let up = stdout(&petrel(&["up", "--help"]));
+    assert!(up.contains("restart what fails (by policy)"), "{up}");
 }

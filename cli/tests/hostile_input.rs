@@ -230,7 +230,7 @@ fn bridge_replay_warns_and_prints_its_counters_on_stderr() {
         err.contains("bus.log:line 3: time goes back from 1000.050000 s to 1000.020000 s"),
         "{err}"
     );
-    assert!(err.contains("1 frames had another length"), "{err}");
+    assert!(err.contains("1 frame had another length"), "{err}");
     assert!(
         err.contains("replayed 5 records (5 received, 0 sent): 4 decoded, 1 of a length other than the DBC's (dropped)"),
         "{err}"

@@ -149,6 +149,14 @@ pub struct Peer {
     pub restorations: u64,
     /// Restarts of its gateway seen (new incarnations after the first).
     pub restarts: u64,
+    /// Whether its latest beacon says it follows this gateway for this computer. Until it
+    /// does, none of its nodes is mirrored here. (What it carries names the gateway it is for,
+    /// [`crate::link::Carried::to_incarnation`]: a copy meant for another gateway of this
+    /// computer is not taken here.)
+    pub follows_me: bool,
+    /// Since when (microseconds) it follows another gateway of this computer, and which.
+    #[serde(skip)]
+    pub follows_other: Option<(u64, u64)>,
     /// Carried messages for it waiting for its acknowledgement (at the latest tick).
     pub buffered: usize,
 }
@@ -165,8 +173,34 @@ impl Peer {
             losses: 0,
             restorations: 0,
             restarts: 0,
+            follows_me: false,
+            follows_other: None,
             buffered: 0,
         }
+    }
+}
+
+impl Peer {
+    /// Whether a message of incarnation `incarnation` is a second gateway's: the peer's
+    /// gateway is another one, heard within the detection bound. (One silent longer is
+    /// taken as dead: the new one is its restart.)
+    fn claimed_by_another(&self, incarnation: u64, now_us: u64, detection_us: u64) -> bool {
+        self.incarnation.is_some_and(|i| i != incarnation)
+            && self.state == PeerState::Up
+            && now_us.saturating_sub(self.last_heard_us.unwrap_or(0)) <= detection_us
+    }
+
+    /// Takes a beacon's `follows`: whether the peer follows `me` (this computer, this
+    /// gateway's incarnation), or another gateway of this computer, since when.
+    fn heard_follows(&mut self, follows: &[(String, u64)], me: (&str, u64), now_us: u64) {
+        let mine = follows.iter().find(|(c, _)| c == me.0).map(|(_, i)| *i);
+        self.follows_me = mine == Some(me.1);
+        self.follows_other = match mine {
+            Some(other) if other != me.1 => {
+                Some((self.follows_other.map_or(now_us, |(since, _)| since), other))
+            }
+            _ => None,
+        };
     }
 }
 
@@ -185,7 +219,9 @@ pub struct Counts {
     /// Link messages delivered to this computer's processes.
     pub delivered: u64,
     /// Link messages for this computer that could not be delivered (no receiver, a full
-    /// buffer, a body that does not decode...).
+    /// buffer, a body that does not decode...) or that their computer may not send (an origin
+    /// of another computer's, an event or a call not carried); a carried one's reason goes
+    /// back to its sender in the acknowledgement.
     pub refused: u64,
     /// Link messages for another computer (each computer hears every peer).
     pub not_mine: u64,
@@ -200,14 +236,18 @@ pub struct Counts {
     /// bound, refused by the destination, for a destination that restarted, or refused at once
     /// by a full buffer.
     pub given_up: u64,
-    /// Copies of carried messages for this computer not taken: already taken, out of order,
-    /// too late, or for an earlier gateway of this computer (see `crate::reliable::Discarded`).
+    /// Link messages not taken, and nothing said to their sender: copies of carried messages
+    /// already taken, out of order, too late, or for another gateway of this computer (see
+    /// `crate::reliable::Discarded`: they come again, or their sender gives them up), and
+    /// every message of a second gateway claiming a computer (also in
+    /// [`Counters::claims_refused`]).
     pub discarded: u64,
 }
 
 /// The gateway's counters, by message kind; `from_link = delivered + refused + not_mine +
-/// unheard + discarded` (once the held messages are delivered), and the carried messages taken
-/// here are `carried + given_up` plus those still buffered.
+/// unheard + discarded` (once the held messages are delivered; a second gateway's messages
+/// count in `from_link` and `discarded`), and the carried messages taken here are `carried +
+/// given_up` plus those still buffered.
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct Counters {
     /// By kind (`event`, `call`, `heartbeat`, `marking`, `signals`, `beacon`).
@@ -216,6 +256,10 @@ pub struct Counters {
     pub undecodable: u64,
     /// The latest refusals (at most 8), newest last.
     pub refusals: Vec<String>,
+    /// Link messages of a second gateway claiming a computer whose first gateway is up
+    /// (this one's computer included), refused (and counted `discarded` by kind), by the
+    /// computer claimed.
+    pub claims_refused: BTreeMap<String, u64>,
 }
 
 impl Counters {
@@ -236,7 +280,8 @@ impl Counters {
         self.remember(reason);
     }
 
-    fn remember(&mut self, reason: String) {
+    /// Keeps `reason` among the latest refusals.
+    pub fn remember(&mut self, reason: String) {
         if self.refusals.len() == 8 {
             self.refusals.remove(0);
         }
@@ -313,7 +358,8 @@ impl AckMap {
 pub enum Route {
     /// This gateway's own message, heard back: dropped.
     Own,
-    /// Not a computer of the vehicle, or damaged: counted, dropped.
+    /// Not a computer of the vehicle (counted `undecodable`), or a message its computer may
+    /// not send (counted `refused`): dropped, the reason to log.
     Foreign(String),
     /// A beacon or an acknowledgement: nothing to deliver.
     Beacon,
@@ -321,12 +367,26 @@ pub enum Route {
     NotMine,
     /// To be delivered here (a carried message: then [`Core::taken`]).
     Deliver,
+    /// From a second gateway claiming a computer whose first gateway is up: refused (one
+    /// gateway per computer). The reason the first time this second gateway is heard (to
+    /// log), `None` after.
+    Claim(Option<String>),
     /// Carried, for this computer, but its computer came back and the player has not taken the
     /// restored event yet: delivered later, from [`Core::take_released`].
     Held,
     /// A copy of a carried message not taken (counted `discarded`).
     Discarded,
 }
+
+/// How long a peer may follow another gateway of this computer before this one gives up,
+/// beyond the detection bound. A restarted gateway is refused from the first beacon it hears
+/// until its peers lose its killed predecessor: at most the bound after the predecessor's
+/// last message, then a beacon period (the peers' tick) and the news' way back; the grace
+/// covers those and a loaded machine.
+pub const CLAIM_GRACE_US: u64 = 2_000_000;
+
+/// Second gateways remembered (to log each once); past it, they are forgotten.
+const CLAIMANTS_MAX: usize = 1024;
 
 /// The gateway's state.
 #[derive(Debug, Clone)]
@@ -337,6 +397,8 @@ pub struct Core {
     pub counters: Counters,
     incarnation: u64,
     next_seq: u64,
+    /// Second gateways already reported: (computer claimed, incarnation).
+    claimants: BTreeSet<(String, u64)>,
     outgoing: Outgoing,
     incoming: Incoming,
     /// Whether a returning computer's carried messages wait for the player to take its
@@ -366,6 +428,7 @@ impl Core {
             counters: Counters::default(),
             incarnation,
             next_seq: 1,
+            claimants: BTreeSet::new(),
             outgoing: Outgoing::new(bounds),
             incoming: Incoming::new(bounds),
             hold_on_restore: false,
@@ -552,8 +615,11 @@ impl Core {
     }
 
     fn release(&mut self, peer: &str) {
-        let msgs = self.incoming.release(peer);
-        self.released.extend(msgs);
+        for msg in self.incoming.release(peer) {
+            if self.admit(&msg).is_ok() {
+                self.released.push(msg);
+            }
+        }
     }
 
     /// Messages waiting for `peer`'s acknowledgement.
@@ -607,17 +673,29 @@ impl Core {
 
     /// Takes a link message heard at `now_us`: updates the sender's state and sequence, and
     /// says what to do with it. Peer changes it causes are appended to `changes`.
+    ///
+    /// One rule for a computer's gateways: the first heard is followed; a message of another
+    /// incarnation while it is up and heard within the detection bound is a second claim,
+    /// refused before anything else ([`Route::Claim`]: no peer state, no stream, no
+    /// acknowledgement touched); past the bound, the new incarnation is the first one's
+    /// restart, and only then are the messages numbered for its predecessor given up.
     pub fn on_link(&mut self, msg: &LinkMsg, now_us: u64, changes: &mut Vec<PeerChange>) -> Route {
         if msg.from == self.plan.computer {
             if msg.incarnation != self.incarnation {
                 // Another gateway claims this computer: refuse it rather than mix their messages.
-                self.counters.undecodable += 1;
-                self.counters
-                    .remember(format!("a second gateway claims computer `{}`", msg.from));
-                return Route::Foreign(format!("a second gateway claims `{}`", msg.from));
+                return self.refuse_claim(msg);
             }
             return Route::Own;
         }
+        let detection_us = self.plan.detection_us;
+        if self
+            .peers
+            .get(&msg.from)
+            .is_some_and(|p| p.claimed_by_another(msg.incarnation, now_us, detection_us))
+        {
+            return self.refuse_claim(msg);
+        }
+        let me = (self.plan.computer.as_str(), self.incarnation);
         let Some(peer) = self.peers.get_mut(&msg.from) else {
             self.counters.undecodable += 1;
             let why = format!("`{}` is not a computer of the vehicle file", msg.from);
@@ -632,6 +710,9 @@ impl Core {
             }
             peer.incarnation = Some(msg.incarnation);
             peer.expected_seq = msg.link_seq;
+            // A new gateway there: it says whom it follows in its beacons.
+            peer.follows_me = false;
+            peer.follows_other = None;
         }
         if msg.link_seq > peer.expected_seq {
             peer.missing += msg.link_seq - peer.expected_seq;
@@ -652,8 +733,9 @@ impl Core {
             PeerState::Up => {}
         }
         peer.state = PeerState::Up;
-        if let LinkKind::Beacon { alive } = &msg.kind {
+        if let LinkKind::Beacon { alive, follows } = &msg.kind {
             peer.alive = alive.iter().cloned().collect();
+            peer.heard_follows(follows, me, now_us);
         }
         if restarted {
             // What was numbered for its predecessor may or may not have been delivered.
@@ -700,13 +782,103 @@ impl Core {
             return Route::NotMine;
         }
         match self.incoming.accept(msg, self.incarnation, now_us) {
-            Accept::Take => Route::Deliver,
+            Accept::Take => match self.admit(msg) {
+                Ok(()) => Route::Deliver,
+                Err(why) => Route::Foreign(why),
+            },
             Accept::Held => Route::Held,
             Accept::Discard(_) => {
                 self.counters.of(kind).discarded += 1;
                 Route::Discarded
             }
         }
+    }
+
+    /// Whether this computer takes `msg`, a message for it that its stream (if carried) let
+    /// through: a computer of the vehicle speaks for its own processes only (the player's
+    /// messages come from the player's computer, a program's from its host, the data server's
+    /// from its computer, a gateway's, `tool/gw-NAME`, from computer NAME; other tools,
+    /// `tool/NAME`, may run anywhere), and an event or a call comes
+    /// carried (a gateway always carries them). A refusal is counted `refused` with its reason
+    /// and, for a carried message, taken with that reason: the acknowledgement tells its
+    /// sender, and the stream goes on.
+    fn admit(&mut self, msg: &LinkMsg) -> Result<(), String> {
+        let kind = msg.kind.name();
+        let home = match msg.origin.as_str() {
+            "player" => Some(self.plan.player_computer.as_str()),
+            "can_bridge" => self.plan.signals_computer.as_deref(),
+            o => match o.strip_prefix("program/") {
+                Some(p) => Some(self.plan.host_of(p)),
+                // A gateway's node is `tool/gw-COMPUTER` (`petrel_ipc::Role::gateway`).
+                None => o.strip_prefix("tool/gw-"),
+            },
+        };
+        let why = match home {
+            Some(h) if h != msg.from => format!(
+                "{kind} from computer `{}` claims origin `{}`, which is computer `{h}`'s",
+                msg.from, msg.origin
+            ),
+            _ if self.plan.destination(&msg.kind).is_some() && msg.carried.is_none() => {
+                format!(
+                    "{kind} from computer `{}` not carried on a stream",
+                    msg.from
+                )
+            }
+            _ => return Ok(()),
+        };
+        self.counters.refuse(kind, why.clone());
+        self.incoming.taken(msg, Some(why.clone()));
+        Err(why)
+    }
+
+    /// Refuses a message of a second gateway claiming its computer.
+    /// Nothing of it is taken nor acknowledged: counted `discarded` (its kind's `from_link`
+    /// too) and in `claims_refused`.
+    fn refuse_claim(&mut self, msg: &LinkMsg) -> Route {
+        let counts = self.counters.of(msg.kind.name());
+        counts.from_link += 1;
+        counts.discarded += 1;
+        *self
+            .counters
+            .claims_refused
+            .entry(msg.from.clone())
+            .or_default() += 1;
+        if self.claimants.len() >= CLAIMANTS_MAX {
+            self.claimants.clear();
+        }
+        if !self.claimants.insert((msg.from.clone(), msg.incarnation)) {
+            return Route::Claim(None);
+        }
+        let why = format!(
+            "a second gateway claims computer `{}` (incarnation {:x}) while its first is up: refused",
+            msg.from, msg.incarnation
+        );
+        self.counters.remember(why.clone());
+        Route::Claim(Some(why))
+    }
+
+    /// The gateway this one follows for each computer it has heard, for its beacons.
+    pub fn follows(&self) -> Vec<(String, u64)> {
+        self.peers
+            .iter()
+            .filter_map(|(name, p)| p.incarnation.map(|i| (name.clone(), i)))
+            .collect()
+    }
+
+    /// Why this gateway gives up, if a peer has followed another gateway of this computer for
+    /// longer than the detection bound and [`CLAIM_GRACE_US`]: that gateway is alive,
+    /// and this one is the second claim.
+    pub fn refused(&self, now_us: u64) -> Option<String> {
+        let bound = self.plan.detection_us + CLAIM_GRACE_US;
+        self.peers.iter().find_map(|(name, p)| {
+            let (since, other) = p.follows_other?;
+            (now_us.saturating_sub(since) > bound).then(|| {
+                format!(
+                    "computer `{name}` follows another gateway of computer `{}` (incarnation {other:x}) and refuses this one: a computer has one gateway; stop the other first",
+                    self.plan.computer
+                )
+            })
+        })
     }
 
     /// Peers silent past the detection bound at `now_us` become lost (a held one's messages
@@ -757,7 +929,7 @@ impl Core {
     pub fn mirrored(&self) -> BTreeMap<String, String> {
         let mut nodes = BTreeMap::new();
         for (name, peer) in &self.peers {
-            if peer.state != PeerState::Up {
+            if peer.state != PeerState::Up || !peer.follows_me {
                 continue;
             }
             for node in &peer.alive {
@@ -814,6 +986,36 @@ mod tests {
         }
     }
 
+    /// `m` carried to computer `to`'s gateway of incarnation `inc`, number `n` on its stream.
+    fn carried(m: LinkMsg, to: &str, inc: u64, n: u64) -> LinkMsg {
+        LinkMsg {
+            carried: Some(crate::link::Carried {
+                to: to.into(),
+                to_incarnation: inc,
+                seq: n,
+                floor: 1,
+            }),
+            ..m
+        }
+    }
+
+    /// `core` hears a beacon of `from` (incarnation 9) that follows it (and lists `alive`).
+    fn followed_by(core: &mut Core, from: &str, seq: u64, alive: &[&str]) {
+        let beacon = LinkKind::Beacon {
+            alive: alive.iter().map(|s| s.to_string()).collect(),
+            follows: vec![(core.plan.computer.clone(), core.incarnation)],
+        };
+        let mut ch = vec![];
+        assert_eq!(
+            core.on_link(&msg(from, seq, beacon), 0, &mut ch),
+            Route::Beacon
+        );
+    }
+
+    fn accounted(c: Counts) -> bool {
+        c.from_link == c.delivered + c.refused + c.not_mine + c.unheard + c.discarded
+    }
+
     #[test]
     fn events_go_to_the_player_computer_only() {
         let mut b = Core::new(plan("B"), 1);
@@ -823,21 +1025,34 @@ mod tests {
         let mut a = Core::new(plan("A"), 2);
         assert!(!a.forward_local(&LinkKind::Event, "program/X", false));
         let mut ch = vec![];
+        // A copy meant for another gateway of A (B follows that one) is not taken here.
+        let event = |seq| msg("B", seq, LinkKind::Event);
         assert_eq!(
-            a.on_link(&msg("B", 1, LinkKind::Event), 0, &mut ch),
-            Route::Deliver
+            a.on_link(&carried(event(1), "A", 7, 1), 0, &mut ch),
+            Route::Discarded
         );
         assert_eq!(ch, vec![PeerChange::Joined("B".into())]);
+        assert_eq!(
+            a.on_link(&carried(event(2), "A", 2, 1), 0, &mut ch),
+            Route::Deliver
+        );
+        // An event not carried on a stream: no gateway sends one.
+        assert!(matches!(
+            a.on_link(&event(3), 0, &mut ch),
+            Route::Foreign(w) if w.contains("not carried")
+        ));
+        let c = a.counters.kinds["event"];
+        assert_eq!(
+            (c.from_link, c.discarded, c.refused),
+            (3, 1, 1),
+            "the runtime counts deliveries"
+        );
         let mut g = Core::new(plan("G"), 3);
         assert_eq!(
-            g.on_link(&msg("B", 1, LinkKind::Event), 0, &mut ch),
+            g.on_link(&carried(event(2), "A", 2, 1), 0, &mut ch),
             Route::NotMine
         );
-        let c = g.counters.kinds["event"];
-        assert_eq!(
-            c.from_link,
-            c.delivered + c.refused + c.not_mine + c.unheard
-        );
+        assert!(accounted(g.counters.kinds["event"]));
     }
 
     #[test]
@@ -851,26 +1066,39 @@ mod tests {
         assert!(!a.forward_local(&LinkKind::Heartbeat, "tool/gw-A", false));
         let mut b = Core::new(plan("B"), 2);
         let mut ch = vec![];
+        let player = |seq, kind| LinkMsg {
+            origin: "player".into(),
+            ..msg("A", seq, kind)
+        };
         assert_eq!(
-            b.on_link(&msg("A", 1, call.clone()), 0, &mut ch),
+            b.on_link(&carried(player(1, call.clone()), "B", 2, 1), 0, &mut ch),
             Route::Deliver
         );
         assert_eq!(
-            b.on_link(&msg("A", 2, LinkKind::Marking), 0, &mut ch),
+            b.on_link(&player(2, LinkKind::Marking), 0, &mut ch),
             Route::Deliver
         );
         let mut g = Core::new(plan("G"), 3);
-        assert_eq!(g.on_link(&msg("A", 1, call), 0, &mut ch), Route::NotMine);
-        // Its own messages, heard back, are dropped; a second gateway on its computer refused.
+        assert_eq!(
+            g.on_link(&carried(player(1, call), "B", 2, 1), 0, &mut ch),
+            Route::NotMine
+        );
+        // Its own messages, heard back, are dropped; a second gateway on its computer refused,
+        // reported once, counted.
         let mut own = msg("G", 1, LinkKind::Event);
         own.incarnation = 3;
         assert_eq!(g.on_link(&own, 0, &mut ch), Route::Own);
         own.incarnation = 4;
-        assert!(matches!(g.on_link(&own, 0, &mut ch), Route::Foreign(_)));
+        assert!(matches!(g.on_link(&own, 0, &mut ch), Route::Claim(Some(_))));
+        assert_eq!(g.on_link(&own, 0, &mut ch), Route::Claim(None));
+        assert_eq!(g.counters.claims_refused["G"], 2);
+        let c = g.counters.kinds["event"];
+        assert_eq!((c.from_link, c.discarded, c.delivered), (2, 2, 0));
         assert!(matches!(
             g.on_link(&msg("Z", 1, LinkKind::Event), 0, &mut ch),
             Route::Foreign(_)
         ));
+        assert_eq!(g.counters.undecodable, 1);
     }
 
     #[test]
@@ -913,6 +1141,7 @@ mod tests {
                 seq,
                 LinkKind::Beacon {
                     alive: alive.iter().map(|s| s.to_string()).collect(),
+                    follows: vec![("A".into(), 1)],
                 },
             )
         };
@@ -930,13 +1159,151 @@ mod tests {
         a.on_link(&beacon(4, &["program/PLN"]), 6_000_000, &mut ch);
         assert_eq!(ch, vec![PeerChange::Restored("B".into())]);
         assert_eq!(a.peers()["B"].missing, 2, "2 and 3 never came");
-        // A restarted gateway starts again at 1: not a gap.
+        // A restarted gateway (its predecessor silent past the bound) starts again at 1: not
+        // a gap.
         let mut restarted = beacon(1, &[]);
         restarted.incarnation = 10;
-        a.on_link(&restarted, 6_100_000, &mut ch);
+        assert_eq!(a.on_link(&restarted, 7_000_001, &mut ch), Route::Beacon);
         assert_eq!(a.peers()["B"].missing, 2);
         assert_eq!(a.peers()["B"].restarts, 1);
         assert_eq!(a.peers()["B"].losses, 1);
+        assert_eq!(a.follows(), vec![("B".to_string(), 10)]);
+    }
+
+    #[test]
+    fn a_computer_speaks_for_its_own_processes_only() {
+        let mut b = Core::new(plan("B"), 2);
+        let mut ch = vec![];
+        let from_g = |seq, origin: &str, kind| LinkMsg {
+            origin: origin.into(),
+            ..msg("G", seq, kind)
+        };
+        // G calls PLN (on B) as the player (on A), sends the player's heartbeat: refused.
+        let call = LinkKind::Call {
+            program: "PLN".into(),
+        };
+        for m in [
+            carried(from_g(1, "player", call.clone()), "B", 2, 1),
+            from_g(2, "player", LinkKind::Heartbeat),
+        ] {
+            assert!(
+                matches!(b.on_link(&m, 0, &mut ch), Route::Foreign(w) if w.contains("claims origin"))
+            );
+        }
+        // A tool of G calling PLN is G's to send: the stream went on past the refused call,
+        // whose reason goes back to G in the acknowledgement.
+        let m = carried(from_g(3, "tool/call1", call), "B", 2, 2);
+        assert_eq!(b.on_link(&m, 0, &mut ch), Route::Deliver);
+        b.taken(&m, None);
+        let c = b.counters.kinds["call"];
+        assert_eq!((c.from_link, c.refused), (2, 1));
+        let Some(LinkMsg {
+            kind: LinkKind::Ack { streams },
+            ..
+        }) = b.acks_due(0)
+        else {
+            panic!("an acknowledgement is due")
+        };
+        assert_eq!((streams[0].from.as_str(), streams[0].taken), ("G", 2));
+        assert!(streams[0].refused[0].1.contains("claims origin `player`"));
+        // PLN's event sent by G to the player's computer, and a `call_failed` as B's gateway
+        // (the player takes `call_failed` from a gateway): refused there. G's gateway's own is
+        // G's to send.
+        let mut a = Core::new(plan("A"), 1);
+        for (n, origin, refused) in [
+            (1, "program/PLN", true),
+            (2, "tool/gw-B", true),
+            (3, "tool/gw-G", false),
+        ] {
+            let m = carried(from_g(n, origin, LinkKind::Event), "A", 1, n);
+            let route = a.on_link(&m, 0, &mut ch);
+            assert_eq!(
+                matches!(route, Route::Foreign(_)),
+                refused,
+                "{origin}: {route:?}"
+            );
+        }
+        let e = a.counters.kinds["event"];
+        assert_eq!((e.from_link, e.refused), (3, 2));
+    }
+
+    #[test]
+    fn a_second_gateway_claiming_a_computer_is_refused_and_the_first_undisturbed() {
+        let mut a = Core::new(plan("A"), 1);
+        followed_by(&mut a, "B", 1, &["program/PLN"]);
+        let mut ch = vec![];
+        // A call of the player's to PLN, sent to B's first gateway (incarnation 9).
+        let call = LinkKind::Call {
+            program: "PLN".into(),
+        };
+        assert!(a.carry("player", (3, 1), call, vec![], 50));
+        let due = a.due(50);
+        assert_eq!(due[0].0.carried.as_ref().map(|c| c.to_incarnation), Some(9));
+        // A second gateway of B (incarnation 77) while the first is heard: refused, whatever
+        // it sends, and reported once.
+        let mut second = carried(msg("B", 1, LinkKind::Event), "A", 1, 1);
+        second.incarnation = 77;
+        assert!(
+            matches!(a.on_link(&second, 100, &mut ch), Route::Claim(Some(w)) if w.contains("second gateway"))
+        );
+        second.kind = LinkKind::Beacon {
+            alive: vec![],
+            follows: vec![("A".into(), 1)],
+        };
+        second.carried = None;
+        assert_eq!(a.on_link(&second, 200, &mut ch), Route::Claim(None));
+        // The first goes on: no restart, its nodes still mirrored, its messages delivered, the
+        // call sent to it still waiting for its acknowledgement (nothing given up).
+        let first = carried(msg("B", 2, LinkKind::Event), "A", 1, 1);
+        assert_eq!(a.on_link(&first, 300, &mut ch), Route::Deliver);
+        let b = &a.peers()["B"];
+        assert_eq!((b.restarts, b.incarnation, b.missing), (0, Some(9), 0));
+        assert!(
+            ch.iter().all(|c| matches!(c, PeerChange::Joined(_))),
+            "{ch:?}"
+        );
+        assert_eq!(a.mirrored().len(), 1);
+        assert_eq!(a.counters.claims_refused["B"], 2);
+        assert_eq!(a.follows(), vec![("B".to_string(), 9)]);
+        assert!(a.take_failures().is_empty());
+        assert_eq!(a.buffered("B"), 1);
+        let e = a.counters.kinds["event"];
+        assert_eq!(
+            (e.from_link, e.discarded),
+            (2, 1),
+            "and one for the runtime to deliver"
+        );
+        assert!(accounted(a.counters.kinds["beacon"]));
+
+        // The second's side: A follows the other gateway of B; B2 takes nothing of A's, and
+        // gives up once that lasts past the bound and the grace.
+        let mut b2 = Core::new(plan("B"), 77);
+        let beacon = LinkKind::Beacon {
+            alive: vec!["player".into()],
+            follows: a.follows(),
+        };
+        let mut from_a = msg("A", 1, beacon);
+        from_a.incarnation = 1;
+        assert_eq!(b2.on_link(&from_a, 0, &mut ch), Route::Beacon);
+        let mut to_first = due[0].0.clone();
+        to_first.incarnation = 1;
+        assert_eq!(b2.on_link(&to_first, 10, &mut ch), Route::Discarded);
+        assert!(b2.mirrored().is_empty(), "no stand-in of A's player on B2");
+        assert_eq!(b2.refused(1_000_000 + CLAIM_GRACE_US), None);
+        let why = b2.refused(1_000_001 + CLAIM_GRACE_US).expect("given up");
+        assert!(
+            why.contains("`A` follows another gateway of computer `B`"),
+            "{why}"
+        );
+
+        // Once B's first gateway is silent past the bound, a new incarnation is its restart:
+        // only then is what was numbered for the first given up.
+        second.link_seq = 3;
+        assert_eq!(a.on_link(&second, 1_300_001, &mut ch), Route::Beacon);
+        assert_eq!(a.peers()["B"].restarts, 1);
+        let failures = a.take_failures();
+        assert_eq!(failures.len(), 1);
+        assert!(failures[0].reason.contains("restarted"), "{failures:?}");
     }
 
     #[test]

@@ -13,6 +13,9 @@
 //! - [`link`]: the one message type on the link and its keys (`petrel/<vehicle>/link/<computer>`).
 //! - [`core`]: the decisions, sans I/O: routing, peers lost and restored within the detection
 //!   bound, which stand-ins to keep, counters accounting for every message.
+//! - [`session`]: the zenoh session: endpoints, mutual TLS with the vehicle's keys, each peer
+//!   bound by zenoh's access control to its certificate's computer.
+//! - [`keys`]: the vehicle's keys (its certificate authority, a certificate per computer).
 //! - [`reliable`]: events and calls carried on numbered streams, acknowledged, sent again, or
 //!   given up with their senders told; [`ledger`]: the verdicts this computer's senders wait for
 //!   on the events the link gave up.
@@ -24,10 +27,13 @@
 #![warn(missing_docs)]
 
 pub mod core;
+pub mod keys;
 pub mod ledger;
 pub mod link;
 pub mod reliable;
 pub mod runtime;
+pub mod session;
 
 pub use crate::core::{Core, Counts, PeerChange, PeerState, Plan};
 pub use crate::runtime::{run, Credentials, GatewayError, LinkEvents, Settings};
+pub use crate::session::Security;

@@ -36,6 +36,10 @@ pub enum LinkKind {
     Beacon {
         /// Node names alive on the sender's computer.
         alive: Vec<String>,
+        /// The gateway (incarnation) the sender follows for each computer it has heard: one
+        /// per computer, so a second gateway claiming a computer learns it is refused, and
+        /// nothing the sender meant for the first is taken by the second.
+        follows: Vec<(String, u64)>,
     },
     /// The sending gateway has taken the carried messages of other gateways' streams up to a
     /// point (delivered here, or refused here for the reasons listed). No body.

@@ -36,6 +36,7 @@ use crate::core::{AckMap, Core, PeerChange, Plan, Route};
 use crate::ledger::Senders;
 use crate::link::{key_all, key_of, LinkKind, LinkMsg};
 use crate::reliable::Failure;
+use crate::session::{zenoh_config, Security, INSECURE_WARNING};
 
 /// The events the player's computer raises when a peer computer is lost or comes back, each
 /// with one parameter, the computer's name (`computer: text`).
@@ -69,7 +70,10 @@ pub struct Settings {
     pub listen: Vec<String>,
     /// zenoh endpoints of the peers to connect to.
     pub connect: Vec<String>,
-    /// Authentication of the peers, if the vehicle file asks for it.
+    /// How the link is secured (mutual TLS with the vehicle's keys, unless a lab bench opts
+    /// out).
+    pub security: Security,
+    /// zenoh's user/password authentication of the peers too, if the vehicle file asks for it.
     pub credentials: Option<Credentials>,
     /// The link's events, if the vehicle file names them.
     pub link_events: Option<LinkEvents>,
@@ -91,30 +95,6 @@ impl std::error::Error for GatewayError {}
 
 fn err(what: &str, e: impl std::fmt::Display) -> GatewayError {
     GatewayError(format!("{what}: {e}"))
-}
-
-/// The zenoh configuration of a gateway: peer mode, no multicast scouting (the peers are the
-/// vehicle file's, and tests on one host must not find each other), quick reconnection.
-pub fn zenoh_config(s: &Settings) -> Result<zenoh::Config, GatewayError> {
-    let mut doc = serde_json::json!({
-        "mode": "peer",
-        "listen": { "endpoints": s.listen },
-        "connect": {
-            "endpoints": s.connect,
-            "retry": { "period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2.0 }
-        },
-        "scouting": { "multicast": { "enabled": false }, "gossip": { "enabled": false } },
-    });
-    if let Some(c) = &s.credentials {
-        doc["transport"] = serde_json::json!({
-            "auth": { "usrpwd": {
-                "user": c.user,
-                "password": c.password,
-                "dictionary_file": c.dictionary.to_string_lossy(),
-            } }
-        });
-    }
-    zenoh::Config::from_json5(&doc.to_string()).map_err(|e| err("the zenoh configuration", e))
 }
 
 /// Removes the resources of the vehicle's dead nodes on this computer, saying what it did.
@@ -258,6 +238,10 @@ pub fn run(settings: Settings) -> Result<serde_json::Value, GatewayError> {
         participant,
     };
 
+    match &settings.security {
+        Security::Tls(_) => tracing::info!("the link: {}", settings.security.describe()),
+        Security::None => tracing::warn!("WARNING: {INSECURE_WARNING}"),
+    }
     let session = zenoh::open(zenoh_config(&settings)?)
         .wait()
         .map_err(|e| err("cannot open the zenoh session", e))?;
@@ -266,7 +250,9 @@ pub fn run(settings: Settings) -> Result<serde_json::Value, GatewayError> {
         .congestion_control(zenoh::qos::CongestionControl::Block)
         .wait()
         .map_err(|e| err("cannot declare the link publisher", e))?;
-    let (tx, rx) = mpsc::channel::<Vec<u8>>();
+    // Each message with the computer of the key it came on: the access control lets a peer
+    // put on its own computer's key only, and a message must say it is from that computer.
+    let (tx, rx) = mpsc::channel::<(String, Vec<u8>)>();
     let (wake_r, wake_w) = UnixStream::pair().map_err(|e| err("the wake-up socket", e))?;
     wake_r
         .set_nonblocking(true)
@@ -275,7 +261,11 @@ pub fn run(settings: Settings) -> Result<serde_json::Value, GatewayError> {
     let _subscriber = session
         .declare_subscriber(key_all(vehicle.name()))
         .callback(move |sample| {
-            let _ = tx.send(sample.payload().to_bytes().into_owned());
+            let computer = sample.key_expr().as_str().rsplit('/').next().unwrap_or("");
+            let _ = tx.send((
+                computer.to_owned(),
+                sample.payload().to_bytes().into_owned(),
+            ));
             // A full socket already holds a wake-up: nothing is lost.
             let _ = (&wake_w).write(&[1]);
         })
@@ -306,6 +296,7 @@ pub fn run(settings: Settings) -> Result<serde_json::Value, GatewayError> {
         publisher,
         start: Instant::now(),
         status_period,
+        security: settings.security.describe(),
     };
     tracing::info!(
         "gateway of computer `{me}` up, link key {}",
@@ -325,6 +316,9 @@ pub fn run(settings: Settings) -> Result<serde_json::Value, GatewayError> {
             // A lost computer's held messages came before its loss: delivered first.
             gw.flush();
             gw.on_changes(changes);
+            if let Some(why) = gw.core.refused(gw.now_us()) {
+                return Err(GatewayError(format!("refused: {why}")));
+            }
             next_beacon = now + beacon_period;
         }
         if now >= next_status {
@@ -360,15 +354,33 @@ pub fn run(settings: Settings) -> Result<serde_json::Value, GatewayError> {
         }
         while matches!((&wake_r).read(&mut buf), Ok(n) if n > 0) {}
         let mut changes = Vec::new();
-        while let Ok(bytes) = rx.try_recv() {
-            gw.take_link(&bytes, &mut changes);
+        while let Ok((computer, bytes)) = rx.try_recv() {
+            gw.take_link(&computer, &bytes, &mut changes);
         }
         gw.on_changes(changes);
         gw.take_local();
         gw.flush();
     }
     gw.publish_status();
-    Ok(gw.status_json())
+    let status = gw.status_json();
+    drop(gw);
+    drop(_subscriber);
+    leave(session);
+    Ok(status)
+}
+
+/// Closes the zenoh session without waiting on peers that are gone: zenoh closes each QUIC
+/// link gracefully and waits (up to 10 s) for an answer a stopped peer never gives. The live
+/// peers are told at once; the gateway waits half a second at most, then leaves (its peers
+/// would see its silence within the detection bound anyway).
+fn leave(session: zenoh::Session) {
+    let closing = std::thread::spawn(move || {
+        let _ = session.close().wait();
+    });
+    let deadline = Instant::now() + Duration::from_millis(500);
+    while !closing.is_finished() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(10));
+    }
 }
 
 /// Local messages for the link: origin, ipc header, kind, body.
@@ -437,6 +449,8 @@ struct Gateway {
     publisher: zenoh::pubsub::Publisher<'static>,
     start: Instant,
     status_period: Duration,
+    /// How the link is secured, for the status.
+    security: String,
 }
 
 impl Gateway {
@@ -585,7 +599,13 @@ impl Gateway {
                 Vec::new()
             }
         };
-        self.put("gateway", (0, 0), LinkKind::Beacon { alive }, Vec::new());
+        let follows = self.core.follows();
+        self.put(
+            "gateway",
+            (0, 0),
+            LinkKind::Beacon { alive, follows },
+            Vec::new(),
+        );
     }
 
     /// Counts what could not be taken, and forwards what was.
@@ -671,9 +691,19 @@ impl Gateway {
         self.forward_all(out, failed);
     }
 
-    fn take_link(&mut self, bytes: &[u8], changes: &mut Vec<PeerChange>) {
+    fn take_link(&mut self, key_computer: &str, bytes: &[u8], changes: &mut Vec<PeerChange>) {
         let msg = match LinkMsg::decode(bytes) {
-            Ok(m) => m,
+            Ok(m) if m.from == key_computer => m,
+            Ok(m) => {
+                let why = format!(
+                    "a message claiming computer `{}` on computer `{key_computer}`'s key",
+                    m.from
+                );
+                tracing::warn!("link message refused: {why}");
+                self.core.counters.undecodable += 1;
+                self.core.counters.remember(why);
+                return;
+            }
             Err(e) => {
                 self.core.counters.undecodable += 1;
                 tracing::warn!("a link message does not decode: {e}");
@@ -683,6 +713,8 @@ impl Gateway {
         let now = self.now_us();
         match self.core.on_link(&msg, now, changes) {
             Route::Own | Route::NotMine | Route::Beacon | Route::Held | Route::Discarded => {}
+            Route::Claim(None) => {}
+            Route::Claim(Some(why)) => tracing::warn!("{why}"),
             Route::Foreign(why) => tracing::warn!("link message refused: {why}"),
             Route::Deliver => self.deliver_counted(&msg),
         }
@@ -843,6 +875,11 @@ impl Gateway {
     }
 
     fn on_changes(&mut self, changes: Vec<PeerChange>) {
+        // A computer heard (again): say at once whom this gateway follows, so that it takes
+        // what this one sends it without waiting for the next beacon.
+        let heard = changes
+            .iter()
+            .any(|c| matches!(c, PeerChange::Joined(_) | PeerChange::Restored(_)));
         for change in changes {
             let (event, computer) = match &change {
                 PeerChange::Joined(c) => {
@@ -881,6 +918,9 @@ impl Gateway {
                     self.core.link_event_sent(computer, sent);
                 }
             }
+        }
+        if heard {
+            self.beacon();
         }
         self.sync_mirrors();
     }
@@ -957,6 +997,7 @@ impl Gateway {
             "peers": self.core.peers(),
             "mirrors": self.mirrors.keys().collect::<Vec<_>>(),
             "counters": self.core.counters,
+            "security": self.security,
         })
     }
 

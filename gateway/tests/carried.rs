@@ -60,7 +60,10 @@ impl Side {
         self.core.outgoing(
             "gateway",
             (0, 0),
-            LinkKind::Beacon { alive: Vec::new() },
+            LinkKind::Beacon {
+                alive: Vec::new(),
+                follows: self.core.follows(),
+            },
             Vec::new(),
             now,
         )
@@ -359,18 +362,30 @@ fn a_restarted_gateway_starts_new_streams_and_old_numbers_do_not_confuse_it() {
     let first = b.puts(0);
     a.hear(&first, 1, None);
     assert_eq!(bodies(&a), [1, 2]);
-    // B restarts: its new incarnation numbers from 1 again, and A takes it as new.
+    // B restarts. Until its predecessor is silent past the detection bound, A takes the new
+    // incarnation for a second gateway of B and refuses it; past the bound, for its restart:
+    // it numbers from 1 again, and A takes it as new.
     let mut b2 = Side::new("B", 22);
-    meet(&mut a, &mut b2, S);
-    b2.event(3, S);
-    let copies = b2.puts(S);
+    let early = b2.beacon(S / 2);
+    assert!(matches!(
+        a.hear(&[early], S / 2, None)[..],
+        [Route::Claim(_)]
+    ));
+    meet(&mut a, &mut b2, 2 * S);
+    assert_eq!(a.core.peers()["B"].restarts, 1);
+    b2.event(3, 2 * S);
+    let copies = b2.puts(2 * S);
     assert_eq!(copies[0].carried.as_ref().map(|c| c.seq), Some(1));
-    assert_eq!(a.hear(&copies, S, None), [Route::Deliver]);
-    let acks = a.puts(S);
-    b2.hear(&acks, S, None);
+    assert_eq!(a.hear(&copies, 2 * S, None), [Route::Deliver]);
+    let acks = a.puts(2 * S);
+    b2.hear(&acks, 2 * S, None);
     assert_eq!(b2.core.buffered("A"), 0);
-    // A late copy of the old incarnation's second message is still known as taken.
-    assert_eq!(a.hear(&first[1..], S + 1, None), [Route::Discarded]);
+    // A late copy of the old incarnation's second message is not taken again: A follows the
+    // new incarnation now, and refuses the other's messages as it would a second gateway's.
+    assert!(matches!(
+        a.hear(&first[1..], 2 * S + 1, None)[..],
+        [Route::Claim(_)]
+    ));
     assert_eq!(bodies(&a), [1, 2, 3]);
 
     // A restarts with a call of B's... (here: an event of B's) numbered but unacknowledged:
@@ -379,12 +394,12 @@ fn a_restarted_gateway_starts_new_streams_and_old_numbers_do_not_confuse_it() {
     let to_old_a = b2.puts(2 * S);
     b2.event(5, 2 * S);
     let mut a2 = Side::new("A", 11);
-    meet(&mut a2, &mut b2, 2 * S);
+    meet(&mut a2, &mut b2, 4 * S);
     let f = b2.core.take_failures();
     assert_eq!(f.len(), 1);
     assert!(reasons(&f)[0].contains("restarted"), "{f:?}");
     assert_eq!(f[0].msg.body, [4]);
-    let copies = b2.puts(2 * S);
+    let copies = b2.puts(4 * S);
     assert_eq!(copies.len(), 1);
     assert_eq!(
         copies[0]
@@ -394,9 +409,88 @@ fn a_restarted_gateway_starts_new_streams_and_old_numbers_do_not_confuse_it() {
         Some((1, 11))
     );
     // The copy for its predecessor is not taken by the new A.
-    assert_eq!(a2.hear(&to_old_a, 2 * S, None), [Route::Discarded]);
-    assert_eq!(a2.hear(&copies, 2 * S, None), [Route::Deliver]);
+    assert_eq!(a2.hear(&to_old_a, 4 * S, None), [Route::Discarded]);
+    assert_eq!(a2.hear(&copies, 4 * S, None), [Route::Deliver]);
     assert_eq!(bodies(&a2), [5]);
+}
+
+#[test]
+fn a_second_gateway_is_neither_taken_nor_acknowledged_and_the_first_stream_goes_on() {
+    let (mut a, mut b) = (Side::new("A", 1), Side::new("B", 2));
+    meet(&mut a, &mut b, 0);
+    // The player's call to ECHO, on its way to B's first gateway.
+    a.call(1, 0);
+    let call = a.puts(0);
+    // A second gateway of B, with the vehicle's keys, while the first is up: it hears A and
+    // sends it an event; A refuses all of it and acknowledges nothing of it.
+    let mut second = Side::new("B", 3);
+    let beacon = a.beacon(S / 10);
+    second.hear(&[beacon], S / 10, None);
+    assert!(second.event(9, S / 10));
+    let mut from_second = vec![second.beacon(S / 10)];
+    from_second.extend(second.puts(S / 10));
+    let routes = a.hear(&from_second, S / 10, None);
+    assert!(
+        routes.iter().all(|r| matches!(r, Route::Claim(_))),
+        "{routes:?}"
+    );
+    assert!(a.delivered.is_empty());
+    assert!(a.puts(S / 10).is_empty(), "nothing acknowledged to it");
+    assert_eq!(a.core.counters.claims_refused["B"], 2);
+    // The second gateway takes nothing meant for the first.
+    assert_eq!(second.hear(&call, S / 10, None), [Route::Discarded]);
+    // The first goes on: no restart, the call not given up, its stream and A's unchanged.
+    b.hear(&call, S / 10, None);
+    b.event(1, S / 10);
+    let puts = b.puts(S / 10);
+    a.hear(&puts, S / 10, None);
+    assert_eq!(bodies(&a), [1]);
+    let acks = a.puts(S / 10);
+    b.hear(&acks, S / 10, None);
+    assert_eq!((b.core.buffered("A"), a.core.buffered("B")), (0, 0));
+    assert!(a.core.take_failures().is_empty());
+    assert_eq!(a.core.peers()["B"].restarts, 0);
+    assert_eq!(a.counts("call").carried, 1);
+    let e = a.counts("event");
+    assert_eq!(
+        e.from_link,
+        e.delivered + e.refused + e.not_mine + e.unheard + e.discarded + 1,
+        "the runtime counts deliveries: {e:?}"
+    );
+}
+
+#[test]
+fn a_message_its_computer_may_not_send_is_refused_back_and_the_stream_goes_on() {
+    let (mut a, mut b) = (Side::new("A", 1), Side::new("B", 2));
+    meet(&mut a, &mut b, 0);
+    a.at(2 * S);
+    b.at(2 * S);
+    // While the link is out, B takes an event claiming to be the player's (its origin is
+    // A's), then a tool's. Back, both wait for the restored event; the first is refused as
+    // they are released, the second delivered.
+    assert!(b
+        .core
+        .carry("player", (5, 1), LinkKind::Event, vec![1], 2 * S));
+    assert!(b.event(2, 2 * S));
+    meet(&mut a, &mut b, 3 * S);
+    let copies = b.puts(3 * S);
+    assert_eq!(a.hear(&copies, 3 * S, None), [Route::Held, Route::Held]);
+    a.core.link_event_sent("B", None);
+    a.release();
+    assert_eq!(bodies(&a), [2]);
+    let acks = a.puts(3 * S);
+    b.hear(&acks, 3 * S, None);
+    let f = b.core.take_failures();
+    assert_eq!(f.len(), 1, "{f:?}");
+    assert!(
+        f[0].reason.contains(
+            "refused on computer `A`: event from computer `B` claims origin `player`, which is computer `A`'s"
+        ),
+        "{f:?}"
+    );
+    assert_eq!(b.core.buffered("A"), 0);
+    let e = a.counts("event");
+    assert_eq!((e.from_link, e.refused), (2, 1));
 }
 
 #[test]

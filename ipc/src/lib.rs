@@ -83,8 +83,8 @@ pub use liveness::{
 };
 pub use naming::{NameError, Role, Vehicle};
 pub use participant::{
-    event_senders, Participant, ServiceFailure, SetupError, EVENT_SENDERS_SPARE, MIN_FIXED_LEN,
-    PROGRAM_SENDERS_GONE,
+    event_senders, CallsView, Participant, ServiceFailure, SetupError, EVENT_SENDERS_SPARE,
+    MIN_FIXED_LEN, PROGRAM_SENDERS_GONE,
 };
 pub use port::{
     CallReceiver, CallSender, Drained, EventReceiver, EventSender, HeartbeatPublisher,

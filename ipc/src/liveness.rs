@@ -4,8 +4,10 @@
 //! (`player`, `program/PLN`, ...). A process killed without warning (SIGKILL, a crash) leaves
 //! its node's files in `/dev/shm` and the vehicle's directory; iceoryx2 sees that the node's
 //! owner is gone (its file lock was released) and reports it dead until someone removes the
-//! stale resources. `petrel play` calls [`cleanup_dead_nodes`] at start; the player turns a dead
-//! program into a `program_lost(name)` event with [`program_status`].
+//! stale resources. `petrel play` calls [`cleanup_dead_nodes`] at start; the player turns a
+//! program whose process went into a `program_lost(name)` event (or, when the program said it
+//! leaves in good order, a stop) with a [`ProgramWatch`], which also tells a program that
+//! receives its calls (ready) from one whose node lives without (joining).
 //!
 //! Only nodes of the given [`Vehicle`] are seen: its directory and session keep the others
 //! apart ([`access`](crate::access)).
@@ -17,6 +19,7 @@ use iceoryx2::node::{NodeCleanupFailure, NodeListFailure, NodeView};
 use iceoryx2::prelude::{ipc, CallbackProgression, Node, NodeState};
 
 use crate::naming::{program_node_name, Vehicle};
+use crate::participant::{CallsView, Participant, SetupError};
 
 /// Whether a node's process lives.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -214,36 +217,64 @@ pub fn cleanup_dead_nodes(
     Ok(report)
 }
 
-/// Whether a program runs.
+/// Whether a program runs, and whether it receives its calls.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ProgramStatus {
-    /// A node of the program is alive.
+    /// A node of the program is alive. Seen by a [`ProgramWatch`], more: a live node of the
+    /// program has its calls receiver connected, so a call sent now reaches it (the program
+    /// is ready). [`program_status`], which lists the nodes only, says `Alive` as soon as a
+    /// node lives.
     Alive,
+    /// A node of the program is alive but receives no calls yet (it is joining: its node is
+    /// made before its calls receiver) or any more (it is leaving). Only a [`ProgramWatch`]
+    /// tells it from [`Alive`](Self::Alive); the player holds the calls it makes to such a
+    /// program until it receives them (docs/semantics.md, "Held calls").
+    Joining,
     /// The program's node is dead (killed, crashed) and not yet cleaned up.
     Dead,
     /// No node of the program exists: never started, stopped in good order, or cleaned up.
     Absent,
 }
 
-/// The status of program `name`: alive if any of its nodes is alive, else dead if one is dead.
+impl ProgramStatus {
+    /// A live process of the program, ready or not.
+    pub fn is_running(self) -> bool {
+        matches!(self, ProgramStatus::Alive | ProgramStatus::Joining)
+    }
+}
+
+/// The status of program `name` from its nodes alone: alive if any of its nodes is alive, else
+/// dead if one is dead. Whether it receives its calls is [`ProgramWatch`]'s to say.
 pub fn program_status(vehicle: &Vehicle, name: &str) -> Result<ProgramStatus, LivenessError> {
     node_status(vehicle, &program_node_name(name))
 }
 
 /// The status of the node named `node_name` (`player`, `can_bridge`, `program/PLN`...).
 pub fn node_status(vehicle: &Vehicle, node_name: &str) -> Result<ProgramStatus, LivenessError> {
+    let mut nodes = Vec::new();
+    visit(vehicle, |state| nodes.push(info(&state)))?;
+    Ok(status_among(&nodes, node_name, None))
+}
+
+/// The status of the nodes named `node_name` among `nodes`; with `receivers` (the nodes that
+/// receive the program's calls), [`ProgramStatus::Alive`] only when one of the live ones is
+/// among them.
+fn status_among(nodes: &[NodeInfo], node_name: &str, receivers: Option<&[u128]>) -> ProgramStatus {
     let mut status = ProgramStatus::Absent;
-    visit(vehicle, |state| {
-        let n = info(&state);
-        if n.name == node_name {
-            match n.status {
-                NodeStatus::Alive => status = ProgramStatus::Alive,
-                NodeStatus::Dead if status == ProgramStatus::Absent => status = ProgramStatus::Dead,
-                _ => {}
+    for n in nodes.iter().filter(|n| n.name == node_name) {
+        match n.status {
+            NodeStatus::Alive => {
+                let receives = receivers.is_none_or(|r| r.contains(&n.id));
+                if receives {
+                    return ProgramStatus::Alive;
+                }
+                status = ProgramStatus::Joining;
             }
+            NodeStatus::Dead if status == ProgramStatus::Absent => status = ProgramStatus::Dead,
+            _ => {}
         }
-    })?;
-    Ok(status)
+    }
+    status
 }
 
 /// Whether program `name` has a live node.
@@ -263,66 +294,117 @@ pub struct ProgramChange {
 }
 
 impl ProgramChange {
-    /// The program was running and is not any more (the player's `program_lost`).
+    /// The program's process was running (ready or not) and is not any more: it died, or it
+    /// left (the player's `program_lost`, unless the program said it leaves in good order).
     pub fn is_lost(&self) -> bool {
-        self.from == ProgramStatus::Alive && self.to != ProgramStatus::Alive
+        self.from.is_running() && !self.to.is_running()
     }
 }
 
-/// Watches the status of a set of programs, one node listing per [`check`](Self::check).
+/// Watches the status of a set of programs, one node listing per [`check`](Self::check): a
+/// program is [`Alive`](ProgramStatus::Alive) (ready) once a live node of it receives its
+/// calls, [`Joining`](ProgramStatus::Joining) while its node lives without (iceoryx2 makes a
+/// node before its ports: a program's node is seen a moment before its calls receiver).
 ///
 /// iceoryx2 does not watch processes by itself: a dead node is noticed when someone lists the
 /// nodes. The player checks on an interval of its reactor, and whenever a receiver reports
-/// [`senders_died`](crate::port::Wakeups::senders_died).
-#[derive(Debug, Clone)]
+/// [`senders_died`](crate::port::Wakeups::senders_died); `petrel up` at each round while a
+/// program starts.
+#[derive(Debug)]
 pub struct ProgramWatch {
     vehicle: Vehicle,
-    known: std::collections::BTreeMap<String, ProgramStatus>,
+    known: std::collections::BTreeMap<String, Watched>,
+}
+
+/// What a [`ProgramWatch`] knows of one program.
+#[derive(Debug)]
+struct Watched {
+    status: ProgramStatus,
+    /// The ids of its live nodes at the last check: a program whose processes all went and
+    /// came back between two checks (killed and restarted at once) is a new one.
+    live: Vec<u128>,
+    view: CallsView,
 }
 
 impl ProgramWatch {
-    /// Watches `programs`, all taken as [`ProgramStatus::Absent`] until the first check.
-    pub fn new<I, S>(vehicle: &Vehicle, programs: I) -> Self
+    /// Watches `programs` through `participant` (which opens, or makes, their calls services
+    /// to see who receives them), all taken as [`ProgramStatus::Absent`] until the first check.
+    pub fn new<I, S>(participant: &Participant, programs: I) -> Result<Self, SetupError>
     where
         I: IntoIterator<Item = S>,
         S: Into<String>,
     {
-        ProgramWatch {
-            vehicle: vehicle.clone(),
-            known: programs
-                .into_iter()
-                .map(|p| (p.into(), ProgramStatus::Absent))
-                .collect(),
+        let mut known = std::collections::BTreeMap::new();
+        for p in programs {
+            let p = p.into();
+            let view = participant.calls_view(&p)?;
+            let watched = Watched {
+                status: ProgramStatus::Absent,
+                live: Vec::new(),
+                view,
+            };
+            known.insert(p, watched);
         }
+        Ok(ProgramWatch {
+            vehicle: participant.vehicle().clone(),
+            known,
+        })
     }
 
     /// The status of `program` at the last check.
     pub fn status(&self, program: &str) -> Option<ProgramStatus> {
-        self.known.get(program).copied()
+        self.known.get(program).map(|w| w.status)
     }
 
-    /// Lists the nodes once and returns the programs whose status changed, in name order.
+    /// The status of `program` now (one node listing), without changing what the next
+    /// [`check`](Self::check) compares with; `None` for a program not watched.
+    pub fn probe(&self, program: &str) -> Result<Option<ProgramStatus>, LivenessError> {
+        let Some(watched) = self.known.get(program) else {
+            return Ok(None);
+        };
+        let nodes = list_nodes(&self.vehicle)?;
+        let receivers = watched.view.receiver_nodes();
+        Ok(Some(status_among(
+            &nodes,
+            &program_node_name(program),
+            Some(&receivers),
+        )))
+    }
+
+    /// Lists the nodes once and returns the programs whose status changed, in name order. A
+    /// program whose every process went and came back since the last check (killed and
+    /// restarted within a period) changes twice: it went ([`Absent`](ProgramStatus::Absent)),
+    /// then it came back.
     pub fn check(&mut self) -> Result<Vec<ProgramChange>, LivenessError> {
         let nodes = list_nodes(&self.vehicle)?;
         let mut changes = Vec::new();
-        for (program, known) in self.known.iter_mut() {
+        for (program, watched) in self.known.iter_mut() {
             let node_name = program_node_name(program);
-            let mut now = ProgramStatus::Absent;
-            for n in nodes.iter().filter(|n| n.name == node_name) {
-                match n.status {
-                    NodeStatus::Alive => now = ProgramStatus::Alive,
-                    NodeStatus::Dead if now == ProgramStatus::Absent => now = ProgramStatus::Dead,
-                    _ => {}
-                }
-            }
-            if now != *known {
+            let receivers = watched.view.receiver_nodes();
+            let now = status_among(&nodes, &node_name, Some(&receivers));
+            let live: Vec<u128> = nodes
+                .iter()
+                .filter(|n| n.name == node_name && n.status == NodeStatus::Alive)
+                .map(|n| n.id)
+                .collect();
+            let mut change = |from, to| {
                 changes.push(ProgramChange {
                     program: program.clone(),
-                    from: *known,
-                    to: now,
-                });
-                *known = now;
+                    from,
+                    to,
+                })
+            };
+            let replaced = watched.status.is_running()
+                && now.is_running()
+                && !watched.live.iter().any(|id| live.contains(id));
+            if replaced {
+                change(watched.status, ProgramStatus::Absent);
+                change(ProgramStatus::Absent, now);
+            } else if now != watched.status {
+                change(watched.status, now);
             }
+            watched.status = now;
+            watched.live = live;
         }
         Ok(changes)
     }

@@ -13,8 +13,8 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::publisher::PublisherCreateError;
 use iceoryx2::port::subscriber::SubscriberCreateError;
 use iceoryx2::prelude::{
-    ipc, AllocationStrategy, AttributeSpecifier, BackpressureStrategy, EventId, Node, NodeBuilder,
-    NodeName, PortFactory, SemanticString, ServiceName,
+    ipc, AllocationStrategy, AttributeSpecifier, BackpressureStrategy, CallbackProgression,
+    EventId, Node, NodeBuilder, NodeName, PortFactory, SemanticString, ServiceName,
 };
 use iceoryx2::service::attribute::{AttributeKey, AttributeValue};
 use iceoryx2::service::builder::event::{EventOpenError, EventOpenOrCreateError};
@@ -445,6 +445,15 @@ impl Participant {
         )
     }
 
+    /// A view of program `program`'s calls service, opened (or made, as the player makes it)
+    /// without a port: who receives the program's calls ([`CallsView::receiver_nodes`]). A
+    /// program is ready when one of its live nodes does: what [`ProgramWatch`](crate::ProgramWatch)
+    /// checks, for the player and for `petrel up`.
+    pub fn calls_view(&self, program: &str) -> Result<CallsView, SetupError> {
+        let factory = self.open_pubsub(&self.vehicle.calls_service(program)?, &CALLS, None)?;
+        Ok(CallsView { factory })
+    }
+
     /// The receiver of this program's calls. Only a [`Role::Program`] has one.
     pub fn call_receiver(&self) -> Result<CallReceiver, SetupError> {
         match &self.role {
@@ -741,6 +750,26 @@ impl Participant {
             factory,
             self.session.clone(),
         ))
+    }
+}
+
+/// A program's calls service seen without a port ([`Participant::calls_view`]).
+#[derive(Debug)]
+pub struct CallsView {
+    factory: publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>,
+}
+
+impl CallsView {
+    /// The iceoryx2 ids of the nodes ([`NodeInfo::id`](crate::NodeInfo::id)) whose receivers
+    /// are connected to the program's calls now: a call sent now reaches them. A receiver of a
+    /// dead node stays listed until the node is cleaned up.
+    pub fn receiver_nodes(&self) -> Vec<u128> {
+        let mut nodes = Vec::new();
+        self.factory.dynamic_config().list_subscribers(|s| {
+            nodes.push(s.node_id.value());
+            CallbackProgression::Continue
+        });
+        nodes
     }
 }
 

@@ -889,6 +889,8 @@ pub enum RecvError {
         sender: u64,
         /// Its sequence number.
         seq: u64,
+        /// Messages of this sender missed just before this one (as [`Received::missed`]).
+        missed: u64,
         /// Why it did not decode.
         error: WireError,
     },
@@ -1321,6 +1323,7 @@ impl<M: Message> Receiver<M> {
                     origin,
                     sender: header.sender,
                     seq: header.seq,
+                    missed,
                     error,
                 }
             };

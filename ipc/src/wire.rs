@@ -55,8 +55,18 @@ pub use in_place::{decode_call_into, decode_event_in_place};
 /// services. Version 2: the heartbeat carries typed acknowledgements and the recorder's state.
 /// Version 3: a marking delta carries its step's mission time, the event's parameters and the
 /// step's actions as text, so that a monitor shows the whole step. Version 4: a body longer
-/// than its sender's fixed samples travels in fragments ([`MsgHeader::fragment`]).
-pub const WIRE_VERSION: u16 = 4;
+/// than its sender's fixed samples travels in fragments ([`MsgHeader::fragment`]). Version 5: a
+/// program says it leaves in good order ([`LEAVE`] on the events service).
+pub const WIRE_VERSION: u16 = 5;
+
+/// The name of the one message on the events service that is not an event: a program says
+/// that it leaves the vehicle in good order (`Program::close`, a `Program` dropped, the CAN
+/// data server's commands program at its stop), before its node goes. The player then
+/// records a stop, not a loss (`program_lost` stays for programs that die). It goes with no
+/// parameters, from the program's own sender (origin `program/NAME`: that is the program it
+/// speaks for), numbered and acknowledged like an event, and crosses computers like one.
+/// No event of a project has this name: it is not an identifier.
+pub const LEAVE: &str = "petrel:leave";
 
 /// [`MsgHeader::fragment`]: this sample carries a piece of a body longer than its sender's
 /// samples; the receiver joins the pieces of one sender, in sequence, into the body.
@@ -110,6 +120,16 @@ impl EventMsg {
             name: name.into(),
             params,
         }
+    }
+
+    /// The message by which a program says it leaves in good order ([`LEAVE`]).
+    pub fn leave() -> Self {
+        EventMsg::new(LEAVE, Vec::new())
+    }
+
+    /// Whether this is a program's [`LEAVE`] rather than an event.
+    pub fn is_leave(&self) -> bool {
+        self.name == LEAVE
     }
 }
 
@@ -576,7 +596,7 @@ impl Message for ReloadAnswer {
 /// depend on the module path and changes with [`WIRE_VERSION`].
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
-#[type_name("petrel::MsgHeader/v4")]
+#[type_name("petrel::MsgHeader/v5")]
 pub struct MsgHeader {
     /// The sending port's id, unique among the vehicle's live ports.
     pub sender: u64,

@@ -256,7 +256,7 @@ fn a_sigkilled_program_is_reported_dead_and_cleaned() {
     let vehicle = TestVehicle::new("auv");
     let player = Participant::join(&vehicle, Role::Player).unwrap();
     let rx = player.event_receiver().unwrap();
-    let mut watch = ProgramWatch::new(&vehicle, ["GDD", "PLN"]);
+    let mut watch = ProgramWatch::new(&player, ["GDD", "PLN"]).unwrap();
     assert!(watch.check().unwrap().is_empty());
     let before = shm_files(&vehicle.shm_prefix().unwrap());
     let mut child = ChildProcess::spawn(&vehicle, "sleeper", "");

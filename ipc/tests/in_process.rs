@@ -452,20 +452,60 @@ fn fd_sources_wake_the_reactor() {
     }
 }
 
+/// A program is ready when it receives its calls, not when its node lives (issue 30: a call
+/// sent in between found no receiver and was lost).
 #[test]
-fn program_watch_sees_programs_come_and_go() {
+fn program_watch_sees_programs_join_receive_and_go() {
+    use petrel_ipc::ProgramStatus::{Absent, Alive, Joining};
     let vehicle = TestVehicle::new("auv");
-    let mut watch = petrel_ipc::ProgramWatch::new(&vehicle, ["PLN"]);
+    let player = Participant::join(&vehicle, Role::Player).unwrap();
+    let mut watch = petrel_ipc::ProgramWatch::new(&player, ["PLN"]).unwrap();
     assert!(watch.check().unwrap().is_empty());
     let pln = Participant::join(&vehicle, Role::program("PLN").unwrap()).unwrap();
+    // Its node lives, its calls have no receiver yet: joining, and a call finds nobody.
     let changes = watch.check().unwrap();
-    assert_eq!(changes.len(), 1);
+    assert_eq!((changes.len(), changes[0].to), (1, Joining), "{changes:?}");
     assert!(!changes[0].is_lost());
-    assert_eq!(watch.status("PLN"), Some(petrel_ipc::ProgramStatus::Alive));
+    let calls = player.call_sender("PLN").unwrap();
+    assert!(matches!(
+        calls.send(&CallMsg::new("plan", vec![])),
+        Err(SendError::NoReceiver { .. })
+    ));
+    assert_eq!(watch.probe("PLN").unwrap(), Some(Joining));
+    // Its receiver connected: ready, and a call goes.
+    let rx = pln.call_receiver().unwrap();
+    assert_eq!(watch.probe("PLN").unwrap(), Some(Alive));
+    assert_eq!(
+        watch.status("PLN"),
+        Some(Joining),
+        "a probe changes nothing"
+    );
+    let changes = watch.check().unwrap();
+    assert_eq!((changes[0].from, changes[0].to), (Joining, Alive));
+    calls.send(&CallMsg::new("plan", vec![])).unwrap();
+    // Its receiver gone first (as a program leaves), then its node: lost only then.
+    drop(rx);
+    let changes = watch.check().unwrap();
+    assert_eq!(changes[0].to, Joining);
+    assert!(!changes[0].is_lost(), "{changes:?}");
     drop(pln);
     let changes = watch.check().unwrap();
     assert!(changes[0].is_lost(), "{changes:?}");
-    assert_eq!(changes[0].to, petrel_ipc::ProgramStatus::Absent);
+    assert_eq!(changes[0].to, Absent);
+    assert_eq!(watch.probe("NAV").unwrap(), None, "not watched");
+    // Gone and back between two checks (killed and restarted at once): a new process, so the
+    // old one went; seen as such, not as no change.
+    let pln = Participant::join(&vehicle, Role::program("PLN").unwrap()).unwrap();
+    let rx = pln.call_receiver().unwrap();
+    assert_eq!(watch.check().unwrap()[0].to, Alive);
+    drop((rx, pln));
+    let pln = Participant::join(&vehicle, Role::program("PLN").unwrap()).unwrap();
+    let _rx = pln.call_receiver().unwrap();
+    let changes = watch.check().unwrap();
+    assert_eq!(changes.len(), 2, "{changes:?}");
+    assert!(changes[0].is_lost(), "{changes:?}");
+    assert_eq!((changes[1].from, changes[1].to), (Absent, Alive));
+    assert!(watch.check().unwrap().is_empty());
 }
 
 #[test]

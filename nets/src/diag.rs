@@ -4,6 +4,7 @@
 //! one run of `petrel check` reports everything. Codes are stable (`E0101`...), so tools and
 //! golden tests can rely on them; `docs/diagnostics.md` lists them all.
 
+use crate::plural::count;
 use crate::source::{LineCol, SourceMap, Span};
 use std::fmt::Write as _;
 
@@ -162,7 +163,6 @@ impl Diagnostics {
             out.push_str(&render_one(d, sources, &mut cache));
         }
         let (e, w) = (self.error_count(), self.warning_count());
-        let plural = |n: usize, s: &str| format!("{n} {s}{}", if n == 1 { "" } else { "s" });
         if self.list.len() > MAX_HUMAN {
             let shown = &self.list[..MAX_HUMAN];
             let shown_e = shown
@@ -172,10 +172,10 @@ impl Diagnostics {
             let (more_e, more_w) = (e - shown_e, w - (MAX_HUMAN - shown_e));
             let mut more = Vec::new();
             if more_e > 0 {
-                more.push(plural(more_e, "more error"));
+                more.push(count(more_e, "more error"));
             }
             if more_w > 0 {
-                more.push(plural(more_w, "more warning"));
+                more.push(count(more_w, "more warning"));
             }
             let _ = writeln!(
                 out,
@@ -184,7 +184,7 @@ impl Diagnostics {
             );
         }
         if e + w > 0 {
-            let _ = writeln!(out, "{}, {}", plural(e, "error"), plural(w, "warning"));
+            let _ = writeln!(out, "{}, {}", count(e, "error"), count(w, "warning"));
         }
         out
     }

@@ -16,6 +16,7 @@ pub mod manifest;
 pub mod model;
 pub mod names;
 pub mod paths;
+pub mod plural;
 pub mod pnml;
 pub mod project;
 pub mod pt;

@@ -44,6 +44,7 @@
 #![forbid(unsafe_code)]
 #![deny(missing_docs)]
 
+use crate::plural::count;
 use crate::pt::{PtNet, PtNode};
 use crate::stubborn::Stubborn;
 use std::fmt;
@@ -373,11 +374,11 @@ pub fn render_human(net: &PtNet, r: &PtReport) -> String {
     let yes_no = |b: bool| if b { "yes" } else { "no" };
     let _ = writeln!(
         out,
-        "net {}: {} places, {} transitions, {} arcs",
+        "net {}: {}, {}, {}",
         net.name,
-        net.places.len(),
-        net.transitions.len(),
-        net.arcs.len()
+        count(net.places.len(), "place"),
+        count(net.transitions.len(), "transition"),
+        count(net.arcs.len(), "arc")
     );
     if r.reduced {
         // Sizes and maxima of the reduced graph would read as the net's: say what they are.

@@ -599,7 +599,7 @@ fn many_findings_of_one_kind_are_grouped_with_a_count_and_all_lists_them() {
     let summary = verify::render_summary("g", &r, true);
     assert_eq!(summary.matches("error[E0602]").count(), 5, "{summary}");
     assert!(
-        summary.ends_with("result: 5 error(s), 0 warning(s)\n"),
+        summary.ends_with("result: 5 errors, 0 warnings\n"),
         "{summary}"
     );
 }

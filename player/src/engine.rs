@@ -235,10 +235,16 @@ impl std::fmt::Display for Refusal {
     }
 }
 
-/// Counters that account for every event: `received == processed + unused + refused + queued`.
+/// Counters that account for every event: `received == processed + unused + refused + queued`,
+/// on every path: an event refused at its submission (unknown, wrong parameters, after a
+/// catastrophic event) is received and refused at once, one refused when taken (after a
+/// catastrophic event) was received when it was queued, and a message the player refuses
+/// before it could be submitted (undecodable, a built-in event from another process) is
+/// counted with [`Engine::count_refused`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Stats {
-    /// Events accepted into the queue (from outside, from nets, from timers, built-ins).
+    /// Events submitted (from outside, from nets, from timers, built-ins), accepted into the
+    /// queue or refused.
     pub received: u64,
     /// Events that fired or offered at least one transition.
     pub processed: u64,
@@ -485,6 +491,8 @@ impl<'p> Engine<'p> {
         accepted: impl FnOnce(&[Value]),
     ) -> Result<(), Refusal> {
         let p = self.sem.project;
+        // Every submission is received: the refusals below count as refused besides.
+        self.stats.received += 1;
         let Some(decl) = p.events.get(event as usize) else {
             self.stats.refused += 1;
             return Err(Refusal::UnknownEvent(format!("#{event}")));
@@ -518,7 +526,6 @@ impl<'p> Engine<'p> {
             }
         }
         accepted(&params);
-        self.stats.received += 1;
         self.queues[category_index(decl.category)].push_back(Queued {
             event,
             params,
@@ -575,10 +582,19 @@ impl<'p> Engine<'p> {
         match self.sem.project.event_id(name) {
             Some(e) => self.submit_with(e, params, accepted),
             None => {
-                self.stats.refused += 1;
+                self.count_refused();
+                self.recycle(params);
                 Err(Refusal::UnknownEvent(name.to_string()))
             }
         }
+    }
+
+    /// Counts a message refused before it could be submitted (one that did not decode, a
+    /// built-in event another process sent): received and refused, so that `received =
+    /// processed + unused + refused + queued` accounts for every message the player took.
+    pub fn count_refused(&mut self) {
+        self.stats.received += 1;
+        self.stats.refused += 1;
     }
 
     fn recycle(&mut self, mut params: Vec<Value>) {
@@ -746,14 +762,10 @@ impl<'p> Engine<'p> {
                     )))
                 }
                 (Ok(t), Some(e)) => {
-                    // Counted as received once already, when it first arrived; a refusal
-                    // here is of a received event, like one refused after a catastrophic end.
+                    // Counted as received once already, when it first arrived: submitted
+                    // again, it is received again (and refused, if it is).
                     self.stats.received -= 1;
-                    let r = self.submit_to(e, params, t);
-                    if r.is_err() {
-                        self.stats.received += 1;
-                    }
-                    r
+                    self.submit_to(e, params, t)
                 }
             };
             if let Err(r) = result {

@@ -110,8 +110,9 @@ pub fn decode_entry(body: &[u8]) -> Result<Entry, String> {
 }
 
 /// The journal format this Petrel writes (the header's `version`): 2 added [`Entry::Gap`] and
-/// [`Entry::Checkpoint`], 3 [`Entry::Reload`]. Journals of versions 1 and 2 read the same.
-pub const FORMAT_VERSION: u32 = 3;
+/// [`Entry::Checkpoint`], 3 [`Entry::Reload`], 4 [`Entry::ProgramStopped`]. Journals of
+/// earlier versions read the same.
+pub const FORMAT_VERSION: u32 = 4;
 
 /// One journal entry.
 #[derive(Clone, Debug, PartialEq, Encode, Decode)]
@@ -232,6 +233,15 @@ pub enum Entry {
         /// them again; their submissions are before it).
         queued: Vec<(String, Vec<Value>, Option<String>)>,
     },
+    /// A program's process went after it said it leaves in good order: a stop, not a loss (no
+    /// `program_lost`). Not an input: replay passes over it. (After [`Entry::Reload`]: the
+    /// entries of earlier versions keep their encoding.)
+    ProgramStopped {
+        /// Mission time, microseconds.
+        time: u64,
+        /// The program.
+        program: String,
+    },
 }
 
 impl Entry {
@@ -246,6 +256,7 @@ impl Entry {
             | Entry::Step { time, .. }
             | Entry::Gap { time, .. }
             | Entry::Reload { time, .. }
+            | Entry::ProgramStopped { time, .. }
             | Entry::Checkpoint { time, .. } => Some(*time),
         }
     }

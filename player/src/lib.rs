@@ -5,8 +5,9 @@
 //!   player's steps goes through.
 //! - [`script`]: missions as unit tests, in virtual time (`petrel run --script`); [`expect`]:
 //!   what a script's `expect` lines say and how they are checked.
-//! - [`runtime`]: the player process on iceoryx2 (`petrel play`); [`ack`], its ledger of what
-//!   it took from each sender, refused and recorded (the acknowledgements of its heartbeat).
+//! - [`runtime`]: the player process on iceoryx2 (`petrel play`); [`intake`], what it does with
+//!   each message it takes (sans I/O); [`held`], the calls it holds for programs joining; [`ack`], its ledger of what it took from each sender,
+//!   refused and recorded (the acknowledgements of its heartbeat).
 //! - [`journal`], [`replay`]: the flight recorder and its replay (`--resume` too).
 //! - [`shadow`]: the ground-station copy that follows a vehicle's steps.
 //! - [`reload`]: a new version of the project read, checked and kept beside the journal
@@ -17,6 +18,8 @@
 pub mod ack;
 pub mod engine;
 pub mod expect;
+pub mod held;
+pub mod intake;
 pub mod journal;
 pub mod record;
 pub mod reload;

@@ -267,7 +267,11 @@ pub fn replay_in<'p>(
                 replayed: describe(engine.project(), engine.layout(), engine.state()),
             };
         match entry {
-            Entry::Header { .. } | Entry::Refused { .. } => {}
+            Entry::Header { .. } => {}
+            // Refused live and counted so (received and refused): the counters of a resumed
+            // engine account for it too.
+            Entry::Refused { .. } => engine.count_refused(),
+            Entry::ProgramStopped { .. } => {}
             Entry::Reload {
                 time,
                 source_hash,

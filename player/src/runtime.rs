@@ -15,7 +15,9 @@
 //! anyway is logged and counted (`heartbeats_refused` in the status).
 
 use crate::ack::Ledger;
-use crate::engine::{Args, Engine, Micros, Refusal, Sink, Stats};
+use crate::engine::{Args, Engine, Micros, Sink, Stats};
+use crate::held::{HeldCalls, Undelivered, HOLD_POLL};
+use crate::intake::{Header, Intake};
 use crate::journal::{
     Entry, FlushPolicy, Journal, JournalLock, JournalWriter, RecorderChange, Settlement, StepParts,
     BATCH_DELAY,
@@ -24,7 +26,7 @@ use crate::record::{marked_places, outcome_name, place_changes, StepRecord};
 use petrel_ipc::{
     CallMsg, CallRef, CallSender, EventMsg, EventReceiver, Heartbeat, HeartbeatPublisher,
     MarkingMsg, MarkingPublisher, Participant, ProgramWatch, Reactor, RecvError, ReloadAnswer,
-    ReloadAnswerPublisher, ReloadReceiver, ReloadRequest, Role, SendError, Vehicle, WaitStrategy,
+    ReloadAnswerPublisher, ReloadReceiver, ReloadRequest, SendError, Vehicle, WaitStrategy,
 };
 use petrel_nets::compiled::{
     CompiledProject, EventId, FunctionId, NetId, Program, ProgramId, TimerId, Value,
@@ -120,8 +122,12 @@ pub struct PlayReport {
     pub bad_messages: u64,
     /// Calls delivered to programs.
     pub calls_sent: u64,
-    /// Calls to absent programs (each became `call_failed`).
+    /// Calls that could not be delivered (each became `call_failed`): to a program with no
+    /// live process, held past [`CALL_HOLD`](crate::held::CALL_HOLD), to a program that went while they were held.
     pub calls_failed: u64,
+    /// Calls held because their program's process lived but did not receive them yet
+    /// (delivered since, or counted in `calls_failed`).
+    pub calls_held: u64,
     /// Journal records written.
     pub journal_records: u64,
     /// Attempts to write the journal that failed (a full disk...).
@@ -152,8 +158,10 @@ pub fn play(project: &CompiledProject, opts: &PlayOptions) -> Result<PlayReport,
 struct RuntimeSink<'a, 'p> {
     record: &'a mut StepRecord<'p>,
     calls: &'a [CallSender],
-    /// Calls that could not be delivered in this step: each becomes `call_failed`.
-    failed: &'a mut Vec<(ProgramId, FunctionId)>,
+    /// By program: calls to it are held ([`HeldCalls`]); a new one goes behind them.
+    holding: &'a [bool],
+    /// Calls that could not be delivered in this step: each is held, or becomes `call_failed`.
+    undelivered: &'a mut Vec<Undelivered>,
     sent: &'a mut u64,
 }
 
@@ -180,23 +188,53 @@ impl Sink for RuntimeSink<'_, '_> {
         let project = self.record.project;
         let prog = &project.programs[program as usize];
         let fname = &prog.functions[function as usize].name;
-        // Encoded from the borrowed arguments straight into the loaned sample.
-        let sent = self.calls[program as usize].send_body(&CallRef {
+        let body = CallRef {
             function: fname,
             args: args.iter(),
-        });
-        // The call's text for the journal and the monitors once the call is out.
-        self.record.call(program, function, args);
+        };
+        // Behind calls to the same program held, or not yet settled, in order.
+        let behind = self.holding.get(program as usize) == Some(&true)
+            || self
+                .undelivered
+                .iter()
+                .any(|u| u.program == program && u.body.is_some());
+        // Encoded from the borrowed arguments straight into the loaned sample.
+        let sent = match behind {
+            false => self.calls[program as usize].send_body(&body).map_err(Some),
+            true => Err(None),
+        };
         match sent {
             Ok(_) => {
                 *self.sent += 1;
                 debug!(program = %prog.name, function = %fname, "call sent");
             }
             Err(e) => {
-                warn!(program = %prog.name, function = %fname, error = %e, "call not delivered: raising call_failed");
-                self.failed.push((program, function));
+                // A call that found no receiver may be held (the program may be joining):
+                // encoded apart, for later.
+                let holdable = e
+                    .as_ref()
+                    .is_none_or(|e| matches!(e, SendError::NoReceiver { .. }));
+                let body = holdable
+                    .then(|| {
+                        let mut bytes = vec![0; petrel_ipc::wire::encoded_len(&body).ok()?];
+                        petrel_ipc::wire::encode_into(&body, &mut bytes).ok()?;
+                        Some(bytes)
+                    })
+                    .flatten();
+                let error = e.map_or_else(
+                    || "calls to this program are held".to_string(),
+                    |e| e.to_string(),
+                );
+                self.undelivered.push(Undelivered {
+                    program,
+                    function,
+                    body,
+                    error,
+                });
             }
         }
+        // The call's text for the journal and the monitors once the call is out.
+        self.record.call(program, function, args);
     }
 
     fn emitted(&mut self, event: EventId, params: &[Value]) {
@@ -399,57 +437,16 @@ fn engine_version(entries: &[Entry]) -> String {
     }
 }
 
-/// Why an event that arrived on the events service names a built-in event it may not: `None`
-/// when it may.
-///
-/// Built-in events (`program_lost`, `call_failed`, `safety_violation`, `livelock`,
-/// `bad_message`) tell the nets what the player itself saw, and the player raises them without
-/// the events service: one arriving there comes from another process, whatever origin it
-/// claims (`player` included), and is refused. The exceptions are `call_failed` from the CAN
-/// data server, which reports the CAN commands it could not carry out as the failed calls they
-/// are (see `petrel_can_bridge::runtime`), and `call_failed` from a gateway, which reports the
-/// calls the link to another computer could not carry (docs/gateway.md).
-fn builtin_refusal(name: &str, origin: &str) -> Option<String> {
-    if !petrel_nets::model::builtin_events()
-        .iter()
-        .any(|b| b.name.text == name)
-    {
-        return None;
-    }
-    if name == "call_failed"
-        && (origin == Role::CanBridge.node_name() || Role::is_gateway_node(origin))
-    {
-        return None;
-    }
-    Some(format!(
-        "`{name}` is a built-in event: only the player raises it (refused from `{origin}`)"
-    ))
-}
-
-/// Submits an event raised by the player itself, journaled like any input.
-fn raise(engine: &mut Engine, journal: &mut Journal, event: Option<EventId>, params: Vec<Value>) {
-    let Some(e) = event else { return };
-    let record = Entry::Submit {
-        time: engine.now(),
-        event: engine.project().events[e as usize].name.clone(),
-        params: params.clone(),
-        origin: "player".into(),
-        seq: 0,
-    };
-    match engine.submit(e, params) {
-        Ok(()) => journal.append(&record),
-        Err(r) => debug!(refusal = %r, "built-in event refused"),
-    }
-}
-
 /// The player: the engine, its ports, its journal, and the clocks of its loop.
 pub struct PlayerLoop<'p> {
     project: &'p CompiledProject,
     opts: PlayOptions,
     engine: Engine<'p>,
     record: StepRecord<'p>,
-    /// Calls of the current step that could not be delivered.
-    failed: Vec<(ProgramId, FunctionId)>,
+    /// Calls of the current step that could not be delivered: held or failed after the step.
+    undelivered: Vec<Undelivered>,
+    /// Calls held for programs whose process lives but does not receive them yet.
+    held: HeldCalls,
     journal: Journal,
     ports: Ports,
     watch: ProgramWatch,
@@ -460,6 +457,9 @@ pub struct PlayerLoop<'p> {
     ledger: Ledger,
     /// Where each event's parameters are decoded, before they move into an engine's buffer.
     decoded: Vec<Value>,
+    /// The programs that said they leave in good order (since they last joined): their going
+    /// is a stop, not a loss.
+    leaves: std::collections::BTreeSet<String>,
     /// When the loop started, and the mission time it started at (after a resume).
     t0: Instant,
     base: Micros,
@@ -470,8 +470,6 @@ pub struct PlayerLoop<'p> {
     next_liveness: Instant,
     /// The next marking message is a snapshot (after a reload, or steps no monitor saw).
     snapshot_next: bool,
-    /// The vehicle, for the programs' liveness watch of a reloaded version.
-    vehicle: Vehicle,
     /// The reload under verification, if any.
     pending: Option<PendingReload>,
     /// The content hash of the version running, once a reload brought one.
@@ -575,7 +573,8 @@ impl<'p> PlayerLoop<'p> {
                 .events
                 .consume_wakeups_every(Some(petrel_ipc::SPIN_WAKEUP_PERIOD));
         }
-        let watch = ProgramWatch::new(&vehicle, project.programs.iter().map(|p| p.name.clone()));
+        let watch = ProgramWatch::new(&ports._me, project.programs.iter().map(|p| p.name.clone()))
+            .map_err(setup)?;
         let reactor = Reactor::new(opts.wait).map_err(|e| PlayError::Setup(e.to_string()))?;
 
         let writer = match &opts.journal {
@@ -605,8 +604,9 @@ impl<'p> PlayerLoop<'p> {
         let mut journal = Journal::with_backlog(writer, opts.journal_backlog);
         journal.batch_records();
         let mut record = StepRecord::new(project).without_calls();
-        let mut failed = Vec::new();
+        let mut undelivered = Vec::new();
         let mut report = PlayReport::default();
+        let held = HeldCalls::new(project.programs.len());
         let (engine, base) = match resumed {
             Some((mut engine, last, steps, _)) => {
                 report.resumed_steps = steps;
@@ -646,7 +646,8 @@ impl<'p> PlayerLoop<'p> {
                     &mut RuntimeSink {
                         record: &mut record,
                         calls: &ports.calls,
-                        failed: &mut failed,
+                        holding: held.holding(),
+                        undelivered: &mut undelivered,
                         sent: &mut report.calls_sent,
                     },
                 );
@@ -665,7 +666,8 @@ impl<'p> PlayerLoop<'p> {
             opts: opts.clone(),
             engine,
             record,
-            failed,
+            undelivered,
+            held,
             journal,
             ports,
             watch,
@@ -680,6 +682,7 @@ impl<'p> PlayerLoop<'p> {
             report,
             ledger: Ledger::new(),
             decoded: Vec::new(),
+            leaves: Default::default(),
             t0,
             base,
             previous: vec![0u64; words],
@@ -687,7 +690,6 @@ impl<'p> PlayerLoop<'p> {
             next_heartbeat: Instant::now(),
             next_liveness: Instant::now() + opts.liveness,
             snapshot_next: false,
-            vehicle,
             pending: None,
             version,
             _lock: lock,
@@ -755,6 +757,10 @@ impl<'p> PlayerLoop<'p> {
                 // The verifier's thread says nothing when it is done: look again soon.
                 timeout = timeout.min(Duration::from_millis(2));
             }
+            if !self.held.is_empty() {
+                // Nothing says when a receiver connects: look for the held calls' programs.
+                timeout = timeout.min(HOLD_POLL);
+            }
             if let Some(hold) = hold {
                 // Within a spin window, so that the wait ends before it could sleep.
                 timeout = timeout.min(hold);
@@ -784,6 +790,10 @@ impl<'p> PlayerLoop<'p> {
             self.take_reload_requests();
             self.finish_reload();
         }
+        // A last look at the programs: one gone since the last check (the programs of a
+        // vehicle stop before its player) is journaled, a stop, or a loss as an input that a
+        // resumed player takes.
+        self.check_liveness();
         if self.journal.flush() != Settlement::Recorded {
             error!(
                 state = self.journal.state().as_str(),
@@ -801,7 +811,7 @@ impl<'p> PlayerLoop<'p> {
 
     /// Submits an event raised by the player itself, journaled like any input.
     fn raise(&mut self, event: Option<EventId>, params: Vec<Value>) {
-        raise(&mut self.engine, &mut self.journal, event, params);
+        crate::intake::raise(&mut self.engine, &mut self.journal, event, params);
     }
 
     /// Processes everything queued (by the start, a timer, an event), journals and publishes
@@ -814,11 +824,15 @@ impl<'p> PlayerLoop<'p> {
         if self.pending.as_ref().is_some_and(|p| !p.request.dry_run) {
             return;
         }
+        // The start's calls not delivered, then the held calls whose program now receives.
+        self.settle_undelivered();
+        self.deliver_held();
         loop {
             let mut sink = RuntimeSink {
                 record: &mut self.record,
                 calls: &self.ports.calls,
-                failed: &mut self.failed,
+                holding: self.held.holding(),
+                undelivered: &mut self.undelivered,
                 sent: &mut self.report.calls_sent,
             };
             let Some(step) = self.engine.step(&mut sink) else {
@@ -850,16 +864,64 @@ impl<'p> PlayerLoop<'p> {
             self.publish_delta();
             self.step_no += 1;
             self.record.clear();
-            for (p, f) in std::mem::take(&mut self.failed) {
-                self.report.calls_failed += 1;
-                let prog = &self.project.programs[p as usize];
-                let params = vec![
-                    Value::Text(prog.name.clone()),
-                    Value::Text(prog.functions[f as usize].name.clone()),
-                ];
-                self.raise(self.builtins.call_failed, params);
+            self.settle_undelivered();
+        }
+    }
+
+    /// Holds each call of the last step that could not be delivered, if its program's process
+    /// lives (it may be joining: [`HeldCalls`]) or calls to it are held already; raises
+    /// `call_failed` for the others.
+    fn settle_undelivered(&mut self) {
+        for u in std::mem::take(&mut self.undelivered) {
+            let prog = &self.project.programs[u.program as usize];
+            let function = &prog.functions[u.function as usize].name;
+            let hold = match &u.body {
+                None => false,
+                Some(_) if self.held.holding().get(u.program as usize) == Some(&true) => true,
+                Some(_) => match self.watch.probe(&prog.name) {
+                    Ok(status) => status.is_some_and(|s| s.is_running()),
+                    Err(e) => {
+                        warn!(error = %e, "liveness check failed");
+                        false
+                    }
+                },
+            };
+            match u.body {
+                Some(body) if hold => {
+                    self.report.calls_held += 1;
+                    self.held
+                        .hold(u.program, &prog.name, function, body, Instant::now());
+                }
+                _ => {
+                    let (program, function) = (prog.name.clone(), function.clone());
+                    self.call_failed(program, function, &u.error);
+                }
             }
         }
+    }
+
+    /// Sends the held calls whose program receives now; raises `call_failed` for those held
+    /// too long.
+    fn deliver_held(&mut self) {
+        if self.held.is_empty() {
+            return;
+        }
+        let (sent, failed) = self
+            .held
+            .deliver(self.project, &self.ports.calls, Instant::now());
+        self.report.calls_sent += sent;
+        for (program, function, why) in failed {
+            self.call_failed(program, function, &why);
+        }
+    }
+
+    /// A call that could not be delivered, `why`: logged, counted, and raised as
+    /// `call_failed(program, function)`.
+    fn call_failed(&mut self, program: String, function: String, why: &str) {
+        warn!(%program, %function, reason = why, "call not delivered: raising call_failed");
+        self.report.calls_failed += 1;
+        let params = vec![Value::Text(program), Value::Text(function)];
+        self.raise(self.builtins.call_failed, params);
     }
 
     /// Raises `recorder_failed` and `recorder_restored` for the recorder's changes of state;
@@ -958,104 +1020,50 @@ impl<'p> PlayerLoop<'p> {
         }
     }
 
-    /// Drains the events service into the engine; true when iceoryx2 saw a sender die.
+    /// Drains the events service into the engine ([`Intake`]); true when iceoryx2 saw a
+    /// sender die.
     fn take_events(&mut self) -> bool {
-        let engine = &mut self.engine;
-        let journal = &mut self.journal;
-        let report = &mut self.report;
-        let ledger = &mut self.ledger;
-        let bad_message = self.builtins.bad_message;
+        let mut intake = Intake {
+            engine: &mut self.engine,
+            journal: &mut self.journal,
+            ledger: &mut self.ledger,
+            report: &mut self.report,
+            bad_message: self.builtins.bad_message,
+            leaves: &mut self.leaves,
+        };
         // Each event is decoded where it lies: its name read from the sample, its parameters
         // into `decoded` (kept from one drain to the next), then moved into one of the
         // engine's buffers. No event is built, and no name copied.
-        let decoded = &mut self.decoded;
-        let drained = self.ports.events.drain_in_place(decoded, |r, decoded| {
-            report.messages += 1;
-            match r {
-                Ok(rcv) => {
-                    let (sender, who, seq, missed) = (rcv.sender, rcv.origin, rcv.seq, rcv.missed);
-                    let origin = who.as_str();
-                    let time = engine.now();
-                    let name = rcv.msg;
-                    if let Some(reason) = builtin_refusal(name, origin) {
-                        report.bad_messages += 1;
-                        warn!(from = %origin, seq = rcv.seq, %reason, "event refused");
-                        journal.append(&Entry::Refused {
-                            time,
-                            what: name.to_owned(),
-                            reason: reason.clone(),
-                            origin: origin.to_string(),
-                        });
-                        raise(
-                            engine,
-                            journal,
-                            bad_message,
-                            vec![Value::Text(origin.to_string()), Value::Text(reason)],
-                        );
-                        return;
-                    }
-                    let mut params = engine.param_buffer();
-                    params.append(decoded);
-                    // Journaled from the parameters the engine keeps, before it queues the
-                    // event: no copy of the event on the way to its call.
-                    let submitted = engine.submit_named_with(name, params, |params| {
-                        journal.append_submit(time, name, params, origin, seq);
-                    });
-                    match submitted {
-                        Ok(()) => {
-                            ledger.taken(sender, who, seq, missed);
-                        }
-                        Err(refusal) => {
-                            ledger.refused(sender, who, seq, missed, &refusal.to_string(), false);
-                            journal.append(&Entry::Refused {
-                                time,
-                                what: name.to_owned(),
-                                reason: refusal.to_string(),
-                                origin: origin.to_string(),
-                            });
-                            if matches!(refusal, Refusal::AfterCatastrophic(_)) {
-                                info!(from = %origin, reason = %refusal, "event refused");
-                            } else {
-                                report.bad_messages += 1;
-                                warn!(from = %origin, seq = rcv.seq, reason = %refusal, "event refused");
-                                let params = vec![
-                                    Value::Text(origin.to_string()),
-                                    Value::Text(refusal.to_string()),
-                                ];
-                                raise(engine, journal, bad_message, params);
-                            }
-                        }
-                    }
-                }
+        let drained = self
+            .ports
+            .events
+            .drain_in_place(&mut self.decoded, |r, decoded| match r {
+                Ok(rcv) => intake.event(Header::from(&rcv), rcv.msg, decoded),
                 Err(RecvError::Undecodable {
                     origin,
                     seq,
                     error,
                     sender,
+                    missed,
                     ..
-                }) => {
-                    report.bad_messages += 1;
-                    let reason = format!("undecodable: {error}");
-                    ledger.refused(sender, origin, seq, 0, &reason, true);
-                    warn!(from = %origin, seq, error = %error, "undecodable event refused");
-                    journal.append(&Entry::Refused {
-                        time: engine.now(),
-                        what: "(undecodable)".into(),
-                        reason: error.to_string(),
-                        origin: origin.to_string(),
-                    });
-                    let params = vec![
-                        Value::Text(origin.to_string()),
-                        Value::Text(format!("undecodable: {error}")),
-                    ];
-                    raise(engine, journal, bad_message, params);
+                }) => intake.undecodable(
+                    Header {
+                        sender,
+                        origin,
+                        seq,
+                        missed,
+                    },
+                    &error.to_string(),
+                ),
+                Err(e @ RecvError::Foreign { .. }) => {
+                    let origin = match &e {
+                        RecvError::Foreign { origin, .. } => origin.to_string(),
+                        _ => String::new(),
+                    };
+                    intake.foreign(&origin, &e.to_string())
                 }
-                Err(e) => {
-                    report.bad_messages += 1;
-                    warn!(error = %e, "event could not be received");
-                }
-            }
-        });
+                Err(e) => intake.failed(&e),
+            });
         match drained {
             Ok(d) => d.wakeups.senders_died > 0,
             Err(e) => {
@@ -1065,22 +1073,46 @@ impl<'p> PlayerLoop<'p> {
         }
     }
 
-    /// Lists the vehicle's nodes: a program that died becomes `program_lost`.
+    /// Lists the vehicle's nodes: a program whose process went becomes `program_lost`, or, if it
+    /// said it leaves in good order, a stop (journaled, logged at INFO); the calls held for it
+    /// fail.
     fn check_liveness(&mut self) {
         self.next_liveness = Instant::now() + self.opts.liveness;
-        match self.watch.check() {
-            Ok(changes) => {
-                for c in changes {
-                    if c.is_lost() {
-                        warn!(program = %c.program, "program lost");
-                        let params = vec![Value::Text(c.program.clone())];
-                        self.raise(self.builtins.program_lost, params);
-                    } else {
-                        info!(program = %c.program, status = ?c.to, "program status");
-                    }
+        let changes = match self.watch.check() {
+            Ok(changes) => changes,
+            Err(e) => return warn!(error = %e, "liveness check failed"),
+        };
+        if changes.iter().any(|c| c.is_lost()) {
+            // A leave sent just before the process went is read before its going is judged:
+            // the listing saw the node gone, so the leave (sent before) is there to read.
+            self.take_events();
+        }
+        for c in changes {
+            if !c.is_lost() {
+                if !c.from.is_running() {
+                    // A new process of the program: what the old one said is forgotten.
+                    self.leaves.remove(&c.program);
                 }
+                info!(program = %c.program, status = ?c.to, "program status");
+                continue;
             }
-            Err(e) => warn!(error = %e, "liveness check failed"),
+            let because = if self.leaves.remove(&c.program) {
+                info!(program = %c.program, "program stopped in good order");
+                self.journal.append(&Entry::ProgramStopped {
+                    time: self.engine.now(),
+                    program: c.program.clone(),
+                });
+                "it stopped"
+            } else {
+                warn!(program = %c.program, status = ?c.to, "program lost");
+                let params = vec![Value::Text(c.program.clone())];
+                self.raise(self.builtins.program_lost, params);
+                "it was lost"
+            };
+            let failed = self.held.drop_program(self.project, &c.program, because);
+            for (program, function, why) in failed {
+                self.call_failed(program, function, &why);
+            }
         }
     }
 
@@ -1367,10 +1399,16 @@ impl<'p> PlayerLoop<'p> {
         self.engine = engine;
         self.project = new;
         self.record = StepRecord::new(new).without_calls();
-        self.watch = ProgramWatch::new(&self.vehicle, new.programs.iter().map(|p| p.name.clone()));
+        match ProgramWatch::new(&self.ports._me, new.programs.iter().map(|p| p.name.clone())) {
+            Ok(watch) => self.watch = watch,
+            Err(e) => {
+                warn!(error = %e, "the new version's programs cannot be watched: the old version's are")
+            }
+        }
         if let Err(e) = self.watch.check() {
             warn!(error = %e, "liveness check failed");
         }
+        self.held.refresh(new);
         self.builtins = Builtins {
             program_lost: new.event_id("program_lost"),
             call_failed: new.event_id("call_failed"),
@@ -1471,7 +1509,7 @@ struct StatusSnapshot {
     /// The marked places of each active net (`global` last); `None`: left out (too large).
     marking: Option<Vec<(String, Vec<String>)>>,
     /// The counters of `stats`, in [`STATS_FIELDS`] order.
-    stats: [u64; 15],
+    stats: [u64; 16],
     /// Each sender: origin, last_seq, received, undecodable, missing, taken, refused, pending,
     /// unrecorded, settled_seq.
     senders: Vec<(String, [u64; 9])>,
@@ -1493,7 +1531,7 @@ const RECORDER_FIELDS: [&str; 4] = [
 ];
 
 /// The names of the counters in the status JSON's `stats`, in [`StatusSnapshot::stats`] order.
-const STATS_FIELDS: [&str; 15] = [
+const STATS_FIELDS: [&str; 16] = [
     "messages",
     "bad_messages",
     "received",
@@ -1503,6 +1541,7 @@ const STATS_FIELDS: [&str; 15] = [
     "queued",
     "calls_sent",
     "calls_failed",
+    "calls_held",
     "journal_records",
     "resumed_steps",
     "heartbeats_sent",
@@ -1573,6 +1612,7 @@ impl StatusSnapshot {
                 engine.queued() as u64,
                 report.calls_sent,
                 report.calls_failed,
+                report.calls_held,
                 report.journal_records,
                 report.resumed_steps,
                 report.heartbeats_sent,
@@ -1763,7 +1803,7 @@ fn status_bound(project: &CompiledProject) -> usize {
         time_s: -f64::MAX,
         over: false,
         marking: Some(marking),
-        stats: [u64::MAX; 15],
+        stats: [u64::MAX; 16],
         senders: (0..petrel_ipc::wire::MAX_ACKS)
             .map(|i| (origin(i), [u64::MAX; 9]))
             .collect(),

@@ -53,7 +53,7 @@ pub use call::{write_invocation, write_value, ArgError, Call};
 pub use error::ProgramError;
 pub use program::{
     event_text, PlayerCheck, Program, ProgramConfig, ProgramStats, DEFAULT_OUTBOX_CAPACITY,
-    DEFAULT_RETRY_PERIOD,
+    DEFAULT_RETRY_PERIOD, LEAVE_GRACE,
 };
 
 /// The values that calls and events carry, and the wait strategies, re-exported so that a

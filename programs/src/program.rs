@@ -23,6 +23,10 @@ use crate::outbox::{Outbox, Queued};
 /// Default capacity of the outbox: events kept while no player receives them.
 pub const DEFAULT_OUTBOX_CAPACITY: usize = 1024;
 
+/// How long a [`Program`] dropped without [`close`](Program::close) waits at most for the
+/// player to acknowledge that it leaves (a heartbeat or two, when the player is there).
+pub const LEAVE_GRACE: Duration = Duration::from_secs(1);
+
 /// Default period between two attempts to deliver queued events while waiting for calls.
 pub const DEFAULT_RETRY_PERIOD: Duration = Duration::from_millis(20);
 
@@ -644,15 +648,22 @@ impl Program {
         }
     }
 
-    /// Ends the program: tries for up to `grace` to deliver the queued events, waits (within
+    /// Ends the program: tries for up to `grace` to deliver the queued events, says to the
+    /// player that each hosted program leaves in good order (so that its going is recorded as
+    /// a stop, not as `program_lost`: [`LEAVE`](petrel_ipc::wire::LEAVE)), waits (within
     /// `grace`, and at least the 250 ms of the player's next heartbeat) for the player to
-    /// acknowledge the last one delivered, since shared memory goes with its process, then
+    /// acknowledge the last message delivered, since shared memory goes with its process, then
     /// leaves the vehicle. The returned statistics tell what happened to every event; `queued`
     /// counts those that were never delivered (their names are written to standard error),
     /// `unacknowledged` whether the last delivered ones may be lost.
+    ///
+    /// A `Program` dropped without `close` (but not while its thread panics) says it leaves
+    /// too, and waits up to [`LEAVE_GRACE`] for the player to acknowledge it (a sample whose
+    /// sender goes before the player connected to it is lost with it).
     pub fn close(mut self, grace: Duration) -> Result<ProgramStats, ProgramError> {
         let deadline = Instant::now() + grace;
         let flushed = self.flush_for(grace);
+        self.say_leave();
         self.stats.unacknowledged = !self.wait_acknowledged(deadline);
         let stats = self.stats();
         if !self.outbox.is_empty() {
@@ -666,6 +677,19 @@ impl Program {
         }
         self.closed = true;
         flushed.map(|_| stats)
+    }
+
+    /// Waits up to `timeout` (250 ms at least) for the player to acknowledge every event
+    /// delivered so far, without leaving: true when all are on its record. For a program that
+    /// must know its events are safe before it goes on, or before it ends abruptly (a
+    /// simulated crash ends without [`close`](Self::close), so that the player reports
+    /// `program_lost` rather than a stop).
+    pub fn acknowledged_within(&mut self, timeout: Duration) -> Result<bool, ProgramError> {
+        let deadline = Instant::now() + timeout;
+        if self.flush_for(timeout)? > 0 {
+            return Ok(false);
+        }
+        Ok(self.wait_acknowledged(deadline))
     }
 
     /// Whether the player acknowledged every host's last delivered event by `deadline` (250 ms
@@ -692,6 +716,22 @@ impl Program {
                 .saturating_duration_since(Instant::now());
             petrel_ipc::wait_acknowledged(&beats, *sender, *seq, left).is_safe(*seq)
         })
+    }
+
+    /// Tells the player, from each hosted program's sender, that the program leaves in good
+    /// order (nothing to tell when no player receives).
+    fn say_leave(&mut self) {
+        if !matches!(self.player_ready(), Ok(true)) {
+            return;
+        }
+        let leave = EventMsg::leave();
+        let Ok(len) = wire::encoded_len(&leave) else {
+            return;
+        };
+        for host in 0..self.hosts.len() {
+            // Not delivered (a full buffer): the player will take the going for a loss.
+            let _ = self.send_now(host, &leave, len);
+        }
     }
 
     fn report_undelivered(&self) {
@@ -829,8 +869,16 @@ impl Program {
 
 impl Drop for Program {
     fn drop(&mut self) {
-        if !self.closed && !self.outbox.is_empty() {
+        if self.closed {
+            return;
+        }
+        if !self.outbox.is_empty() {
             self.report_undelivered();
+        }
+        // A program dropped in good order says so; one whose thread panics dies.
+        if !std::thread::panicking() {
+            self.say_leave();
+            self.wait_acknowledged(Instant::now() + LEAVE_GRACE);
         }
     }
 }

@@ -47,9 +47,13 @@ fn main() {
     let vehicle = format!("gwb{}", std::process::id());
     let local = format!("gwl{}", std::process::id());
 
+    // The gateways secure their link as by default: one machine, so they make the vehicle's
+    // keys at their first start, here in the run's directory (removed with it).
+    let state = work.path().join("state");
     let spawn = |root: &Path, args: &[&str], log: &str| -> Child {
         Command::new(&petrel)
             .env("PETREL_RUNTIME_DIR", root)
+            .env(petrel_gateway::keys::STATE_DIR_ENV, &state)
             .args(args)
             .stdout(Stdio::null())
             .stderr(std::fs::File::create(work.path().join(log)).expect("log"))

@@ -99,3 +99,40 @@ fn send_reports_the_players_refusal_and_its_reason() {
     assert_eq!(s["stats"]["bad_messages"], 1, "{s}");
     assert!(player.stop().success());
 }
+
+/// Regression (issue 30, item 4): a built-in event sent by an operator was refused and
+/// journaled by the player but never acknowledged, so `petrel send` waited its whole timeout
+/// and called it unacknowledged. With `--timeout 1`, only an answer of the player within that
+/// second gives "refused" and the reason.
+#[test]
+fn send_of_a_built_in_event_is_answered_refused_with_the_reason() {
+    let vehicle = unique_vehicle("builtin");
+    let player = Player::start(&liveness_dir(), &vehicle);
+    let t0 = std::time::Instant::now();
+    let o = player.send_with("program_lost(\"GUI\")", &["--timeout", "1"]);
+    eprintln!(
+        "petrel send answered in {:.2} s",
+        t0.elapsed().as_secs_f64()
+    );
+    let all = text(&o);
+    assert_eq!(o.status.code(), Some(1), "{all}");
+    assert!(
+        all.contains("1 refused") && all.contains("0 unacknowledged"),
+        "{all}"
+    );
+    assert!(
+        all.contains(
+            "refused by the player: `program_lost` is a built-in event: only the player raises it"
+        ),
+        "{all}"
+    );
+    // Counted as received and refused: the counters balance.
+    let s = player.wait_for(5.0, |s| s["stats"]["refused"] == 1);
+    let stat = |k: &str| s["stats"][k].as_u64().unwrap();
+    assert_eq!(
+        stat("received"),
+        stat("processed") + stat("unused") + stat("refused") + stat("queued"),
+        "{s}"
+    );
+    assert!(player.stop().success());
+}

@@ -51,6 +51,8 @@ fn seed(mission: &str) -> u64 {
 struct Process {
     label: &'static str,
     program: &'static str,
+    /// Every program the process plays (`program` first).
+    programs: &'static [&'static str],
     spawn: fn(vehicle: &str, stderr: &Path) -> Command,
 }
 
@@ -70,6 +72,7 @@ fn uav() -> Mission {
             Process {
                 label: "uav-gui",
                 program: "GUI",
+                programs: &["GUI", "PLD"],
                 spawn: |vehicle, _| {
                     let mut c = Command::new(vehicle_bin("uav-gui"));
                     // A slower flight (about 3 s) spreads the steps the kill falls among.
@@ -81,6 +84,7 @@ fn uav() -> Mission {
             Process {
                 label: "uav-dec",
                 program: "DEC",
+                programs: &["DEC"],
                 spawn: |vehicle, _| {
                     let mut c = Command::new(vehicle_bin("uav-dec"));
                     c.args(["--vehicle", vehicle]).stderr(Stdio::null());
@@ -100,6 +104,7 @@ fn auv() -> Mission {
             Process {
                 label: "auv-bridge",
                 program: "CAN",
+                programs: &["CAN"],
                 spawn: |vehicle, stderr| {
                     let mut c = Command::new(vehicle_bin("auv-bridge"));
                     c.arg(repo().join("missions/auv"))
@@ -112,6 +117,7 @@ fn auv() -> Mission {
             Process {
                 label: "auv-gui",
                 program: "GUI",
+                programs: &["GUI"],
                 spawn: |vehicle, _| {
                     let mut c = Command::new(vehicle_bin("auv-gui"));
                     c.args(["--vehicle", vehicle]).stderr(Stdio::null());
@@ -216,6 +222,21 @@ fn journaled(journal: &Path) -> Vec<String> {
         .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
         .filter(|l| l["kind"] == "submit")
         .filter_map(|l| l["origin"].as_str().map(str::to_owned))
+        .collect()
+}
+
+/// The programs the journal holds a `program_lost` for, in order.
+fn lost_programs(journal: &Path) -> Vec<String> {
+    let (entries, o) = petrel_tests::journal_json(journal);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    entries
+        .iter()
+        .filter(|e| e["kind"] == "submit" && e["event"] == "program_lost")
+        .filter_map(|e| {
+            e["params"][0]
+                .as_str()
+                .map(|p| p.trim_matches('"').to_string())
+        })
         .collect()
 }
 
@@ -332,6 +353,21 @@ fn fly_and_kill(m: &Mission, victim: Option<usize>, step: u64) {
             taken.len()
         );
     }
+    // The killed program, and it alone, was lost: the others (and it, restarted) stopped in
+    // good order at the end (issue 30).
+    let mut lost = lost_programs(&journal);
+    lost.sort();
+    let mut expected: Vec<String> = victim
+        .map(|i| {
+            m.processes[i]
+                .programs
+                .iter()
+                .map(|p| p.to_string())
+                .collect()
+        })
+        .unwrap_or_default();
+    expected.sort();
+    assert_eq!(lost, expected, "program_lost of {who}'s kill");
     // And the journal, crash included, replays.
     let o = Command::new(petrel_bin())
         .arg("replay")

@@ -4,6 +4,11 @@
 //!
 //! The project (tests/data/relay) is the same as on one computer: the player calls ECHO and
 //! waits for its `pong`; nothing in it or in the program knows there are two computers.
+//!
+//! The link is secured as by default (mutual TLS with the vehicle's keys): the computers of a
+//! test share one state directory in its work directory (one machine: the gateways make the
+//! keys at their first start), except where a test gives each its own and distributes keys
+//! made by `petrel keys`, as for a real vehicle.
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -13,152 +18,12 @@ use petrel_tests::{
     example_bin, journal_json, petrel_bin, repo, unique_vehicle, Processes, Workdir,
 };
 
-/// One simulated computer: its own iceoryx2 root.
-struct Computer {
-    name: &'static str,
-    root: PathBuf,
-    work: PathBuf,
-    /// The network namespace its processes run in, if any.
-    netns: Option<String>,
-    /// The root, removed pass or fail; short, in /tmp: iceoryx2's Unix sockets live in it.
-    _root: tempfile::TempDir,
-}
+mod computers;
 
-impl Computer {
-    fn new(work: &Workdir, name: &'static str) -> Computer {
-        let root = tempfile::Builder::new()
-            .prefix("pg")
-            .tempdir_in("/tmp")
-            .expect("a runtime root");
-        Computer {
-            name,
-            root: root.path().to_path_buf(),
-            work: work.path().to_path_buf(),
-            netns: None,
-            _root: root,
-        }
-    }
-
-    fn command(&self, program: &Path) -> Command {
-        let mut c = match &self.netns {
-            Some(ns) => {
-                let mut c = Command::new("ip");
-                c.args(["netns", "exec", ns]).arg(program);
-                c
-            }
-            None => Command::new(program),
-        };
-        c.env("PETREL_RUNTIME_DIR", &self.root);
-        c
-    }
-
-    fn spawn(&self, program: &Path, args: &[&str], log: &str) -> Child {
-        self.command(program)
-            .args(args)
-            .stdout(std::fs::File::create(self.work.join(format!("{log}.out"))).expect("log"))
-            .stderr(std::fs::File::create(self.work.join(format!("{log}.log"))).expect("log"))
-            .spawn()
-            .expect("the process starts")
-    }
-
-    fn gateway(&self, project: &Path, vehicle: &str, log: &str) -> Child {
-        self.spawn(
-            &petrel_bin(),
-            &[
-                "gateway",
-                &project.display().to_string(),
-                "--vehicle",
-                vehicle,
-                "--computer",
-                self.name,
-            ],
-            log,
-        )
-    }
-
-    /// `petrel status --json` on this computer.
-    fn status(&self, project: &Path, vehicle: &str) -> Option<serde_json::Value> {
-        let o = self
-            .command(&petrel_bin())
-            .arg("status")
-            .arg(project)
-            .args(["--vehicle", vehicle, "--json"])
-            .stderr(Stdio::null())
-            .output()
-            .ok()?;
-        o.status
-            .success()
-            .then(|| serde_json::from_slice(&o.stdout).ok())
-            .flatten()
-    }
-
-    /// Waits (up to a minute: the machine is shared) until `pred` holds on this computer's
-    /// status; returns it, or panics with the last one and the logs.
-    fn wait_for(
-        &self,
-        project: &Path,
-        vehicle: &str,
-        what: &str,
-        pred: impl Fn(&serde_json::Value) -> bool,
-    ) -> serde_json::Value {
-        let deadline = Instant::now() + Duration::from_secs(60);
-        let mut last = serde_json::Value::Null;
-        while Instant::now() < deadline {
-            if let Some(s) = self.status(project, vehicle) {
-                if pred(&s) {
-                    return s;
-                }
-                last = s;
-            }
-            std::thread::sleep(Duration::from_millis(50));
-        }
-        panic!(
-            "on computer {}: never {what}; last status {last}\nlogs: {}",
-            self.name,
-            logs(&self.work)
-        );
-    }
-
-    fn send(&self, project: &Path, vehicle: &str, event: &str) -> String {
-        let o = self
-            .command(&petrel_bin())
-            .arg("send")
-            .arg(project)
-            .arg(event)
-            .args(["--vehicle", vehicle])
-            .output()
-            .expect("petrel send runs");
-        let out = String::from_utf8_lossy(&o.stdout).into_owned();
-        assert!(
-            o.status.success(),
-            "petrel send {event}: {out}{}",
-            String::from_utf8_lossy(&o.stderr)
-        );
-        out
-    }
-}
-
-fn logs(dir: &Path) -> String {
-    let mut text = String::new();
-    for e in std::fs::read_dir(dir).into_iter().flatten().flatten() {
-        let p = e.path();
-        if p.extension().is_some_and(|x| x == "log" || x == "out") {
-            text.push_str(&format!(
-                "\n--- {}\n{}",
-                p.display(),
-                std::fs::read_to_string(&p).unwrap_or_default()
-            ));
-        }
-    }
-    text
-}
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .map(|a| a.port())
-        .expect("a free port")
-}
+use computers::{
+    distribute_keys, free_port, last_json, logs, rogue, rogue_report, verdict, Cable, Computer,
+    Stopped,
+};
 
 /// tests/data/relay with a vehicle file: the player on A, ECHO on B.
 fn project(work: &Workdir) -> PathBuf {
@@ -370,6 +235,104 @@ fn a_link_event_must_be_a_communication_event_of_the_project() {
     );
 }
 
+/// The link is secured by default. With computers not all on this machine, `petrel check`
+/// says this machine has no keys and how to make them, and a gateway without its keys refuses
+/// to start, saying the same; `petrel keys` makes them, and `petrel check` then says where.
+/// The lab bench's opt-out (`[link] security = "none"`) is warned of by `petrel check` and by
+/// the gateway as it starts.
+#[test]
+fn the_link_is_secured_by_default_and_its_opt_out_is_loud() {
+    let work = Workdir::new();
+    let dir = project(&work);
+    let vehicle = unique_vehicle("keys");
+    let file = std::fs::read_to_string(dir.join("vehicle.toml")).expect("vehicle.toml");
+    let far = format!(
+        "[vehicle]\nname = \"{vehicle}\"\n{}",
+        file.replace("tcp/127.0.0.1:", "tcp/10.255.255.1:")
+    );
+    std::fs::write(dir.join("vehicle.toml"), &far).expect("vehicle.toml");
+    let a = Computer::new(&work, "A");
+    let run = |args: &[&str]| {
+        let o = a
+            .command(&petrel_bin())
+            .args(args)
+            .output()
+            .expect("petrel runs");
+        let text = |b: &[u8]| String::from_utf8_lossy(b).into_owned();
+        (o.status.code(), text(&o.stdout), text(&o.stderr))
+    };
+    let d = dir.display().to_string();
+    let (_, _, err) = run(&["check", &d, "--no-verify"]);
+    assert!(
+        err.contains("W0803") && err.contains("petrel keys"),
+        "{err}"
+    );
+    let (code, _, err) = run(&["gateway", &d, "--computer", "A"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("no usable keys") && err.contains("petrel keys"),
+        "{err}"
+    );
+    let (code, said, err) = run(&["keys", &d]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(
+        said.contains("A.key") && said.contains("keep it off the vehicle"),
+        "{said}"
+    );
+    let (code, said, err) = run(&["check", &d, "--no-verify"]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(
+        said.contains("link: mutual TLS, keys of A, B in") && !err.contains("W08"),
+        "{said}{err}"
+    );
+
+    // The opt-out.
+    std::fs::write(
+        dir.join("vehicle.toml"),
+        far.replace("[link]\n", "[link]\nsecurity = \"none\"\n"),
+    )
+    .expect("vehicle.toml");
+    let (code, said, err) = run(&["check", &d, "--no-verify"]);
+    assert_eq!(code, Some(0), "{err}");
+    let warning = "neither encrypted nor authenticated";
+    assert!(
+        err.contains("W0802") && err.contains(warning) && said.contains("NOT SECURED"),
+        "{said}{err}"
+    );
+    let listen = format!("tcp/127.0.0.1:{}", free_port());
+    let connect = format!("tcp/127.0.0.1:{}", free_port());
+    let gateway = a.spawn(
+        &petrel_bin(),
+        &[
+            "gateway",
+            &d,
+            "--computer",
+            "A",
+            "--listen",
+            &listen,
+            "--connect",
+            &connect,
+        ],
+        "gw-open",
+    );
+    let gateway = Processes(vec![gateway]);
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let log = loop {
+        let log = std::fs::read_to_string(work.path().join("gw-open.log")).unwrap_or_default();
+        if log.contains("up, link key") || Instant::now() > deadline {
+            break log;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(
+        log.contains(&format!(
+            "WARNING: the link between the vehicle's computers is {warning}"
+        )),
+        "{log}"
+    );
+    assert_eq!(gateway.stop(), vec![Some(0)], "{log}");
+}
+
 /// tests/data/relay with ECHO and the player on A, a ground station G, and the gateways
 /// authenticating each other with `password` (the credentials file of the copy).
 fn ground_project(work: &Workdir, name: &str, ports: (u16, u16), password: &str) -> PathBuf {
@@ -429,13 +392,29 @@ fn only_an_authenticated_ground_station_sends_events_and_its_shadow_follows() {
         ],
         "player",
     )]);
-    procs.0.push(a.gateway(&dir, &vehicle, "gw-a"));
+    // zenoh logs a refused password at debug level.
+    let log = |ext: &str| std::fs::File::create(work.path().join(format!("gw-a.{ext}")));
+    procs.0.push(
+        a.command(&petrel_bin())
+            .env(
+                "RUST_LOG",
+                "info,zenoh_transport::unicast::establishment=debug",
+            )
+            .arg("gateway")
+            .arg(&dir)
+            .args(["--vehicle", &vehicle, "--computer", "A"])
+            .stdout(log("out").expect("log"))
+            .stderr(log("log").expect("log"))
+            .spawn()
+            .expect("the gateway starts"),
+    );
     procs
         .0
         .push(a.spawn(&example_bin("echo"), &[&vehicle, "ECHO"], "echo"));
 
-    // A ground station with the wrong password: the vehicle's gateway refuses its session (its
-    // log says so), so it never hears the player, and what it is sent goes nowhere.
+    // A ground station with the vehicle's keys but the wrong password: the vehicle's gateway
+    // refuses its session (its log says so), so it never hears the player, and what it is sent
+    // goes nowhere.
     let mut bad = Processes(vec![g.gateway(&impostor, &vehicle, "gw-impostor")]);
     let deadline = Instant::now() + Duration::from_secs(60);
     while !std::fs::read_to_string(work.path().join("gw-a.log"))
@@ -522,7 +501,7 @@ fn only_an_authenticated_ground_station_sends_events_and_its_shadow_follows() {
     assert_eq!(shadow.stop(), vec![Some(0)]);
     let log = std::fs::read_to_string(&shadow_log).unwrap_or_default();
     assert!(
-        log.contains("2 vehicle steps followed") && log.contains("0 divergence alarm(s)"),
+        log.contains("2 vehicle steps followed") && log.contains("0 divergence alarms"),
         "{log}"
     );
     let codes = procs.stop();
@@ -533,36 +512,62 @@ fn only_an_authenticated_ground_station_sends_events_and_its_shadow_follows() {
     );
 }
 
-/// missions/ugv copied with free ports for its three computers' gateways.
-fn ugv_project(work: &Workdir) -> PathBuf {
+/// missions/ugv copied, with free ports for its three computers' gateways when `free_ports`
+/// (on this host's loopback; in a network namespace of its own, its file runs as shipped).
+fn ugv_project(work: &Workdir, free_ports: bool) -> PathBuf {
     let dir = work.path().join("ugv");
     std::fs::create_dir_all(&dir).expect("project dir");
     for f in ["petrel.toml", "robot.pn", "sync.pn", "vehicle.toml"] {
         let text = std::fs::read_to_string(repo().join("missions/ugv").join(f)).expect("read");
-        let text = ["7447", "7448", "7449"].iter().fold(text, |t, p| {
-            t.replace(
-                &format!("127.0.0.1:{p}"),
-                &format!("127.0.0.1:{}", free_port()),
-            )
-        });
+        let text = ["7447", "7448", "7449"]
+            .iter()
+            .filter(|_| free_ports)
+            .fold(text, |t, p| {
+                t.replace(
+                    &format!("127.0.0.1:{p}"),
+                    &format!("127.0.0.1:{}", free_port()),
+                )
+            });
         std::fs::write(dir.join(f), text).expect("write");
     }
     dir
 }
 
+/// The `gateway` endpoints of a project's vehicle.toml, in file order.
+fn endpoints(dir: &Path) -> Vec<String> {
+    std::fs::read_to_string(dir.join("vehicle.toml"))
+        .expect("vehicle.toml")
+        .lines()
+        .filter_map(|l| l.strip_prefix("gateway = \""))
+        .map(|l| l.trim_end_matches('"').to_owned())
+        .collect()
+}
+
 /// The paper's UGV pair live (section 3.3): the supervision on one computer, each robot's
 /// movement program on its own; both robots reach the bottleneck together, and the journal
 /// shows them in it one at a time.
+///
+/// The link as shipped (`missions/ugv/vehicle.toml`, nothing added: the gateways make the
+/// vehicle's keys at their first start, every computer being on this machine), attacked while
+/// the mission runs, in a network namespace of its own where one can be made (the file's
+/// loopback ports are then the namespace's): a stranger's zenoh peer, in plain TCP and in QUIC
+/// with a CA of its own, reaches no gateway, hears nothing and gets nothing in; a peer with
+/// robot2's keys (a computer of the vehicle) may not speak for robot1, and its claim to be
+/// robot2 is refused, as is a second `petrel gateway` for robot2: the first link goes on with
+/// no restart, and the journal holds the operator's `start_mission` and nothing forged.
 #[test]
 fn the_ugv_pair_on_three_computers_passes_the_bottleneck_one_at_a_time() {
     let work = Workdir::new();
-    let dir = ugv_project(&work);
+    let ns = Cable::new();
+    let dir = ugv_project(&work, ns.is_none());
     let vehicle = unique_vehicle("ugv");
-    let s = Computer::new(&work, "supervision");
-    let (r1, r2) = (
-        Computer::new(&work, "robot1"),
-        Computer::new(&work, "robot2"),
-    );
+    let names = ["supervision", "robot1", "robot2"];
+    let [mut s, mut r1, mut r2, mut stranger, mut second] =
+        [names[0], names[1], names[2], "stranger", names[2]].map(|n| Computer::new(&work, n));
+    for c in [&mut s, &mut r1, &mut r2, &mut stranger, &mut second] {
+        c.netns = ns.as_ref().map(|n| n.ns[0].clone());
+    }
+    stranger.state = work.path().join("stranger");
     let journal = work.path().join("journal");
     let ugv = petrel_tests::vehicle_bin("ugv");
     let mut procs = Processes(vec![s.spawn(
@@ -594,6 +599,60 @@ fn the_ugv_pair_on_three_computers_passes_the_bottleneck_one_at_a_time() {
             .iter()
             .all(|p| st["programs"][p] == "alive")
     });
+
+    // The attacks, while the mission runs. A stranger's keys: a CA of its own, certificates
+    // with the vehicle's computer names.
+    let foreign = stranger.state.join("keys").join(&vehicle);
+    petrel_gateway::keys::make(&foreign, &vehicle, &names.map(String::from)).expect("keys");
+    let plain = endpoints(&dir);
+    let quic: Vec<String> = plain.iter().map(|e| e.replace("tcp/", "quic/")).collect();
+    let forge = [
+        "--claim",
+        "robot1",
+        "--claim",
+        "supervision",
+        "--claim",
+        "robot2",
+        "--event",
+        "emergency_stop",
+        "--call",
+        "MOVES_R1.stop",
+    ];
+    let foreign_keys = foreign.display().to_string();
+    let mut with_keys = forge.to_vec();
+    with_keys.extend(["--keys", &foreign_keys, "--as", "robot1"]);
+    let stolen = s.state.join("keys").join(&vehicle).display().to_string();
+    let mut insider = forge.to_vec();
+    insider.extend(["--keys", &stolen, "--as", "robot2"]);
+    let rogues = [
+        rogue(&stranger, &vehicle, "3", &plain, &forge, "rogue-plain"),
+        rogue(&stranger, &vehicle, "3", &quic, &with_keys, "rogue-quic"),
+        rogue(
+            &stranger,
+            &vehicle,
+            "3",
+            &quic[..1],
+            &insider,
+            "rogue-insider",
+        ),
+    ];
+    // A second gateway for robot2 (on a port of its own): refused by the others, it gives up.
+    let port = format!("tcp/127.0.0.1:{}", free_port());
+    let second_gw = second.spawn(
+        &petrel_bin(),
+        &[
+            "gateway",
+            &dir.display().to_string(),
+            "--vehicle",
+            &vehicle,
+            "--computer",
+            "robot2",
+            "--listen",
+            &port,
+        ],
+        "gw-second",
+    );
+
     s.send(&dir, &vehicle, "start_mission");
     let st = s.wait_for(&dir, &vehicle, "both robots done", |st| {
         place(st, "R1", "done") && place(st, "R2", "done")
@@ -614,6 +673,58 @@ fn the_ugv_pair_on_three_computers_passes_the_bottleneck_one_at_a_time() {
         "{on_r1}"
     );
     assert!(events["delivered"] == 0 && accounted(events), "{on_r1}");
+
+    // The strangers reached no gateway and heard nothing; the insider reached the gateway it
+    // connected to and heard its computer's traffic (the control: this rogue does get in).
+    let [plain, quic, insider] = rogues;
+    for (rogue, log) in [(plain, "rogue-plain"), (quic, "rogue-quic")] {
+        let r = rogue_report(&work, rogue, log);
+        assert_eq!(
+            (r["peers"].as_u64(), r["received"].as_u64()),
+            (Some(0), Some(0)),
+            "{log}: {r}"
+        );
+        assert!(r["puts"].as_u64() > Some(0), "{log}: {r}");
+    }
+    let r = rogue_report(&work, insider, "rogue-insider");
+    assert!(r["peers"] == 1 && r["received"].as_u64() > Some(0), "{r}");
+    // The second gateway of robot2 gave up, saying why.
+    let out = second_gw
+        .wait_with_output()
+        .expect("the second gateway ends");
+    let log = std::fs::read_to_string(work.path().join("gw-second.log")).unwrap_or_default();
+    assert_eq!(out.status.code(), Some(2), "{log}");
+    assert!(
+        log.contains("follows another gateway of computer `robot2`"),
+        "{log}"
+    );
+    // The supervision refused the second gateways of robot2 (the insider's and the second
+    // `petrel gateway`), and robot2's first link went on: no restart, no loss (so no stand-in
+    // left: no program lost).
+    let st = s.wait_for(&dir, &vehicle, "the supervision's counters", |x| {
+        x["gateways"]["supervision"].is_object()
+    });
+    let gw = &st["gateways"]["supervision"];
+    assert!(
+        gw["counters"]["claims_refused"]["robot2"].as_u64() > Some(0),
+        "{gw}"
+    );
+    for peer in ["robot1", "robot2"] {
+        let p = &gw["peers"][peer];
+        let seen = (
+            p["restarts"].as_u64(),
+            p["losses"].as_u64(),
+            p["state"].as_str(),
+        );
+        assert_eq!(seen, (Some(0), Some(0), Some("up")), "{peer}: {gw}");
+    }
+    assert!(
+        std::fs::read_to_string(work.path().join("gw-s.log"))
+            .unwrap_or_default()
+            .contains("a second gateway claims computer `robot2`"),
+        "{}",
+        logs(work.path())
+    );
     let codes = procs.stop();
     assert!(
         codes.iter().all(|c| *c == Some(0)),
@@ -622,8 +733,20 @@ fn the_ugv_pair_on_three_computers_passes_the_bottleneck_one_at_a_time() {
     );
 
     // The trace: each robot entered the bottleneck once, never while the other was in it
-    // (from `enter`, which takes it, to `out`, which gives it back).
+    // (from `enter`, which takes it, to `out`, which gives it back); nothing forged is on
+    // record: one `start_mission` (the operator's), no `emergency_stop`.
     let (entries, _) = journal_json(&journal);
+    let submitted = |name: &str| {
+        entries
+            .iter()
+            .filter(|e| e["kind"] == "submit" && e["event"] == name)
+            .count()
+    };
+    assert_eq!(
+        [submitted("start_mission"), submitted("emergency_stop")],
+        [1, 0],
+        "{entries:?}"
+    );
     let mut inside = [false, false];
     let mut entered = [0, 0];
     let mut both_waited = false;
@@ -654,141 +777,6 @@ fn the_ugv_pair_on_three_computers_passes_the_bottleneck_one_at_a_time() {
     );
 }
 
-/// Two network namespaces joined by a veth pair (a cable between two computers), removed when
-/// dropped; `None` where they cannot be made (not root, no `ip`).
-struct Cable {
-    ns: [String; 2],
-    ends: [String; 2],
-    addrs: [String; 2],
-}
-
-impl Cable {
-    fn new() -> Option<Cable> {
-        let id = std::process::id() % 100_000;
-        let ns = [format!("pg{id}a"), format!("pg{id}b")];
-        let ends = [format!("pgv{id}a"), format!("pgv{id}b")];
-        let net = format!("10.{}.{}", 200 + id % 50, id % 250);
-        let addrs = [format!("{net}.1"), format!("{net}.2")];
-        let cable = Cable { ns, ends, addrs };
-        let ip = |args: &[&str]| {
-            Command::new("ip")
-                .args(args)
-                .stderr(Stdio::null())
-                .status()
-                .is_ok_and(|s| s.success())
-        };
-        let made = ip(&["netns", "add", &cable.ns[0]])
-            && ip(&["netns", "add", &cable.ns[1]])
-            && ip(&[
-                "link",
-                "add",
-                &cable.ends[0],
-                "type",
-                "veth",
-                "peer",
-                "name",
-                &cable.ends[1],
-            ])
-            && (0..2).all(|i| {
-                ip(&["link", "set", &cable.ends[i], "netns", &cable.ns[i]])
-                    && ip(&[
-                        "-n",
-                        &cable.ns[i],
-                        "addr",
-                        "add",
-                        &format!("{}/24", cable.addrs[i]),
-                        "dev",
-                        &cable.ends[i],
-                    ])
-                    && ip(&["-n", &cable.ns[i], "link", "set", &cable.ends[i], "up"])
-                    && ip(&["-n", &cable.ns[i], "link", "set", "lo", "up"])
-            });
-        if !made {
-            eprintln!("cannot make network namespaces and a veth pair (this test needs root and `ip`): skipped");
-            return None;
-        }
-        Some(cable)
-    }
-
-    /// Unplugs (or plugs back) the cable at the first computer's end.
-    fn set(&self, up: bool) {
-        let ok = Command::new("ip")
-            .args([
-                "-n",
-                &self.ns[0],
-                "link",
-                "set",
-                &self.ends[0],
-                if up { "up" } else { "down" },
-            ])
-            .status()
-            .is_ok_and(|s| s.success());
-        assert!(ok, "ip link set {}", self.ends[0]);
-    }
-}
-
-impl Drop for Cable {
-    fn drop(&mut self) {
-        // Deleting a namespace deletes its end of the pair, and so the pair.
-        for ns in &self.ns {
-            let _ = Command::new("ip").args(["netns", "del", ns]).status();
-        }
-    }
-}
-
-/// A gateway stopped (SIGSTOP) for as long as it lives, continued (SIGCONT) when dropped.
-struct Stopped(u32);
-
-impl Stopped {
-    fn new(pid: u32) -> Stopped {
-        signal("-STOP", pid);
-        Stopped(pid)
-    }
-}
-
-impl Drop for Stopped {
-    fn drop(&mut self) {
-        signal("-CONT", self.0);
-    }
-}
-
-fn signal(which: &str, pid: u32) {
-    let ok = Command::new("kill")
-        .args([which, &pid.to_string()])
-        .status()
-        .is_ok_and(|s| s.success());
-    assert!(ok, "kill {which} {pid}");
-}
-
-impl Computer {
-    /// `petrel send` started now, waiting up to 40 s for its verdict (an outage is longer
-    /// than the default 10 s); its output is read by [`verdict`].
-    fn send_waiting(&self, project: &Path, vehicle: &str, event: &str) -> Child {
-        self.command(&petrel_bin())
-            .arg("send")
-            .arg(project)
-            .arg(event)
-            .args(["--vehicle", vehicle, "--timeout", "40"])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("petrel send starts")
-    }
-}
-
-/// A waiting `petrel send`'s exit code and output.
-fn verdict(send: Child) -> (Option<i32>, String) {
-    let o = send.wait_with_output().expect("petrel send ends");
-    (
-        o.status.code(),
-        format!(
-            "{}{}",
-            String::from_utf8_lossy(&o.stdout),
-            String::from_utf8_lossy(&o.stderr)
-        ),
-    )
-}
-
 /// The link out for longer than zenoh's lease (10 s), twice on one set-up: the cable between
 /// the computers cut for 15 s, then B's gateway stopped (SIGSTOP) for 12 s, with a call of the
 /// player's to ECHO in flight each time and operator events sent on B. Nothing goes silently:
@@ -796,6 +784,8 @@ fn verdict(send: Child) -> (Option<i32>, String) {
 /// `call_failed` (ECHO never gets them, not even after the stopped gateway runs again); the
 /// event sent as the cable went is refused to its sender with the reason; those
 /// sent later arrive in order, after `link_restored("B")`; the journal and the counters say so.
+/// Each computer has only its own keys (made by `petrel keys`), and a stranger on B's side of
+/// the cable gets no session with A's gateway.
 #[test]
 fn past_the_lease_every_call_and_event_is_delivered_in_order_or_failed_to_its_sender() {
     let Some(cable) = Cable::new() else {
@@ -820,6 +810,8 @@ fn past_the_lease_every_call_and_event_is_delivered_in_order_or_failed_to_its_se
     let (mut a, mut b) = (Computer::new(&work, "A"), Computer::new(&work, "B"));
     a.netns = Some(cable.ns[0].clone());
     b.netns = Some(cable.ns[1].clone());
+    // Each computer has only its own keys, as on a real vehicle.
+    distribute_keys(&work, &dir, &vehicle, [&mut a, &mut b]);
     let journal = work.path().join("journal");
     let mut procs = Processes(vec![a.spawn(
         &petrel_bin(),
@@ -841,10 +833,25 @@ fn past_the_lease_every_call_and_event_is_delivered_in_order_or_failed_to_its_se
     a.wait_for(&dir, &vehicle, "ECHO alive on A", |s| {
         s["programs"]["ECHO"] == "alive"
     });
+    // A stranger on B's side of the cable, at A's address: no session, nothing heard.
+    let stranger = rogue(
+        &b,
+        &vehicle,
+        "2",
+        &endpoints(&dir)[..1],
+        &["--claim", "B", "--event", "start_mission"],
+        "rogue",
+    );
     a.send(&dir, &vehicle, "start_mission");
     let s = a.wait_for(&dir, &vehicle, "the pong back", |s| {
         place(s, "RELAY", "ready") && counts(s, "A", "event")["delivered"] == 1
     });
+    let r = rogue_report(&work, stranger, "rogue");
+    assert_eq!(
+        (r["peers"].as_u64(), r["received"].as_u64()),
+        (Some(0), Some(0)),
+        "{r}"
+    );
     let started = Instant::now();
 
     // 1. The cable cut for 15 s. Within the detection bound (3 s), the player calls ECHO and
@@ -1058,16 +1065,6 @@ fn mission_steps(journal: &Path) -> Vec<String> {
         }
     }
     panic!("the mission never completed: {steps:#?}");
-}
-
-/// The last line of `path` that is a JSON object (a gateway prints its final counters).
-fn last_json(path: &Path) -> serde_json::Value {
-    let text = std::fs::read_to_string(path).unwrap_or_default();
-    text.lines()
-        .rev()
-        .find_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
-        .filter(|v| v.is_object())
-        .unwrap_or_else(|| panic!("no final counters in {}:\n{text}", path.display()))
 }
 
 /// `petrel monitor` on `computer`, listening on a free port of loopback: its address.

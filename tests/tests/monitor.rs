@@ -313,6 +313,27 @@ fn operator_actions_need_operator_mode_and_its_token() {
     assert_eq!(r.json()["verdict"], "taken and on record");
     let s = player.wait_for(10.0, |s| s["marking"]["MISSION"][0] == "rolling");
     assert_eq!(s["marking"]["MISSION"][0], "rolling", "{s}");
+    // A built-in event: the player's refusal and its reason, not a time-out (issue 30).
+    let r = http(
+        op.addr,
+        "POST",
+        "/api/send",
+        &[("X-Petrel-Token", &token)],
+        "{\"event\": \"program_lost(\\\"GUI\\\")\"}",
+    )
+    .unwrap();
+    assert_eq!(r.status, 502, "{}", r.body);
+    let v = r.json();
+    assert_eq!(
+        (&v["taken"], &v["refused"]),
+        (&false.into(), &true.into()),
+        "{v}"
+    );
+    let verdict = v["verdict"].as_str().unwrap_or_default();
+    assert!(
+        verdict.starts_with("refused by the player: `program_lost` is a built-in event"),
+        "{v}"
+    );
     // Unknown routes and wrong modes are JSON errors too.
     let r = op.get("/no/such/page");
     assert_eq!(r.status, 404);

@@ -263,6 +263,7 @@ pub fn follow(
                 .map(|p| {
                     let st = match petrel_ipc::program_status(vehicle, p) {
                         Ok(petrel_ipc::ProgramStatus::Alive) => "alive",
+                        Ok(petrel_ipc::ProgramStatus::Joining) => "joining",
                         Ok(petrel_ipc::ProgramStatus::Dead) => "dead",
                         Ok(petrel_ipc::ProgramStatus::Absent) => "absent",
                         Err(_) => "unknown",

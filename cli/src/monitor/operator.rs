@@ -136,6 +136,8 @@ pub fn serve(vehicle: Vehicle, requests: mpsc::Receiver<Request>) {
                     "origin": sender.origin().to_string(),
                     "seq": sent.seq,
                     "taken": refusal.is_none() && ack.ack.as_ref().is_some_and(|a| a.last_seq >= sent.seq),
+                    "refused": refusal.is_some(),
+                    "reason": refusal,
                     "verdict": verdict,
                 }))
             }

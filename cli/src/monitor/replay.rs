@@ -148,6 +148,9 @@ pub fn timeline(project: &CompiledProject, names: &Names, read: Read) -> Result<
             } => notes.push(json!({
                 "time": *time as f64 / 1e6, "text": format!("refused `{what}` from {origin}: {reason}")
             })),
+            Entry::ProgramStopped { time, program } => notes.push(json!({
+                "time": *time as f64 / 1e6, "text": format!("program {program} stopped in good order")
+            })),
             Entry::Gap { time, lost, reason } => notes.push(json!({
                 "time": *time as f64 / 1e6, "text": format!("the recorder dropped {lost} entries: {reason}")
             })),

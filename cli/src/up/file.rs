@@ -164,6 +164,9 @@ pub struct LinkSpec {
     pub user: Option<String>,
     /// The file of `user:password` lines (relative to the project) the gateways accept.
     pub credentials: Option<String>,
+    /// `security = "none"`: the link is neither encrypted nor authenticated (a lab bench's
+    /// explicit opt-out of the default, mutual TLS with the vehicle's keys).
+    pub insecure: bool,
 }
 
 /// A checked vehicle file.
@@ -224,6 +227,7 @@ struct RawLink {
     restored_event: Option<Spanned<String>>,
     user: Option<Spanned<String>>,
     credentials: Option<Spanned<String>>,
+    security: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize, Default)]
@@ -447,6 +451,7 @@ impl Checker<'_> {
                 );
             }
         }
+        let insecure = l.security.as_ref().is_some_and(|s| self.security(s));
         LinkSpec {
             detection,
             retention,
@@ -454,6 +459,37 @@ impl Checker<'_> {
             restored_event,
             user: l.user.as_ref().map(|u| u.get_ref().clone()),
             credentials: l.credentials.as_ref().map(|u| u.get_ref().clone()),
+            insecure,
+        }
+    }
+
+    /// `[link] security`: "tls" (the default) or "none", a lab bench's opt-out, which is
+    /// warned of. True for "none".
+    fn security(&mut self, s: &Spanned<String>) -> bool {
+        match s.get_ref().as_str() {
+            "tls" => false,
+            "none" => {
+                self.diags.push(
+                    Diagnostic::warning(
+                        "W0802",
+                        self.span(s),
+                        petrel_gateway::session::INSECURE_WARNING.to_string(),
+                    )
+                    .label("the link is open")
+                    .help("remove `security = \"none\"`: the gateways then use mutual TLS with the vehicle's keys (docs/gateway.md)"),
+                );
+                true
+            }
+            other => {
+                self.error(
+                    "E0812",
+                    self.span(s),
+                    format!("[link] security `{other}` is not \"tls\" or \"none\""),
+                    "not a security",
+                    "leave it out (mutual TLS, the default), or write \"none\" for a lab bench whose link needs no protection",
+                );
+                false
+            }
         }
     }
 
@@ -1500,11 +1536,19 @@ after = ["a"]
         ));
         assert!(v.is_none());
         assert_eq!(codes(&d), vec!["E0812"], "credentials outside the project");
+        let (v, d, _) = check(&format!("{base}[link]\nsecurity = \"none\"\n"));
+        assert!(
+            v.is_some_and(|v| v.link.insecure) && codes(&d) == ["W0802"],
+            "{d:?}"
+        );
+        let (v, d, _) = check(&format!("{base}[link]\nsecurity = \"ssl\"\n"));
+        assert!(v.is_none() && codes(&d) == ["E0812"], "{d:?}");
         let (v, d, _) = check(&format!(
             "{base}[link]\ndetection = \"250ms\"\nuser = \"petrel\"\ncredentials = \"link.txt\"\n"
         ));
         let v = v.unwrap_or_else(|| panic!("{d:?}"));
         assert_eq!(v.link.detection, Some(Duration::from_millis(250)));
+        assert!(!v.link.insecure, "secured by default");
         let (v, d, _) = check(&format!("{base}[link]\nretention = \"1s\"\n"));
         assert!(v.is_none());
         assert_eq!(

@@ -5,10 +5,14 @@
 //! - this module: the command line, and the plan of a run (which processes on this computer,
 //!   their executables and arguments expanded, the run directory);
 //! - [`run`]: the supervisor that starts, watches, restarts and stops the processes;
-//! - [`display`]: the status lines; [`signals`]: stop requests and children's ends.
+//! - [`display`]: the status lines; [`signals`]: stop requests and children's ends;
+//!   `build_hint`: the cargo command for a missing executable of the running petrel's build;
+//!   [`notify`]: systemd's readiness and watchdog notifications.
 
+mod build_hint;
 pub mod display;
 pub mod file;
+pub mod notify;
 pub mod run;
 pub mod signals;
 
@@ -229,8 +233,14 @@ fn is_executable(p: &Path) -> bool {
 }
 
 /// Resolves an executable: a path with a `/` is taken relative to the project directory, a
-/// bare name is looked up in PATH.
-fn resolve_executable(text: &str, project_dir: &Path, process: &str) -> Result<PathBuf, String> {
+/// bare name is looked up in PATH. A missing build output of the running petrel's directory
+/// (`target`, the `{target}` of vehicle files) gets the cargo command that builds it.
+fn resolve_executable(
+    text: &str,
+    project_dir: &Path,
+    process: &str,
+    target: &Path,
+) -> Result<PathBuf, String> {
     if text.contains('/') {
         let path = project_dir.join(text);
         if is_executable(&path) {
@@ -241,14 +251,15 @@ fn resolve_executable(text: &str, project_dir: &Path, process: &str) -> Result<P
         } else {
             "does not exist"
         };
-        let hint = if text.contains("/examples/") {
-            " (build the examples with the profile of this petrel: `cargo build --examples`, or `cargo test --workspace` builds them too)"
+        let hint = if path.exists() {
+            None
         } else {
-            ""
+            build_hint::hint(&path, target, project_dir)
         };
         return Err(format!(
-            "process `{process}`: {} {why}{hint}",
-            path.display()
+            "process `{process}`: {} {why}{}",
+            path.display(),
+            hint.map(|h| format!("; {h}")).unwrap_or_default()
         ));
     }
     let path = std::env::var_os("PATH").unwrap_or_default();
@@ -480,7 +491,7 @@ fn plan(a: UpArgs) -> Result<Plan, Outcome> {
                 // petrel-can-bridge: `petrel bridge`'s arguments, and its simulator's).
                 let own = match (&spec.executable, spec.kind) {
                     (Some(text), Kind::Bridge) => match ex(text)
-                        .and_then(|t| resolve_executable(&t, &project_dir, &spec.name))
+                        .and_then(|t| resolve_executable(&t, &project_dir, &spec.name, &target))
                     {
                         Ok(p) => Some(p),
                         Err(e) => {
@@ -528,7 +539,9 @@ fn plan(a: UpArgs) -> Result<Plan, Outcome> {
             }
             Kind::Program | Kind::Command => {
                 let text = spec.executable.clone().unwrap_or_default();
-                match ex(&text).and_then(|t| resolve_executable(&t, &project_dir, &spec.name)) {
+                match ex(&text)
+                    .and_then(|t| resolve_executable(&t, &project_dir, &spec.name, &target))
+                {
                     Ok(p) => p,
                     Err(e) => {
                         problems.push(e);

@@ -9,6 +9,7 @@
 
 use super::display::{Display, Line};
 use super::file::{Kind, Restart};
+use super::notify::{Notifier, VARIABLES};
 use super::signals::Signals;
 use super::{Plan, Planned, Until};
 use crate::common::Outcome;
@@ -163,6 +164,11 @@ struct Supervisor {
     origin: String,
     /// The running petrel, which starts each process (`petrel __exec`).
     petrel: std::path::PathBuf,
+    /// The programs of this computer's processes: ready when they receive their calls (taken
+    /// away at the end: it keeps our node).
+    watch: Option<petrel_ipc::ProgramWatch>,
+    /// systemd's notifications (readiness, watchdog), when it runs us.
+    notify: Notifier,
 }
 
 /// Runs the plan; prints the summary; the outcome gives the exit code.
@@ -194,6 +200,15 @@ pub fn run(plan: Plan, t0: Instant) -> Outcome {
         Err(e) => return Outcome::Usage(e.to_string()),
     };
     let origin = events.origin().to_string();
+    let programs = plan
+        .processes
+        .iter()
+        .filter(|p| p.spec.kind == Kind::Program)
+        .flat_map(|p| p.spec.programs.clone());
+    let watch = match petrel_ipc::ProgramWatch::new(&me, programs) {
+        Ok(w) => w,
+        Err(e) => return Outcome::Usage(format!("cannot watch the programs: {e}")),
+    };
     let petrel = match std::env::current_exe() {
         Ok(p) => p,
         Err(e) => return Outcome::Usage(format!("cannot find the running petrel: {e}")),
@@ -215,11 +230,16 @@ pub fn run(plan: Plan, t0: Instant) -> Outcome {
         None => String::new(),
     };
     display.message(&format!(
-        "petrel up: vehicle `{}` (project `{}`), {} processes{on}; run directory {}",
+        "petrel up: vehicle `{}` (project `{}`), {}{on}; run directory {}",
         plan.vehicle.name(),
         plan.project.name,
-        plan.processes.len(),
+        petrel_nets::plural::count(plan.processes.len(), "process"),
         plan.run_dir.display()
+    ));
+    let mut notify = Notifier::from_env();
+    notify.status(&format!(
+        "starting {}",
+        petrel_nets::plural::count(plan.processes.len(), "process")
     ));
     let procs = plan
         .processes
@@ -252,11 +272,13 @@ pub fn run(plan: Plan, t0: Instant) -> Outcome {
         acks: Vec::new(),
         origin,
         petrel,
+        watch: Some(watch),
+        notify,
     };
     let end = sup.supervise(&signals, &beats, &deltas, &events);
     sup.stop_all(&signals, &beats, &deltas);
     // Our node goes before the dead ones are cleaned, so the vehicle is left as we found it.
-    drop((beats, deltas, events));
+    drop((beats, deltas, events, sup.watch.take()));
     drop(me);
     if let Err(e) = petrel_ipc::cleanup_dead_nodes(&sup.plan.vehicle, Duration::from_millis(500)) {
         eprintln!("warning: {e}");
@@ -297,9 +319,9 @@ impl Supervisor {
                 {
                     if let Some(s) = &self.player {
                         text.push_str(&format!(
-                            "  mission {:.1} s, {} events, {} marked{}",
+                            "  mission {:.1} s, {}, {} marked{}",
                             s.time,
-                            s.processed,
+                            petrel_nets::plural::count(s.processed, "event"),
                             s.marked.len(),
                             if s.over { ", OVER" } else { "" }
                         ));
@@ -357,6 +379,10 @@ impl Supervisor {
             .env("PETREL_LOGS", &self.plan.run_dir)
             .env("PETREL_PROCESS", &plan.spec.name)
             .env("PETREL_RESTARTS", p.restarts.to_string())
+            // systemd's notifications are ours alone (notify.rs).
+            .env_remove(VARIABLES[0])
+            .env_remove(VARIABLES[1])
+            .env_remove(VARIABLES[2])
             .current_dir(&self.plan.run_dir)
             .stdin(Stdio::null())
             .stdout(log)
@@ -486,7 +512,8 @@ impl Supervisor {
             let failure = match p.plan.spec.restart {
                 Restart::Never => format!("{why} (restart = \"never\")"),
                 Restart::OnFailure { max, .. } if p.restarts >= max => {
-                    format!("{why}, after {max} restarts: none left")
+                    let restarts = petrel_nets::plural::count(max, "restart");
+                    format!("{why}, after {restarts}: none left")
                 }
                 Restart::OnFailure { .. } => why.clone(),
             };
@@ -624,8 +651,8 @@ impl Supervisor {
         None
     }
 
-    /// Whether process `i`'s readiness is seen.
-    fn is_ready(&self, i: usize, nodes: &Option<Vec<petrel_ipc::NodeInfo>>) -> bool {
+    /// Whether process `i`'s readiness is seen (a program's at the watch's last check).
+    fn is_ready(&self, i: usize) -> bool {
         let p = &self.procs[i];
         let Some(since) = p.spawned_at else {
             return false;
@@ -634,13 +661,11 @@ impl Supervisor {
             Kind::Player => self.player_beat.is_some_and(|t| t > since),
             Kind::Bridge => self.bridge_beat.is_some_and(|t| t > since),
             Kind::Command => true,
-            Kind::Program => nodes.as_ref().is_some_and(|nodes| {
-                p.plan.spec.programs.iter().all(|x| {
-                    let node = petrel_ipc::naming::program_node_name(x);
-                    nodes
-                        .iter()
-                        .any(|n| n.name == node && n.status == petrel_ipc::NodeStatus::Alive)
-                })
+            // Each of its programs receives its calls (its node alone is not enough: a call
+            // sent before its calls receiver connects finds nobody).
+            Kind::Program => p.plan.spec.programs.iter().all(|x| {
+                let status = self.watch.as_ref().and_then(|w| w.status(x));
+                status == Some(petrel_ipc::ProgramStatus::Alive)
             }),
         }
     }
@@ -684,15 +709,20 @@ impl Supervisor {
         if starting.is_empty() {
             return fatal;
         }
-        let nodes = starting
+        if starting
             .iter()
             .any(|&i| self.procs[i].plan.spec.kind == Kind::Program)
-            .then(|| petrel_ipc::list_nodes(&self.plan.vehicle).ok())
-            .flatten();
+        {
+            // Not ready this round if the nodes cannot be listed.
+            if let Some(Err(e)) = self.watch.as_mut().map(|w| w.check()) {
+                self.display
+                    .message(&format!("cannot see the programs: {e}"));
+            }
+        }
         for i in starting {
             let name = self.procs[i].plan.spec.name.clone();
             let since = self.procs[i].spawned_at.unwrap_or(now);
-            if self.is_ready(i, &nodes) {
+            if self.is_ready(i) {
                 self.procs[i].state = if self.up_at.is_some() {
                     State::Running
                 } else {
@@ -765,6 +795,8 @@ impl Supervisor {
     ) -> End {
         loop {
             self.display.update(&self.lines());
+            // The watchdog watches this loop: fed every round it turns.
+            self.notify.watchdog(Instant::now());
             if let Some(s) = signals.wait(ROUND) {
                 return End::Signal(s);
             }
@@ -787,6 +819,12 @@ impl Supervisor {
                 }
                 self.display
                     .message(&format!("vehicle up in {:.2} s", self.elapsed()));
+                let status = format!(
+                    "vehicle `{}` up: {} running",
+                    self.plan.vehicle.name(),
+                    petrel_nets::plural::count(self.procs.len(), "process")
+                );
+                self.notify.ready(&status);
             }
             if self.up_at.is_some() {
                 if let Some(why) = self.send_due(events) {
@@ -820,6 +858,7 @@ impl Supervisor {
         beats: &petrel_ipc::HeartbeatSubscriber,
         deltas: &petrel_ipc::MarkingSubscriber,
     ) {
+        self.notify.stopping("stopping the vehicle");
         for p in &mut self.procs {
             match p.state {
                 State::Waiting => p.state = State::NotStarted,
@@ -853,6 +892,7 @@ impl Supervisor {
             }
             while members.iter().any(|&i| self.procs[i].alive()) {
                 self.display.update(&self.lines());
+                self.notify.watchdog(Instant::now());
                 if let Some(s) = signals.wait(ROUND) {
                     if !hurry {
                         self.display
@@ -923,8 +963,10 @@ impl Supervisor {
         }
         if let Some(s) = &self.player {
             text.push_str(&format!(
-                "  last player status: mission time {:.1} s, {} events processed, marking {}\n",
-                s.time, s.processed, s.doc["marking"]
+                "  last player status: mission time {:.1} s, {} processed, marking {}\n",
+                s.time,
+                petrel_nets::plural::count(s.processed, "event"),
+                s.doc["marking"]
             ));
         }
         text.push_str(&format!("logs: {}\n", self.plan.run_dir.display()));

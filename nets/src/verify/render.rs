@@ -3,6 +3,7 @@
 //! `petrel check` and `petrel verify` print with file, line and caret).
 
 use super::{Report, Trace};
+use crate::plural::count;
 use std::fmt::Write as _;
 
 /// How many findings of one kind the grouped report shows before "and N more".
@@ -80,8 +81,10 @@ fn render(project_name: &str, r: &Report, all: bool, details: bool) -> String {
     };
     let _ = writeln!(
         o,
-        "verified `{project_name}`: {} stable states, {} event deliveries, {:.3} s",
-        r.states, r.edges, r.seconds
+        "verified `{project_name}`: {}, {}, {:.3} s",
+        count(r.states, "stable state"),
+        count(r.edges, "event delivery"),
+        r.seconds
     );
     if r.timed {
         let _ = writeln!(
@@ -92,8 +95,8 @@ fn render(project_name: &str, r: &Report, all: bool, details: bool) -> String {
     if r.partial {
         let _ = writeln!(
             o,
-            "partial-order reduction: {} state(s) expanded with one independent group of nets only; dead markings, safety, loops of immediate transitions, cascades of produced events, invariants, conflicts, progress and stuck nets are exact, traces other than to dead markings are witnesses (not always the shortest); starvation and loops need every state: not checked (--no-reduction checks them)",
-            r.reduced_states
+            "partial-order reduction: {} expanded with one independent group of nets only; dead markings, safety, loops of immediate transitions, cascades of produced events, invariants, conflicts, progress and stuck nets are exact, traces other than to dead markings are witnesses (not always the shortest); starvation and loops need every state: not checked (--no-reduction checks them)",
+            count(r.reduced_states, "state")
         );
     }
     let _ = writeln!(
@@ -106,8 +109,8 @@ fn render(project_name: &str, r: &Report, all: bool, details: bool) -> String {
     } else {
         let _ = writeln!(
             o,
-            "safe: NO, {} firing(s) would put a second token in a place (the player refuses them):",
-            r.unsafe_places.len()
+            "safe: NO, {} would put a second token in a place (the player refuses them):",
+            count(r.unsafe_places.len(), "firing")
         );
         for u in &r.unsafe_places {
             item(
@@ -208,8 +211,8 @@ fn render(project_name: &str, r: &Report, all: bool, details: bool) -> String {
         Some(f) => {
             let _ = writeln!(
                 o,
-                "progress: NO, from {} state(s) no declared end can be reached{}:",
-                f.states,
+                "progress: NO, from {} no declared end can be reached{}:",
+                count(f.states, "state"),
                 excluded_text(&f.excluded)
             );
             item(
@@ -345,10 +348,10 @@ fn render(project_name: &str, r: &Report, all: bool, details: bool) -> String {
     for l in r.event_loops.iter().take(limit(r.event_loops.len())) {
         let _ = writeln!(
             o,
-            "  info: a loop on {{{}}}, {} states in {} component(s); one turn: {}",
+            "  info: a loop on {{{}}}, {} in {}; one turn: {}",
             l.events.join(", "),
-            l.states,
-            l.components,
+            count(l.states, "state"),
+            count(l.components, "component"),
             l.turn.join(" → ")
         );
     }
@@ -391,9 +394,18 @@ fn render(project_name: &str, r: &Report, all: bool, details: bool) -> String {
     if errors == 0 && warnings == 0 {
         let _ = writeln!(o, "result: verified, no error");
     } else if errors == 0 {
-        let _ = writeln!(o, "result: verified, no error, {warnings} warning(s)");
+        let _ = writeln!(
+            o,
+            "result: verified, no error, {}",
+            count(warnings, "warning")
+        );
     } else {
-        let _ = writeln!(o, "result: {errors} error(s), {warnings} warning(s)");
+        let _ = writeln!(
+            o,
+            "result: {}, {}",
+            count(errors, "error"),
+            count(warnings, "warning")
+        );
     }
     o
 }
@@ -655,8 +667,8 @@ fn diagnostics_with(
             Diagnostic::global(
                 "E0605",
                 format!(
-                    "the mission cannot finish{without} from {} reachable state(s); the first: {}, {}",
-                    f.states,
+                    "the mission cannot finish{without} from {}; the first: {}, {}",
+                    count(f.states, "reachable state"),
                     marking_text(&f.marking),
                     trace_text(&f.trace)
                 ),

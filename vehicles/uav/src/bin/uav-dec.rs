@@ -233,7 +233,7 @@ fn main() -> ExitCode {
     let mut answered = 0u32;
     let mut last_call: Option<Instant> = None;
     let mut status = ExitCode::SUCCESS;
-    'run: loop {
+    loop {
         while dec.answers.front().is_some_and(|a| a.due <= Instant::now()) {
             let Some(a) = dec.answers.pop_front() else {
                 break;
@@ -245,8 +245,15 @@ fn main() -> ExitCode {
             answered += 1;
             if crash_after == Some(answered) {
                 println!("uav-dec: crashing after {answered} answers (--crash-after-answers)");
-                status = ExitCode::from(3);
-                break 'run;
+                // A crash says no goodbye: once the player has the answer on record, the
+                // process ends without `close` (no leave on the wire), so the player reports
+                // `program_lost`, as it would for a real crash.
+                match program.acknowledged_within(Duration::from_secs(2)) {
+                    Ok(true) => {}
+                    Ok(false) => eprintln!("uav-dec: the answer is not acknowledged"),
+                    Err(e) => eprintln!("uav-dec: {e}"),
+                }
+                std::process::exit(3);
             }
         }
         let now = Instant::now();
