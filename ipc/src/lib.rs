@@ -65,6 +65,7 @@ pub mod doorbell;
 mod epoll;
 pub mod liveness;
 pub mod mapped;
+pub mod mending;
 pub mod naming;
 mod participant;
 pub mod port;

@@ -24,6 +24,7 @@ use iceoryx2::service::builder::publish_subscribe::{
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 
 use crate::access::{AccessError, Session};
+use crate::mending::Mending;
 use crate::naming::{NameError, Role, Vehicle};
 use crate::port::{
     CallReceiver, CallSender, EventReceiver, EventSender, HeartbeatPublisher, HeartbeatSubscriber,
@@ -736,9 +737,12 @@ impl Participant {
             .listener_builder()
             .create()
             .map_err(|e| failed(ServiceFailure::Listener(e)))?;
+        // A connection iceoryx2 could not make is mended by the receiver (crate::mending).
+        let mending = Mending::new();
         let subscriber = factory
             .subscriber_builder()
             .buffer_size(spec.subscriber_buffer)
+            .set_degradation_handler(mending.handler())
             .create()
             .map_err(|e| failed(ServiceFailure::Subscriber(e)))?;
         self.session.share_now();
@@ -748,6 +752,7 @@ impl Participant {
             subscriber,
             listener,
             factory,
+            mending,
             self.session.clone(),
         ))
     }

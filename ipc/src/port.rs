@@ -41,6 +41,7 @@ use iceoryx2::service::port_factory::publish_subscribe;
 
 use crate::access::Session;
 use crate::doorbell::{self, Bells, Changes, Doorbell, Joined};
+use crate::mending::Mending;
 use crate::wire::{self, Message, MsgHeader, MsgKind, Origin, WireError, WIRE_VERSION};
 
 /// Event id a sender notifies after delivering a sample.
@@ -834,6 +835,8 @@ pub struct ReceiverStats {
     pub missing: u64,
     /// Samples whose sequence number went backwards (should never happen).
     pub out_of_order: u64,
+    /// Connections to senders iceoryx2 could not make, tried again ([`crate::mending`]).
+    pub reconnects: u64,
 }
 
 /// What a receiver knows of one sender.
@@ -1060,6 +1063,8 @@ pub struct Receiver<M: Message> {
     /// the doorbell (fields drop in order): senders forget this receiver.
     _joined: Option<Joined>,
     _kind: PhantomData<fn() -> M>,
+    /// Connections to senders that iceoryx2 could not make, to make again.
+    mending: Mending,
     /// The process's membership of the vehicle, kept while the port lives.
     _session: Arc<Session>,
 }
@@ -1095,6 +1100,7 @@ impl<M: Message> Receiver<M> {
         subscriber: Subscriber<ipc::Service, [u8], MsgHeader>,
         listener: Listener<ipc::Service>,
         factory: publish_subscribe::PortFactory<ipc::Service, [u8], MsgHeader>,
+        mending: Mending,
         session: Arc<Session>,
     ) -> Self {
         let doorbell = own_node_id(&factory, subscriber.id().value()).and_then(|node| {
@@ -1119,6 +1125,7 @@ impl<M: Message> Receiver<M> {
             last_consumed: Cell::new(Instant::now()),
             key: crate::reactor::SourceKey::new(),
             _kind: PhantomData,
+            mending,
             _session: session,
         }
     }
@@ -1171,7 +1178,10 @@ impl<M: Message> Receiver<M> {
 
     /// The counters of this receiver.
     pub fn stats(&self) -> ReceiverStats {
-        self.stats.get()
+        ReceiverStats {
+            reconnects: self.mending.retries(),
+            ..self.stats.get()
+        }
     }
 
     /// What this receiver knows of each sender it heard from.
@@ -1202,8 +1212,29 @@ impl<M: Message> Receiver<M> {
 
     /// True when a sample waits in the buffer (a shared-memory read, no system call).
     pub fn has_pending(&self) -> bool {
+        self.mending.before_look(|| self.change_senders());
         // A connection failure still lets the caller try to receive and see the error.
-        self.subscriber.has_samples().unwrap_or(true)
+        let pending = self.subscriber.has_samples().unwrap_or(true);
+        self.mending.after_look();
+        pending
+    }
+
+    /// Makes the service's list of senders change, so that this receiver's next look connects
+    /// again to the senders iceoryx2 could not connect it to ([`crate::mending`]): a publisher
+    /// of its own, made and dropped (no notifier: no one hears of it).
+    fn change_senders(&self) {
+        let made = self
+            .factory
+            .publisher_builder()
+            .initial_max_slice_len(1)
+            .max_loaned_samples(1)
+            .create();
+        drop(made);
+    }
+
+    /// When this receiver must look again to mend a connection iceoryx2 could not make.
+    pub(crate) fn mend_by(&self) -> Option<Instant> {
+        self.mending.due()
     }
 
     /// Consumes the notifications of the paired event service and returns them, with those a
@@ -1292,10 +1323,14 @@ impl<M: Message> Receiver<M> {
         &self,
         on_body: impl FnOnce(Received<()>, &[u8]) -> Result<T, WireError>,
     ) -> Result<Option<T>, RecvError> {
+        self.mending.before_look(|| self.change_senders());
         loop {
             let sample = match self.subscriber.receive() {
                 Ok(Some(sample)) => sample,
-                Ok(None) => return Ok(None),
+                Ok(None) => {
+                    self.mending.after_look();
+                    return Ok(None);
+                }
                 Err(error) => {
                     return Err(RecvError::Transport {
                         service: self.service.clone(),

@@ -128,6 +128,12 @@ pub trait Source {
     fn doorbell(&self) -> Option<&Doorbell> {
         None
     }
+
+    /// When the source must be looked at again whatever wakes the reactor (a receiver's
+    /// connection iceoryx2 could not make: [`crate::mending`]); `None`: only when woken.
+    fn mend_by(&self) -> Option<Instant> {
+        None
+    }
 }
 
 impl<M: Message> Source for Receiver<M> {
@@ -147,6 +153,10 @@ impl<M: Message> Source for Receiver<M> {
 
     fn doorbell(&self) -> Option<&Doorbell> {
         Receiver::doorbell(self)
+    }
+
+    fn mend_by(&self) -> Option<Instant> {
+        Receiver::mend_by(self)
     }
 
     fn signalled(&self) -> bool {
@@ -598,6 +608,28 @@ impl Reactor {
     ) -> Result<Ready, ReactorError> {
         let mut slept = false;
         loop {
+            // A receiver mending a connection is looked at when its retry is due: reported
+            // ready (its drain retries), and the sleep until then no longer.
+            let mut mend = None::<Instant>;
+            let mut due_now = 0u64;
+            for (index, source) in sources.iter().enumerate() {
+                if let Some(by) = source.mend_by() {
+                    if by <= *now.get_or_insert_with(Instant::now) {
+                        due_now |= 1 << index;
+                    }
+                    mend = Some(mend.map_or(by, |m: Instant| m.min(by)));
+                }
+            }
+            if due_now != 0 {
+                return Ok(Ready {
+                    mask: due_now,
+                    ..Ready::default()
+                });
+            }
+            let deadline = match (deadline, mend) {
+                (Some(d), Some(m)) => Some(d.min(m)),
+                (d, m) => d.or(m),
+            };
             let remaining = match deadline {
                 Some(d) => {
                     // The caller's reading of the clock for the first round, if it just made one.

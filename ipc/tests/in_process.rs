@@ -944,3 +944,65 @@ fn a_sized_marking_publisher_sends_a_long_step_in_pieces_every_monitor_joins() {
         assert_eq!(sub.stats().missing, 0);
     }
 }
+
+/// A receiver whose connection to a new sender failed once connects again: the sender's data
+/// segment was not there when the receiver looked (as when the sender's process, creating it,
+/// is not scheduled within iceoryx2's creation timeout on a loaded machine). iceoryx2 retries a
+/// connection only when the list of senders changes, so the sender's samples, delivered and
+/// counted, were never seen: a blocking receiver slept for ever (issue 38's CI failure).
+#[test]
+fn a_receiver_whose_connection_to_a_sender_failed_connects_again() {
+    let vehicle = TestVehicle::new("auv");
+    let (player, pln) = pair(&vehicle);
+    let rx = player.event_receiver().unwrap();
+    assert!(!rx.has_pending());
+    let prefix = vehicle.shm_prefix().unwrap();
+    let files = || -> std::collections::BTreeSet<String> {
+        std::fs::read_dir("/dev/shm")
+            .unwrap()
+            .filter_map(Result::ok)
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| n.starts_with(&prefix))
+            .collect()
+    };
+    let before = files();
+    let tx = pln.event_sender().unwrap();
+    // The sender's data segment (its management part and its first segment).
+    let segment: Vec<_> = files()
+        .difference(&before)
+        .filter(|n| n.ends_with(".data"))
+        .map(|n| std::path::Path::new("/dev/shm").join(n))
+        .collect();
+    assert_eq!(segment.len(), 2, "{segment:?}");
+    let hidden = |p: &std::path::Path| p.with_extension("hidden");
+    for path in &segment {
+        std::fs::rename(path, hidden(path)).unwrap();
+    }
+    // The receiver looks (its connection to the new sender fails), then the segment is back.
+    assert!(!rx.has_pending());
+    for path in &segment {
+        std::fs::rename(hidden(path), path).unwrap();
+    }
+    let sent = tx
+        .send(&EventMsg::new("depth", vec![Value::Int(7)]))
+        .unwrap();
+    assert_eq!(sent.delivered, 1, "the sender reached the receiver");
+    // A blocking reactor wakes for it (the sender rang, or the retry came due), however many
+    // wake-ups it takes.
+    let reactor = Reactor::without_signal_handling(WaitStrategy::Block).unwrap();
+    let deadline = Instant::now() + Duration::from_secs(5);
+    let got = loop {
+        if let Some(got) = rx.try_recv().unwrap() {
+            break got;
+        }
+        let left = deadline.saturating_duration_since(Instant::now());
+        assert!(
+            !left.is_zero(),
+            "the receiver never saw the delivered sample"
+        );
+        reactor.wait(&[&rx], Some(left)).unwrap();
+    };
+    assert_eq!(got.msg, EventMsg::new("depth", vec![Value::Int(7)]));
+    assert_eq!(got.missed, 0);
+    assert!(rx.stats().reconnects >= 1, "{:?}", rx.stats());
+}

@@ -41,6 +41,15 @@ impl Flight {
         self.steps.iter().filter(|(e, _, _)| e == event).count()
     }
 
+    /// The journal's steps, one per line (event, parameters, actions), for a failed
+    /// assertion's message: the path the mission took, not only that it went wrong.
+    pub fn story(&self) -> String {
+        self.steps
+            .iter()
+            .map(|(e, p, a)| format!("{e}({}) -> {}\n", p.join(", "), a.join("; ")))
+            .collect()
+    }
+
     pub fn called(&self, action: &str) -> bool {
         self.steps
             .iter()
@@ -387,12 +396,14 @@ pub fn check_nominal(f: &Flight) {
 /// buoy field, the end area reached, surfaced and stopped.
 pub fn check_nominal_route(f: &Flight) {
     assert_flown_and_stopped(f);
-    assert_eq!(f.took("next_area"), 2);
-    assert_eq!(f.took("areas_done"), 1);
-    assert_eq!(f.took("current_ok"), 2);
+    let story = f.story();
+    assert_eq!(f.took("next_area"), 2, "{story}");
+    assert_eq!(f.took("areas_done"), 1, "{story}");
+    assert_eq!(f.took("current_ok"), 2, "{story}");
     assert_eq!(
         f.took("alarm") + f.took("leak") + f.took("depth_sensor_lost"),
-        0
+        0,
+        "{story}"
     );
     assert_clear_of_the_buoys(f);
     assert_ends_in_the_end_area(f);
