@@ -74,14 +74,14 @@ fn main() {
         deadlines: &deadlines,
         net_args: &args,
     };
-    let candidate =
-        petrel_player::reload::load_candidate(dir.path(), "", "").expect("the new version");
+    let candidate = petrel_player::reload::version::load_candidate(dir.path(), "", "")
+        .expect("the new version");
     let mapped = map_state(&old, &from, &candidate.project, &candidate.mapping).expect("maps");
 
     let runs = 20;
     let check = best(runs, || petrel_nets::project::load_and_check(dir.path()));
     let load = best(runs, || {
-        petrel_player::reload::load_candidate(dir.path(), "", "").map(|c| c.source_hash)
+        petrel_player::reload::version::load_candidate(dir.path(), "", "").map(|c| c.source_hash)
     });
     let map = best(runs, || {
         map_state(&old, &from, &candidate.project, &candidate.mapping).map(|m| m.state)

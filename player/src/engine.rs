@@ -6,6 +6,12 @@
 //! first, oldest first within a category); after a catastrophic event nothing more is
 //! processed. Processing an event allocates nothing in the steady state: queues and buffers are
 //! reused (a test counts allocations).
+//!
+//! Every event is accounted for: `received = processed + unused + refused + queued` holds
+//! after every call ([`Stats`]). A cascade of events produced at one instant is bounded
+//! (docs/semantics.md, "Zero-time cascades"): each queued event knows whether a step produced
+//! it, and at the bound the produced events still queued are dropped, counted as refused, and
+//! `livelock` is raised once ([`Sink::cascade_stopped`]).
 
 use petrel_nets::compiled::{
     Arg, CompiledProject, EventId, FunctionId, NetId, PlaceRef, ProgramId, TimerDuration, TimerId,

@@ -15,7 +15,6 @@
 use crate::ack::Ledger;
 use crate::engine::{Engine, Refusal};
 use crate::journal::{Entry, Journal};
-use crate::runtime::PlayReport;
 use petrel_ipc::{Origin, Received, Role};
 use petrel_nets::compiled::{EventId, Value};
 use std::collections::BTreeSet;
@@ -101,8 +100,10 @@ pub struct Intake<'a, 'p> {
     pub journal: &'a mut Journal,
     /// The senders' accounts (the heartbeat's acknowledgements).
     pub ledger: &'a mut Ledger,
-    /// `messages` and `bad_messages`.
-    pub report: &'a mut PlayReport,
+    /// Messages received (decoded or not): the player's `messages`.
+    pub messages: &'a mut u64,
+    /// Messages refused as bad (told to the nets) and receiver failures: its `bad_messages`.
+    pub bad_messages: &'a mut u64,
     /// The project's `bad_message` event.
     pub bad_message: Option<EventId>,
     /// The programs that said they leave in good order, since they last joined.
@@ -112,7 +113,7 @@ pub struct Intake<'a, 'p> {
 impl Intake<'_, '_> {
     /// An event `name` whose parameters were decoded into `decoded` (moved out of it).
     pub fn event(&mut self, from: Header, name: &str, decoded: &mut Vec<Value>) {
-        self.report.messages += 1;
+        *self.messages += 1;
         let origin = from.origin.as_str();
         if name == petrel_ipc::wire::LEAVE {
             return self.leave(from, decoded);
@@ -179,7 +180,7 @@ impl Intake<'_, '_> {
 
     /// A message whose body did not decode (`from.sender` known).
     pub fn undecodable(&mut self, from: Header, error: &str) {
-        self.report.messages += 1;
+        *self.messages += 1;
         self.engine.count_refused();
         let reason = format!("undecodable: {error}");
         let origin = from.origin.as_str().to_string();
@@ -189,14 +190,14 @@ impl Intake<'_, '_> {
     /// A message of another wire version or kind, whose sender the player cannot acknowledge
     /// (a process of another Petrel: it cannot read the acknowledgement either).
     pub fn foreign(&mut self, origin: &str, reason: &str) {
-        self.report.messages += 1;
+        *self.messages += 1;
         self.engine.count_refused();
         self.refuse(None, origin, "(foreign)", reason.to_string(), false, true);
     }
 
     /// The receiver failed (not a message): logged and counted in `bad_messages`.
     pub fn failed(&mut self, error: &dyn std::fmt::Display) {
-        self.report.bad_messages += 1;
+        *self.bad_messages += 1;
         warn!(error = %error, "events could not be received");
     }
 
@@ -226,7 +227,7 @@ impl Intake<'_, '_> {
             info!(from = %origin, ?seq, %reason, "event refused");
             return;
         }
-        self.report.bad_messages += 1;
+        *self.bad_messages += 1;
         warn!(from = %origin, ?seq, %reason, "event refused");
         let params = vec![Value::Text(origin.to_string()), Value::Text(reason)];
         raise(self.engine, self.journal, self.bad_message, params);

@@ -27,6 +27,17 @@
 //! dropped; a killed player leaves them, a reader takes them as the end of the journal, and
 //! `--resume` cuts them off. The format is unchanged.
 //!
+//! **Writing, failing, one player per directory.** [`JournalWriter`] queues complete records
+//! and writes them at the segment's last good record boundary (a failed write is cut back to
+//! it, its records stay queued); `sync`, and file systems without `fallocate`, write through
+//! the file (`PETREL_JOURNAL_NO_MAP` forces that, for benchmarks). [`Journal`] is the
+//! recorder's state: ok; failing (records wait in memory and are retried at each heartbeat);
+//! dropping (past the backlog, until a gap and a checkpoint can be written); each change is
+//! raised to the nets (`recorder_failed`, `recorder_restored`). [`JournalLock`] makes a
+//! journal directory one player's: a second player is refused, naming the owner; a dead
+//! player's lock is taken over with a warning. The player also refuses a new mission a
+//! directory that already holds a journal, and `--resume` another vehicle's journal.
+//!
 //! Decoding is bounded: a record's body is decoded with a bincode limit proportional to its own
 //! length ([`decode_entry`]), so a body with a valid checksum that claims a vector of 2^61
 //! elements or a string of 2^40 bytes is refused as an undecodable record, never a panic or an
@@ -1480,69 +1491,4 @@ pub fn project_digest(p: &petrel_nets::compiled::CompiledProject) -> u64 {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_borrowed_submit_encodes_as_the_entry() {
-        let params = vec![
-            Value::Int(-7),
-            Value::FloatList(vec![0.5, 1e300]),
-            Value::Text("é x".into()),
-            Value::Bool(true),
-        ];
-        let entry = Entry::Submit {
-            time: 123_456,
-            event: "waypoint".into(),
-            params: params.clone(),
-            origin: "program/PLN".into(),
-            seq: 1 << 40,
-        };
-        let borrowed = SubmitRecord {
-            variant: SUBMIT_VARIANT,
-            time: 123_456,
-            event: "waypoint",
-            params: &params,
-            origin: "program/PLN",
-            seq: 1 << 40,
-        };
-        let (mut a, mut b) = (Vec::new(), Vec::new());
-        encode_record(&entry, &mut Vec::new(), &mut a).unwrap();
-        encode_record(&borrowed, &mut Vec::new(), &mut b).unwrap();
-        assert_eq!(a, b);
-        assert_eq!(decode_entry(&b[8..]).unwrap(), entry);
-    }
-
-    #[test]
-    fn a_borrowed_step_encodes_as_the_entry() {
-        let params = vec![Value::Int(3), Value::FloatList(vec![0.25, -1e-9])];
-        let fired = vec!["R0.answer".to_string(), "MISSION.go".to_string()];
-        let actions = vec!["call P0.ping(3, [0.25, -1e-9])".to_string()];
-        let (state, deadlines) = (vec![5u64, 1 << 63], vec![None, Some(12_500_000)]);
-        let entry = Entry::Step {
-            time: 99,
-            event: "pong_0".into(),
-            params: params.clone(),
-            outcome: "processed".into(),
-            fired: fired.clone(),
-            actions: actions.clone(),
-            state: state.clone(),
-            deadlines: deadlines.clone(),
-        };
-        let borrowed = StepParts {
-            time: 99,
-            event: "pong_0",
-            params: &params,
-            outcome: "processed",
-            fired: &fired[..],
-            actions: &actions,
-            state: &state,
-            deadlines: &deadlines,
-        };
-        let (mut a, mut b) = (Vec::new(), Vec::new());
-        encode_record(&entry, &mut Vec::new(), &mut a).unwrap();
-        encode_record(&(STEP_VARIANT, &borrowed), &mut Vec::new(), &mut b).unwrap();
-        assert_eq!(a, b);
-        assert_eq!(decode_entry(&b[8..]).unwrap(), entry);
-    }
-}
+mod tests;

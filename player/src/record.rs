@@ -11,6 +11,12 @@
 //! `refused`. The journal records these words, the replay compares them, `petrel run` prints
 //! them in each JSON line's `outcome` and a script's `expect processed` / `expect unused` /
 //! `expect refused` is read with them, so that what a step says is what a script expects.
+//!
+//! The player's record ([`StepRecord::without_calls`]) keeps only the texts, written in place
+//! ([`write_call_text`]) into strings it reuses from step to step, and hands the journal the
+//! fired transitions' names without building them ([`FiredNames`]). [`marked_places`] and
+//! [`place_changes`] name a state's marked places, and what two states differ in (the marking
+//! deltas name only that).
 
 use crate::engine::{ArgValue, Args, Micros, Sink};
 use petrel_nets::compiled::{

@@ -12,8 +12,9 @@
 use crate::engine::{Engine, Micros};
 use crate::journal::Entry;
 use crate::record::{outcome_name, StepRecord};
-use petrel_nets::compiled::CompiledProject;
+use petrel_nets::compiled::{CompiledProject, Value};
 use petrel_nets::semantics::Layout;
+use std::path::Path;
 
 /// What kind of difference a [`Divergence`] is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -66,48 +67,6 @@ pub struct ReplayReport {
     pub reloads: u64,
 }
 
-/// Replaces `engine` (running `project`) by one running the version of content hash `hash`
-/// kept beside the journal in `kept`, as the player did at the reload: the state mapped
-/// again with the recorded mapping, the queue carried over.
-fn reload_engine<'p>(
-    project: &'p CompiledProject,
-    engine: &mut Engine<'p>,
-    kept: Option<&std::path::Path>,
-    hash: &str,
-    mapping: &str,
-    time: Micros,
-) -> Result<&'p CompiledProject, String> {
-    let dir = kept.ok_or_else(|| {
-        format!("a reload to version {hash}: the journal directory is needed to find its files")
-    })?;
-    let new = crate::reload::load_kept(dir, hash)?;
-    let mapping = petrel_nets::reload::Mapping::parse(mapping)
-        .map_err(|e| format!("the reload's mapping does not read: {e}"))?;
-    let from = petrel_nets::reload::OldState {
-        state: engine.state(),
-        deadlines: engine.deadlines(),
-        net_args: engine.all_net_args(),
-    };
-    let mapped = petrel_nets::reload::map_state(project, &from, &new, &mapping)
-        .map_err(|r| format!("the reload does not map again: {}", r.reasons.join("; ")))?;
-    let new = crate::reload::leak(new);
-    let queued = engine.take_queue();
-    let stats = engine.stats();
-    let mut next = Engine::new(new);
-    next.adopt(
-        time,
-        &mapped.state,
-        &mapped.deadlines,
-        mapped.net_args,
-        stats,
-        queued,
-        &mapping.nets,
-    )
-    .ok_or_else(|| "the mapped state is not of the new version's size".to_string())?;
-    *engine = next;
-    Ok(new)
-}
-
 /// A state as `NET.place` / `global.place` names, active nets as `NET+`, running timers.
 pub fn describe(project: &CompiledProject, layout: &Layout, state: &[u64]) -> Vec<String> {
     if state.len() != layout.words {
@@ -139,96 +98,28 @@ pub fn last_reload(entries: &[Entry]) -> Option<usize> {
 }
 
 /// Replays `entries` as [`replay`] does, across reloads: the versions a reload brought are
-/// read from the journal directory `kept` ([`crate::reload::load_kept`]), the state is mapped
-/// again and checked against the recorded one, and the replay goes on with the new version.
-/// With `from_last_reload`, the replay starts at the journal's last reload, on the version it
-/// brought (its recorded state restored like a checkpoint's): for `--resume`, and for a
-/// replay whose project directory holds a later version than the mission's first.
+/// read from the journal directory `kept` ([`crate::reload::version::load_kept`]), the state is
+/// mapped again and checked against the recorded one, and the replay goes on with the new
+/// version. With `from_last_reload`, the replay starts at the journal's last reload, on the
+/// version it brought (its recorded state restored like a checkpoint's): for `--resume`, and
+/// for a replay whose project directory holds a later version than the mission's first.
 pub fn replay_in<'p>(
     project: &'p CompiledProject,
     entries: &[Entry],
     until: Option<Micros>,
-    kept: Option<&std::path::Path>,
+    kept: Option<&Path>,
     from_last_reload: bool,
 ) -> (Engine<'p>, ReplayReport) {
-    let mut project = project;
-    let mut engine = Engine::new(project);
-    let mut report = ReplayReport::default();
+    let mut r = Replayer::new(project, kept);
     let mut skip_to = 0;
-    if let (true, Some(k)) = (from_last_reload, last_reload(entries)) {
-        if let Entry::Reload {
-            time,
-            source_hash,
-            mapping,
-            state,
-            deadlines,
-            queued,
-            ..
-        } = &entries[k]
-        {
-            let loaded = match kept {
-                Some(dir) => crate::reload::load_kept(dir, source_hash),
-                None => Err("the journal directory is needed to find the reloaded version".into()),
-            };
-            match loaded {
-                Ok(p) => {
-                    project = crate::reload::leak(p);
-                    engine = Engine::new(project);
-                    let renamed = petrel_nets::reload::Mapping::parse(mapping)
-                        .map(|m| m.nets)
-                        .unwrap_or_default();
-                    // The events queued at the reload were received before it.
-                    let stats = crate::engine::Stats {
-                        received: queued.len() as u64,
-                        ..Default::default()
-                    };
-                    let args = vec![Vec::new(); project.nets.len()];
-                    let adopted = engine.adopt(
-                        *time,
-                        state,
-                        deadlines,
-                        args,
-                        stats,
-                        queued.clone(),
-                        &renamed,
-                    );
-                    if adopted.is_none() {
-                        report.divergence = Some(Divergence {
-                            kind: DivergenceKind::Replay,
-                            entry: k,
-                            time: *time,
-                            event: "(reload)".into(),
-                            what: "the reload's state is not of its version's size".into(),
-                            recorded: Vec::new(),
-                            replayed: Vec::new(),
-                        });
-                        return (engine, report);
-                    }
-                    report.last_time = *time;
-                    report.reloads += 1;
-                    skip_to = k + 1;
-                }
-                Err(what) => {
-                    report.divergence = Some(Divergence {
-                        kind: DivergenceKind::Replay,
-                        entry: k,
-                        time: *time,
-                        event: "(reload)".into(),
-                        what,
-                        recorded: Vec::new(),
-                        replayed: Vec::new(),
-                    });
-                    return (engine, report);
-                }
-            }
+    let last = last_reload(entries).and_then(|k| Some((k, ReloadAt::of(&entries[k])?)));
+    if let (true, Some((k, at))) = (from_last_reload, last) {
+        if let Err(d) = r.start_at_reload(k, at) {
+            r.report.divergence = Some(d);
+            return (r.engine, r.report);
         }
+        skip_to = k + 1;
     }
-    let mut log = StepRecord::new(project);
-    // After a gap, the next checkpoint is where the replay starts over.
-    let mut after_gap = false;
-    // The journal's first header, and the time of the last entry that had one.
-    let mut first: Option<(&str, u64, Option<u64>)> = None;
-    let mut previous: Option<(usize, u64)> = None;
     for (i, entry) in entries.iter().enumerate() {
         // Headers are checked all the same: the journal holds together or not.
         if i < skip_to && !matches!(entry, Entry::Header { .. }) {
@@ -236,42 +127,375 @@ pub fn replay_in<'p>(
         }
         if let (Some(limit), Some(t)) = (until, entry.time()) {
             if t > limit {
-                report.stopped_early = true;
+                r.report.stopped_early = true;
                 break;
             }
         }
-        if let Some(what) = inconsistency(entry, &mut first, &mut previous, i) {
-            report.divergence = Some(Divergence {
+        if let Err(d) = r.entry(i, entry) {
+            r.report.divergence = Some(d);
+            break;
+        }
+    }
+    (r.engine, r.report)
+}
+
+/// A replay under way: the version it runs, its engine, and what it saw of the journal.
+struct Replayer<'p, 'e> {
+    project: &'p CompiledProject,
+    engine: Engine<'p>,
+    log: StepRecord<'p>,
+    report: ReplayReport,
+    /// The journal directory, where the versions reloads brought are kept.
+    kept: Option<&'e Path>,
+    /// After a gap, the next checkpoint is where the replay starts over.
+    after_gap: bool,
+    /// The journal's first header (vehicle, digest, mission start).
+    first: Option<(&'e str, u64, Option<u64>)>,
+    /// The last entry that had a time, and its time.
+    previous: Option<(usize, u64)>,
+}
+
+impl<'p, 'e> Replayer<'p, 'e> {
+    fn new(project: &'p CompiledProject, kept: Option<&'e Path>) -> Self {
+        Replayer {
+            project,
+            engine: Engine::new(project),
+            log: StepRecord::new(project),
+            report: ReplayReport::default(),
+            kept,
+            after_gap: false,
+            first: None,
+            previous: None,
+        }
+    }
+
+    /// Entry `i` replayed: `Err` with the first difference.
+    fn entry(&mut self, i: usize, entry: &'e Entry) -> Result<(), Divergence> {
+        if let Some(what) = inconsistency(entry, &mut self.first, &mut self.previous, i) {
+            return Err(Divergence {
                 kind: DivergenceKind::Journal,
                 entry: i,
-                time: entry.time().unwrap_or(report.last_time),
+                time: entry.time().unwrap_or(self.report.last_time),
                 event: "(journal)".into(),
                 what,
                 recorded: Vec::new(),
-                replayed: describe(engine.project(), engine.layout(), engine.state()),
+                replayed: self.describe(self.engine.state()),
             });
-            break;
         }
-        report.entries = i + 1;
+        self.report.entries = i + 1;
         if let Some(t) = entry.time() {
-            report.last_time = t;
+            self.report.last_time = t;
         }
-        let diverge =
-            |engine: &Engine, what: String, event: &str, time: u64, recorded: &[u64]| Divergence {
+        match entry {
+            Entry::Header { .. } | Entry::ProgramStopped { .. } => Ok(()),
+            // Refused live and counted so (received and refused): the counters of a resumed
+            // engine account for it too.
+            Entry::Refused { .. } => {
+                self.engine.count_refused();
+                Ok(())
+            }
+            Entry::Reload { .. } => match ReloadAt::of(entry) {
+                Some(at) => self.reload(i, at),
+                None => Ok(()),
+            },
+            // The player came back at this mission time: timers whose deadline passed while it
+            // was down expire now, as they did live.
+            Entry::Resume { time } => {
+                self.engine.advance_to(*time);
+                Ok(())
+            }
+            Entry::Gap { lost, .. } => {
+                self.report.gaps += 1;
+                self.report.lost += lost;
+                self.after_gap = true;
+                Ok(())
+            }
+            Entry::Checkpoint {
+                time,
+                state,
+                deadlines,
+            } => self.checkpoint(i, *time, state, deadlines),
+            Entry::Start { time, state } => {
+                self.engine.start(*time, &mut self.log);
+                self.log.clear();
+                let what = "the initial state differs";
+                self.check_state(i, what, "(start)", *time, state, None)
+            }
+            Entry::Submit {
+                time,
+                event,
+                params,
+                ..
+            } => self.submit(i, *time, event, params),
+            Entry::Step {
+                time,
+                event,
+                outcome,
+                fired,
+                state,
+                ..
+            } => self.step(i, *time, event, (outcome, fired), state),
+        }
+    }
+
+    /// A state as names, in the version the replay runs.
+    fn describe(&self, state: &[u64]) -> Vec<String> {
+        describe(self.engine.project(), self.engine.layout(), state)
+    }
+
+    /// Entry `i`, at `time` (event `event`), does not replay: `what`; `recorded` is the state
+    /// the journal holds there.
+    fn diverge(
+        &self,
+        i: usize,
+        what: String,
+        event: &str,
+        time: u64,
+        recorded: &[u64],
+    ) -> Divergence {
+        Divergence {
+            kind: DivergenceKind::Replay,
+            entry: i,
+            time,
+            event: event.to_string(),
+            what,
+            recorded: self.describe(recorded),
+            replayed: self.describe(self.engine.state()),
+        }
+    }
+
+    /// The engine's state is the recorded `state` (and its deadlines the recorded ones, if
+    /// given); otherwise the divergence `what`.
+    fn check_state(
+        &self,
+        i: usize,
+        what: &str,
+        event: &str,
+        time: u64,
+        state: &[u64],
+        deadlines: Option<&[Option<u64>]>,
+    ) -> Result<(), Divergence> {
+        let same =
+            self.engine.state() == state && deadlines.is_none_or(|d| self.engine.deadlines() == d);
+        match same {
+            true => Ok(()),
+            false => Err(self.diverge(i, what.into(), event, time, state)),
+        }
+    }
+
+    /// A checkpoint: where the replay starts over after a gap, and a check of the state
+    /// otherwise.
+    fn checkpoint(
+        &mut self,
+        i: usize,
+        time: u64,
+        state: &[u64],
+        deadlines: &[Option<u64>],
+    ) -> Result<(), Divergence> {
+        if !self.after_gap {
+            let what = "the state at the checkpoint differs";
+            return self.check_state(i, what, "(checkpoint)", time, state, Some(deadlines));
+        }
+        self.after_gap = false;
+        if !self.engine.restore(time, state, deadlines) {
+            let what = "the checkpoint is not of this project's size".into();
+            return Err(self.diverge(i, what, "(checkpoint)", time, state));
+        }
+        Ok(())
+    }
+
+    /// A submitted event, at its time.
+    fn submit(
+        &mut self,
+        i: usize,
+        time: u64,
+        event: &str,
+        params: &[Value],
+    ) -> Result<(), Divergence> {
+        self.engine.advance_to(time);
+        match self.engine.submit_named(event, params.to_vec()) {
+            Ok(()) => Ok(()),
+            Err(r) => Err(Divergence {
                 kind: DivergenceKind::Replay,
                 entry: i,
                 time,
                 event: event.to_string(),
-                what,
-                recorded: describe(engine.project(), engine.layout(), recorded),
-                replayed: describe(engine.project(), engine.layout(), engine.state()),
+                what: format!("the engine refuses the recorded event: {r}"),
+                recorded: Vec::new(),
+                replayed: self.describe(self.engine.state()),
+            }),
+        }
+    }
+
+    /// A recorded step: the engine takes its next event, which must be the recorded one, with
+    /// the same outcome, the same transitions fired and the same state after.
+    fn step(
+        &mut self,
+        i: usize,
+        time: Micros,
+        event: &str,
+        (outcome, fired): (&str, &[String]),
+        state: &[u64],
+    ) -> Result<(), Divergence> {
+        self.engine.advance_to(time);
+        self.log.clear();
+        let Some(step) = self.engine.step(&mut self.log) else {
+            let what = "the journal has a step here, the replay has no event left to take";
+            return Err(self.diverge(i, what.into(), event, time, state));
+        };
+        self.report.steps += 1;
+        let taken = &self.project.events[step.event as usize].name;
+        let replayed_outcome = outcome_name(step.outcome);
+        let found_fired = self.log.fired_names();
+        let what = if taken != event {
+            format!("the replay took `{taken}`, the journal `{event}`")
+        } else if replayed_outcome != outcome {
+            format!("the event was {replayed_outcome} in the replay, {outcome} in the journal")
+        } else if found_fired != fired {
+            format!(
+                "fired [{}] in the replay, [{}] in the journal",
+                found_fired.join(", "),
+                fired.join(", ")
+            )
+        } else {
+            let what = "the marking after the step differs";
+            return self.check_state(i, what, event, time, state, None);
+        };
+        Err(self.diverge(i, what, event, time, state))
+    }
+
+    /// A reload: the queue at the reload must be the recorded one; the version it brought is
+    /// read from the journal directory, the state mapped again with the recorded mapping (and
+    /// checked against the recorded state), the queue carried over.
+    fn reload(&mut self, i: usize, at: ReloadAt) -> Result<(), Divergence> {
+        self.engine.advance_to(at.time);
+        let carried = self.engine.queued_names();
+        if carried != at.queued {
+            let names = |q: &[(String, Vec<Value>, Option<String>)]| {
+                q.iter()
+                    .map(|q| q.0.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
             };
+            let what = format!(
+                "the queue at the reload differs: [{}] in the replay, [{}] in the journal",
+                names(&carried),
+                names(at.queued)
+            );
+            return Err(self.diverge(i, what, "(reload)", at.time, at.state));
+        }
+        match self.reload_engine(at.source_hash, at.mapping, at.time) {
+            Ok(()) => {
+                self.report.reloads += 1;
+                let what = "the state mapped at the reload differs";
+                self.check_state(i, what, "(reload)", at.time, at.state, Some(at.deadlines))
+            }
+            Err(what) => Err(self.diverge(i, what, "(reload)", at.time, at.state)),
+        }
+    }
+
+    /// Replaces the engine by one running the version of content hash `hash` kept beside the
+    /// journal, as the player did at the reload: the state mapped again with the recorded
+    /// mapping, the queue carried over.
+    fn reload_engine(&mut self, hash: &str, mapping: &str, time: Micros) -> Result<(), String> {
+        let dir = self.kept.ok_or_else(|| {
+            format!("a reload to version {hash}: the journal directory is needed to find its files")
+        })?;
+        let new = crate::reload::version::load_kept(dir, hash)?;
+        let mapping = petrel_nets::reload::Mapping::parse(mapping)
+            .map_err(|e| format!("the reload's mapping does not read: {e}"))?;
+        let from = crate::reload::running_state(&self.engine);
+        let mapped = petrel_nets::reload::map_state(self.project, &from, &new, &mapping)
+            .map_err(|r| format!("the reload does not map again: {}", r.reasons.join("; ")))?;
+        let new = crate::reload::version::leak(new);
+        let queued = self.engine.take_queue();
+        let stats = self.engine.stats();
+        let mut next = Engine::new(new);
+        next.adopt(
+            time,
+            &mapped.state,
+            &mapped.deadlines,
+            mapped.net_args,
+            stats,
+            queued,
+            &mapping.nets,
+        )
+        .ok_or_else(|| "the mapped state is not of the new version's size".to_string())?;
+        self.run_version(new, next);
+        Ok(())
+    }
+
+    /// Runs version `project` from now on, on `engine`.
+    fn run_version(&mut self, project: &'p CompiledProject, engine: Engine<'p>) {
+        self.project = project;
+        self.engine = engine;
+        self.log = StepRecord::new(project);
+    }
+
+    /// Starts the replay at the journal's reload `k`, on the version it brought, from its
+    /// recorded state (restored like a checkpoint's).
+    fn start_at_reload(&mut self, k: usize, at: ReloadAt) -> Result<(), Divergence> {
+        let at_reload = |what: String| Divergence {
+            kind: DivergenceKind::Replay,
+            entry: k,
+            time: at.time,
+            event: "(reload)".into(),
+            what,
+            recorded: Vec::new(),
+            replayed: Vec::new(),
+        };
+        let loaded = match self.kept {
+            Some(dir) => crate::reload::version::load_kept(dir, at.source_hash),
+            None => Err("the journal directory is needed to find the reloaded version".into()),
+        };
+        let project = crate::reload::version::leak(loaded.map_err(at_reload)?);
+        let mut engine = Engine::new(project);
+        let renamed = petrel_nets::reload::Mapping::parse(at.mapping)
+            .map(|m| m.nets)
+            .unwrap_or_default();
+        // The events queued at the reload were received before it.
+        let stats = crate::engine::Stats {
+            received: at.queued.len() as u64,
+            ..Default::default()
+        };
+        let args = vec![Vec::new(); project.nets.len()];
+        let adopted = engine.adopt(
+            at.time,
+            at.state,
+            at.deadlines,
+            args,
+            stats,
+            at.queued.to_vec(),
+            &renamed,
+        );
+        self.run_version(project, engine);
+        if adopted.is_none() {
+            return Err(at_reload(
+                "the reload's state is not of its version's size".into(),
+            ));
+        }
+        self.report.last_time = at.time;
+        self.report.reloads += 1;
+        Ok(())
+    }
+}
+
+/// What a reload entry holds that the replay needs ([`Entry::Reload`]).
+struct ReloadAt<'e> {
+    time: Micros,
+    source_hash: &'e str,
+    mapping: &'e str,
+    /// The state recorded after the reload (mapped onto the new version).
+    state: &'e [u64],
+    deadlines: &'e [Option<u64>],
+    /// The events queued at the reload, carried over to the new version.
+    queued: &'e [(String, Vec<Value>, Option<String>)],
+}
+
+impl<'e> ReloadAt<'e> {
+    /// The reload `entry` holds, if it is one.
+    fn of(entry: &'e Entry) -> Option<Self> {
         match entry {
-            Entry::Header { .. } => {}
-            // Refused live and counted so (received and refused): the counters of a resumed
-            // engine account for it too.
-            Entry::Refused { .. } => engine.count_refused(),
-            Entry::ProgramStopped { .. } => {}
             Entry::Reload {
                 time,
                 source_hash,
@@ -280,169 +504,17 @@ pub fn replay_in<'p>(
                 deadlines,
                 queued,
                 ..
-            } => {
-                engine.advance_to(*time);
-                let carried = engine.queued_names();
-                if &carried != queued {
-                    report.divergence = Some(diverge(
-                        &engine,
-                        format!(
-                            "the queue at the reload differs: [{}] in the replay, [{}] in the journal",
-                            carried.iter().map(|q| q.0.as_str()).collect::<Vec<_>>().join(", "),
-                            queued.iter().map(|q| q.0.as_str()).collect::<Vec<_>>().join(", ")
-                        ),
-                        "(reload)",
-                        *time,
-                        state,
-                    ));
-                    break;
-                }
-                match reload_engine(project, &mut engine, kept, source_hash, mapping, *time) {
-                    Ok(next) => {
-                        project = next;
-                        log = StepRecord::new(project);
-                        report.reloads += 1;
-                        if engine.state() != state.as_slice()
-                            || engine.deadlines() != deadlines.as_slice()
-                        {
-                            report.divergence = Some(diverge(
-                                &engine,
-                                "the state mapped at the reload differs".into(),
-                                "(reload)",
-                                *time,
-                                state,
-                            ));
-                            break;
-                        }
-                    }
-                    Err(what) => {
-                        report.divergence = Some(diverge(&engine, what, "(reload)", *time, state));
-                        break;
-                    }
-                }
-            }
-            // The player came back at this mission time: timers whose deadline passed while it
-            // was down expire now, as they did live.
-            Entry::Resume { time } => engine.advance_to(*time),
-            Entry::Gap { lost, .. } => {
-                report.gaps += 1;
-                report.lost += lost;
-                after_gap = true;
-            }
-            Entry::Checkpoint {
-                time,
+            } => Some(ReloadAt {
+                time: *time,
+                source_hash,
+                mapping,
                 state,
                 deadlines,
-            } => {
-                if after_gap {
-                    after_gap = false;
-                    if !engine.restore(*time, state, deadlines) {
-                        report.divergence = Some(diverge(
-                            &engine,
-                            "the checkpoint is not of this project's size".into(),
-                            "(checkpoint)",
-                            *time,
-                            state,
-                        ));
-                        break;
-                    }
-                } else if engine.state() != state.as_slice()
-                    || engine.deadlines() != deadlines.as_slice()
-                {
-                    report.divergence = Some(diverge(
-                        &engine,
-                        "the state at the checkpoint differs".into(),
-                        "(checkpoint)",
-                        *time,
-                        state,
-                    ));
-                    break;
-                }
-            }
-            Entry::Start { time, state } => {
-                engine.start(*time, &mut log);
-                log.clear();
-                if engine.state() != state.as_slice() {
-                    report.divergence = Some(diverge(
-                        &engine,
-                        "the initial state differs".into(),
-                        "(start)",
-                        *time,
-                        state,
-                    ));
-                    break;
-                }
-            }
-            Entry::Submit {
-                time,
-                event,
-                params,
-                ..
-            } => {
-                engine.advance_to(*time);
-                let params = params.clone();
-                if let Err(r) = engine.submit_named(event, params) {
-                    report.divergence = Some(Divergence {
-                        kind: DivergenceKind::Replay,
-                        entry: i,
-                        time: *time,
-                        event: event.clone(),
-                        what: format!("the engine refuses the recorded event: {r}"),
-                        recorded: Vec::new(),
-                        replayed: describe(engine.project(), engine.layout(), engine.state()),
-                    });
-                    break;
-                }
-            }
-            Entry::Step {
-                time,
-                event,
-                outcome,
-                fired,
-                state,
-                ..
-            } => {
-                engine.advance_to(*time);
-                log.clear();
-                let Some(step) = engine.step(&mut log) else {
-                    report.divergence = Some(diverge(
-                        &engine,
-                        "the journal has a step here, the replay has no event left to take".into(),
-                        event,
-                        *time,
-                        state,
-                    ));
-                    break;
-                };
-                report.steps += 1;
-                let taken = &project.events[step.event as usize].name;
-                let replayed_outcome = outcome_name(step.outcome);
-                let found_fired = log.fired_names();
-                let what = if taken != event {
-                    Some(format!("the replay took `{taken}`, the journal `{event}`"))
-                } else if replayed_outcome != outcome {
-                    Some(format!(
-                        "the event was {replayed_outcome} in the replay, {outcome} in the journal"
-                    ))
-                } else if &found_fired != fired {
-                    Some(format!(
-                        "fired [{}] in the replay, [{}] in the journal",
-                        found_fired.join(", "),
-                        fired.join(", ")
-                    ))
-                } else if engine.state() != state.as_slice() {
-                    Some("the marking after the step differs".to_string())
-                } else {
-                    None
-                };
-                if let Some(what) = what {
-                    report.divergence = Some(diverge(&engine, what, event, *time, state));
-                    break;
-                }
-            }
+                queued,
+            }),
+            _ => None,
         }
     }
-    (engine, report)
 }
 
 /// What is inconsistent about entry `i` of a journal, given its first header and the previous

@@ -55,7 +55,7 @@ fn journal(dir: &std::path::Path, old: &CompiledProject, new: &CompiledProject) 
         ("a.pn".to_string(), NEW.to_string()),
     ];
     let hash = source_digest(files.iter().map(|(p, t)| (p.as_str(), t.as_str())));
-    petrel_player::reload::keep(dir, &hash, &files).unwrap();
+    petrel_player::reload::version::keep(dir, &hash, &files).unwrap();
     let mut out = vec![Entry::Header {
         version: petrel_player::journal::FORMAT_VERSION,
         project: "r".into(),

@@ -4,7 +4,7 @@
 //!   with diagnostics (E08xx), as `petrel check` reports them;
 //! - this module: the command line, and the plan of a run (which processes on this computer,
 //!   their executables and arguments expanded, the run directory);
-//! - [`run`]: the supervisor that starts, watches, restarts and stops the processes;
+//! - [`supervise`]: the supervisor that starts, watches, restarts and stops the processes;
 //! - [`display`]: the status lines; [`signals`]: stop requests and children's ends;
 //!   `build_hint`: the cargo command for a missing executable of the running petrel's build;
 //!   [`notify`]: systemd's readiness and watchdog notifications.
@@ -13,12 +13,13 @@ mod build_hint;
 pub mod display;
 pub mod file;
 pub mod notify;
-pub mod run;
 pub mod signals;
+pub mod supervise;
 
 use crate::common::{require_clean, Outcome, Scope};
 use file::{expand, Journal, Kind, ProcessSpec, SendSpec, VehicleFile};
 use petrel_nets::compiled::CompiledProject;
+use petrel_nets::source::SourceMap;
 use std::os::unix::fs::{DirBuilderExt, PermissionsExt};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -159,7 +160,7 @@ pub struct Planned {
 }
 
 /// Everything a run needs, decided before the first process starts.
-pub struct Plan {
+pub struct RunPlan {
     /// The vehicle.
     pub vehicle: petrel_ipc::Vehicle,
     /// The computer this run is for (`--computer`), if the vehicle file declares computers.
@@ -172,18 +173,9 @@ pub struct Plan {
     pub run_dir: PathBuf,
     /// The processes of this computer, dependencies first.
     pub processes: Vec<Planned>,
-    /// The timed sends of this computer, in time order.
-    pub sends: Vec<SendSpec>,
-    /// Conditions that end the run with success.
-    pub until: Vec<Until>,
-    /// The run fails past this.
-    pub timeout: Option<Duration>,
-    /// The manifest's final markings, as place names.
-    pub finals: Vec<Vec<String>>,
-    /// Stay up after the mission's end.
-    pub keep_running: bool,
-    /// Any failure for good stops the vehicle.
-    pub fail_fast: bool,
+    /// The timed sends, `--until`, `--timeout`, the final markings, `--keep-running`,
+    /// `--fail-fast`.
+    pub rules: supervise::policy::Rules,
 }
 
 /// Brings the vehicle up, supervises it, and brings it down.
@@ -193,7 +185,7 @@ pub fn up(a: UpArgs) -> Outcome {
         Ok(p) => p,
         Err(o) => return o,
     };
-    run::run(plan, start)
+    supervise::run(plan, start)
 }
 
 /// The current time as `YYYYMMDD-HHMMSS` (UTC), for run directory names.
@@ -339,7 +331,7 @@ fn order(selected: &[ProcessSpec]) -> Vec<usize> {
 }
 
 /// Reads, checks and resolves everything before anything starts.
-fn plan(a: UpArgs) -> Result<Plan, Outcome> {
+fn plan(a: UpArgs) -> Result<RunPlan, Outcome> {
     let checked = require_clean(
         &a.dir,
         Scope {
@@ -353,17 +345,98 @@ fn plan(a: UpArgs) -> Result<Plan, Outcome> {
     let c = checked
         .compiled
         .ok_or_else(|| Outcome::Usage("the project did not compile".into()))?;
+    let can_program = checked
+        .can
+        .as_ref()
+        .and_then(|(config, _)| config.commands.program.as_deref());
+    let file = vehicle_file(&a, checked.vehicle, &c, can_program, &mut sources)?;
+    let sends = scenario(&a, &c, &file, &mut sources)?;
+    let name = a
+        .vehicle
+        .clone()
+        .or_else(|| file.name.clone())
+        .unwrap_or_else(|| c.name.clone());
+    let vehicle = petrel_ipc::Vehicle::new(&name)
+        .map_err(|e| Outcome::Usage(format!("bad vehicle name `{name}`: {e}")))?;
+    let (selected, sends) = select_processes(&a, &file, sends)?;
+    let until = a
+        .until
+        .iter()
+        .map(|u| parse_until(u, &c))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(Outcome::Usage)?;
+    let timeout = match a.timeout {
+        None => None,
+        Some(s) => match Duration::try_from_secs_f64(s) {
+            Ok(d) if s > 0.0 => Some(d),
+            _ => {
+                return Err(Outcome::Usage(format!(
+                    "--timeout takes a positive number of seconds, not {s:?}"
+                )))
+            }
+        },
+    };
+    // Before the run directory is made: a refused run leaves nothing behind.
+    refuse_running(&vehicle, &selected)?;
+    let project_dir = absolute(&a.dir)?;
+    let run_dir = run_directory(&a, &file, &project_dir, vehicle.name())?;
+    let petrel = std::env::current_exe()
+        .map_err(|e| Outcome::Usage(format!("cannot find the running petrel: {e}")))?;
+    let target = petrel
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("."));
+    let places = Places {
+        vehicle: vehicle.name(),
+        project_dir: &project_dir,
+        run_dir: &run_dir,
+        target: &target,
+        petrel: &petrel,
+    };
+    let processes = resolve_processes(&selected, &places)?;
+    let finals = c
+        .finals
+        .iter()
+        .map(|f| f.iter().map(|&(n, p)| c.place_name(n, p)).collect())
+        .collect();
+    let computer = a
+        .computer
+        .as_ref()
+        .and_then(|k| file.computers.iter().find(|x| &x.name == k).cloned());
+    Ok(RunPlan {
+        vehicle,
+        computer,
+        project: c,
+        project_dir,
+        run_dir,
+        processes,
+        rules: supervise::policy::Rules {
+            sends,
+            until,
+            timeout,
+            finals,
+            keep_running: a.keep_running,
+            fail_fast: a.fail_fast,
+        },
+    })
+}
+
+/// The vehicle file: `--file`, checked here (it must check clean), or the project's
+/// vehicle.toml, checked with the project.
+fn vehicle_file(
+    a: &UpArgs,
+    checked: Option<VehicleFile>,
+    c: &CompiledProject,
+    can_program: Option<&str>,
+    sources: &mut SourceMap,
+) -> Result<VehicleFile, Outcome> {
     let vehicle_file = match &a.file {
-        None => checked.vehicle,
+        None => checked,
         Some(path) => {
             let mut d = petrel_nets::diag::Diagnostics::new();
-            let can_program = checked
-                .can
-                .as_ref()
-                .and_then(|(config, _)| config.commands.program.as_deref());
-            let read = file::load_file(path, Some(&c), can_program, &mut sources, &mut d)
+            let read = file::load_file(path, Some(c), can_program, sources, &mut d)
                 .map_err(|e| Outcome::Usage(format!("cannot read {}: {e}", path.display())))?;
-            crate::common::report(&d, &sources);
+            crate::common::report(&d, sources);
             if d.has_errors() {
                 eprintln!(
                     "fix the errors above first: `petrel up` needs a vehicle file that checks clean"
@@ -373,34 +446,41 @@ fn plan(a: UpArgs) -> Result<Plan, Outcome> {
             read
         }
     };
-    let Some(file) = vehicle_file else {
-        return Err(Outcome::Usage(format!(
+    vehicle_file.ok_or_else(|| {
+        Outcome::Usage(format!(
             "{} has no vehicle.toml: write one to say which processes make up the vehicle (docs/vehicle.md)",
             a.dir.display()
-        )));
+        ))
+    })
+}
+
+/// The timed sends: `--scenario`'s (it must read whole), or the vehicle file's.
+fn scenario(
+    a: &UpArgs,
+    c: &CompiledProject,
+    file: &VehicleFile,
+    sources: &mut SourceMap,
+) -> Result<Vec<SendSpec>, Outcome> {
+    let Some(path) = &a.scenario else {
+        return Ok(file.sends.clone());
     };
-    let mut sends = file.sends.clone();
-    if let Some(path) = &a.scenario {
-        let mut d = petrel_nets::diag::Diagnostics::new();
-        let read = file::load_scenario(path, &c, &file, &mut sources, &mut d)
-            .map_err(|e| Outcome::Usage(format!("cannot read {}: {e}", path.display())))?;
-        crate::common::report(&d, &sources);
-        match read {
-            Some(s) => sends = s,
-            None => {
-                eprintln!("fix the scenario first: `petrel up` needs every send to read");
-                return Err(Outcome::Errors);
-            }
-        }
-    }
-    let name = a
-        .vehicle
-        .clone()
-        .or_else(|| file.name.clone())
-        .unwrap_or_else(|| c.name.clone());
-    let vehicle = petrel_ipc::Vehicle::new(&name)
-        .map_err(|e| Outcome::Usage(format!("bad vehicle name `{name}`: {e}")))?;
-    // The computer: only its processes and sends.
+    let mut d = petrel_nets::diag::Diagnostics::new();
+    let read = file::load_scenario(path, c, file, sources, &mut d)
+        .map_err(|e| Outcome::Usage(format!("cannot read {}: {e}", path.display())))?;
+    crate::common::report(&d, sources);
+    read.ok_or_else(|| {
+        eprintln!("fix the scenario first: `petrel up` needs every send to read");
+        Outcome::Errors
+    })
+}
+
+/// The processes and the timed sends of this computer (`--computer`, a computer of the file),
+/// or all of them.
+fn select_processes(
+    a: &UpArgs,
+    file: &VehicleFile,
+    mut sends: Vec<SendSpec>,
+) -> Result<(Vec<ProcessSpec>, Vec<SendSpec>), Outcome> {
     if let Some(k) = &a.computer {
         if !file.computers.iter().any(|x| &x.name == k) {
             let known: Vec<String> = file
@@ -436,157 +516,37 @@ fn plan(a: UpArgs) -> Result<Plan, Outcome> {
         }));
     }
     sends.retain(|s| on_this(&s.computer));
-    let until = a
-        .until
-        .iter()
-        .map(|u| parse_until(u, &c))
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(Outcome::Usage)?;
-    let timeout = match a.timeout {
-        None => None,
-        Some(s) => match Duration::try_from_secs_f64(s) {
-            Ok(d) if s > 0.0 => Some(d),
-            _ => {
-                return Err(Outcome::Usage(format!(
-                    "--timeout takes a positive number of seconds, not {s:?}"
-                )))
-            }
-        },
-    };
-    // Before the run directory is made: a refused run leaves nothing behind.
-    refuse_running(&vehicle, &selected)?;
-    let project_dir = absolute(&a.dir)?;
-    let run_dir = run_directory(&a, &file, &project_dir, vehicle.name())?;
-    let petrel = std::env::current_exe()
-        .map_err(|e| Outcome::Usage(format!("cannot find the running petrel: {e}")))?;
-    let target = petrel
-        .parent()
-        .map(Path::to_path_buf)
-        .unwrap_or_else(|| PathBuf::from("."));
-    let order = order(&selected);
+    Ok((selected, sends))
+}
+
+/// Where a run's processes find things: the values of the substitutions.
+struct Places<'a> {
+    vehicle: &'a str,
+    project_dir: &'a Path,
+    run_dir: &'a Path,
+    /// The running petrel's directory (`{target}`).
+    target: &'a Path,
+    petrel: &'a Path,
+}
+
+/// The selected processes, dependencies first, each resolved and expanded; every problem is
+/// reported at once.
+fn resolve_processes(selected: &[ProcessSpec], places: &Places) -> Result<Vec<Planned>, Outcome> {
     let mut processes: Vec<Planned> = Vec::new();
     let mut problems = Vec::new();
-    for &i in &order {
-        let spec = selected[i].clone();
-        let var = |n: &str| -> Option<String> {
-            Some(match n {
-                "vehicle" => vehicle.name().to_string(),
-                "project" => project_dir.display().to_string(),
-                "logs" => run_dir.display().to_string(),
-                "target" => target.display().to_string(),
-                "petrel" => petrel.display().to_string(),
-                "name" => spec.name.clone(),
-                "computer" => spec.computer.clone().unwrap_or_default(),
-                _ => return None,
-            })
-        };
-        // Templates were checked with the file: an error here cannot happen, but is reported
-        // rather than trusted.
-        let ex = |t: &str| expand(t, &var).map_err(|e| format!("process `{}`: {e}", spec.name));
-        let mut args: Vec<String> = Vec::new();
-        let mut journal = None;
-        let program = match spec.kind {
-            Kind::Player | Kind::Bridge => {
-                // A bridge with an executable is the vehicle's own data server (built on
-                // petrel-can-bridge: `petrel bridge`'s arguments, and its simulator's).
-                let own = match (&spec.executable, spec.kind) {
-                    (Some(text), Kind::Bridge) => match ex(text)
-                        .and_then(|t| resolve_executable(&t, &project_dir, &spec.name, &target))
-                    {
-                        Ok(p) => Some(p),
-                        Err(e) => {
-                            problems.push(e);
-                            continue;
-                        }
-                    },
-                    _ => None,
-                };
-                if own.is_none() {
-                    args.push(
-                        if spec.kind == Kind::Player {
-                            "play"
-                        } else {
-                            "bridge"
-                        }
-                        .into(),
-                    );
-                }
-                args.push(project_dir.display().to_string());
-                args.extend(["--vehicle".to_string(), vehicle.name().to_string()]);
-                if let Some(w) = &spec.wait {
-                    args.extend(["--wait".to_string(), w.clone()]);
-                }
-                if spec.kind == Kind::Player {
-                    match &spec.journal {
-                        Journal::Off => args.push("--no-journal".into()),
-                        j => {
-                            let dir = match j {
-                                Journal::Path(t) => match ex(t) {
-                                    Ok(p) => run_dir.join(p),
-                                    Err(e) => {
-                                        problems.push(e);
-                                        continue;
-                                    }
-                                },
-                                _ => run_dir.join("journal"),
-                            };
-                            args.extend(["--journal".to_string(), dir.display().to_string()]);
-                            journal = Some(dir);
-                        }
-                    }
-                }
-                own.unwrap_or_else(|| petrel.clone())
+    for i in order(selected) {
+        match resolve_process(&selected[i], places) {
+            Ok(mut planned) => {
+                planned.after = planned
+                    .spec
+                    .after
+                    .iter()
+                    .filter_map(|n| processes.iter().position(|p| &p.spec.name == n))
+                    .collect();
+                processes.push(planned);
             }
-            Kind::Program | Kind::Command => {
-                let text = spec.executable.clone().unwrap_or_default();
-                match ex(&text)
-                    .and_then(|t| resolve_executable(&t, &project_dir, &spec.name, &target))
-                {
-                    Ok(p) => p,
-                    Err(e) => {
-                        problems.push(e);
-                        continue;
-                    }
-                }
-            }
-        };
-        let mut ok = true;
-        for t in &spec.args {
-            match ex(t) {
-                Ok(v) => args.push(v),
-                Err(e) => {
-                    problems.push(e);
-                    ok = false;
-                }
-            }
+            Err(e) => problems.extend(e),
         }
-        let mut env = Vec::new();
-        for (k, t) in &spec.env {
-            match ex(t) {
-                Ok(v) => env.push((k.clone(), v)),
-                Err(e) => {
-                    problems.push(e);
-                    ok = false;
-                }
-            }
-        }
-        if !ok {
-            continue;
-        }
-        let after = spec
-            .after
-            .iter()
-            .filter_map(|n| processes.iter().position(|p| &p.spec.name == n))
-            .collect();
-        processes.push(Planned {
-            log: run_dir.join(format!("{}.log", spec.name)),
-            spec,
-            program,
-            args,
-            env,
-            after,
-            journal,
-        });
     }
     if !problems.is_empty() {
         return Err(Outcome::Usage(format!(
@@ -594,29 +554,129 @@ fn plan(a: UpArgs) -> Result<Plan, Outcome> {
             problems.join("\n  ")
         )));
     }
-    let finals = c
-        .finals
-        .iter()
-        .map(|f| f.iter().map(|&(n, p)| c.place_name(n, p)).collect())
-        .collect();
-    let computer = a
-        .computer
-        .as_ref()
-        .and_then(|k| file.computers.iter().find(|x| &x.name == k).cloned());
-    Ok(Plan {
-        vehicle,
-        computer,
-        project: c,
-        project_dir,
-        run_dir,
-        processes,
-        sends,
-        until,
-        timeout,
-        finals,
-        keep_running: a.keep_running,
-        fail_fast: a.fail_fast,
+    Ok(processes)
+}
+
+/// One process: its executable resolved, its arguments and environment expanded (`after`
+/// is left to the caller, which knows the processes planned before it).
+fn resolve_process(spec: &ProcessSpec, places: &Places) -> Result<Planned, Vec<String>> {
+    let var = |n: &str| -> Option<String> {
+        Some(match n {
+            "vehicle" => places.vehicle.to_string(),
+            "project" => places.project_dir.display().to_string(),
+            "logs" => places.run_dir.display().to_string(),
+            "target" => places.target.display().to_string(),
+            "petrel" => places.petrel.display().to_string(),
+            "name" => spec.name.clone(),
+            "computer" => spec.computer.clone().unwrap_or_default(),
+            _ => return None,
+        })
+    };
+    // Templates were checked with the file: an error here cannot happen, but is reported
+    // rather than trusted.
+    let ex = |t: &str| expand(t, &var).map_err(|e| format!("process `{}`: {e}", spec.name));
+    let (program, mut args, journal) = match spec.kind {
+        Kind::Player | Kind::Bridge => petrel_command(spec, places, &ex).map_err(|e| vec![e])?,
+        Kind::Program | Kind::Command => {
+            let text = spec.executable.clone().unwrap_or_default();
+            let program = ex(&text)
+                .and_then(|t| resolve_executable(&t, places.project_dir, &spec.name, places.target))
+                .map_err(|e| vec![e])?;
+            (program, Vec::new(), None)
+        }
+    };
+    let (extra, env) = expand_args(spec, &ex)?;
+    args.extend(extra);
+    Ok(Planned {
+        log: places.run_dir.join(format!("{}.log", spec.name)),
+        spec: spec.clone(),
+        program,
+        args,
+        env,
+        after: Vec::new(),
+        journal,
     })
+}
+
+/// A player's or a bridge's command line: the running petrel, `play|bridge DIR --vehicle V`,
+/// its `--wait`, and a player's journal (the directory, also returned). A bridge with an
+/// `executable` is the vehicle's own data server (built on petrel-can-bridge, with its
+/// simulator): `EXECUTABLE DIR --vehicle V`, `petrel bridge`'s arguments.
+fn petrel_command(
+    spec: &ProcessSpec,
+    places: &Places,
+    ex: &dyn Fn(&str) -> Result<String, String>,
+) -> Result<(PathBuf, Vec<String>, Option<PathBuf>), String> {
+    let mut args = Vec::new();
+    let program = match (&spec.executable, spec.kind) {
+        (Some(text), Kind::Bridge) => {
+            resolve_executable(&ex(text)?, places.project_dir, &spec.name, places.target)?
+        }
+        _ => {
+            args.push(
+                if spec.kind == Kind::Player {
+                    "play"
+                } else {
+                    "bridge"
+                }
+                .to_string(),
+            );
+            places.petrel.to_path_buf()
+        }
+    };
+    args.extend([
+        places.project_dir.display().to_string(),
+        "--vehicle".to_string(),
+        places.vehicle.to_string(),
+    ]);
+    if let Some(w) = &spec.wait {
+        args.extend(["--wait".to_string(), w.clone()]);
+    }
+    let mut journal = None;
+    if spec.kind == Kind::Player {
+        match &spec.journal {
+            Journal::Off => args.push("--no-journal".into()),
+            j => {
+                let dir = match j {
+                    Journal::Path(t) => places.run_dir.join(ex(t)?),
+                    _ => places.run_dir.join("journal"),
+                };
+                args.extend(["--journal".to_string(), dir.display().to_string()]);
+                journal = Some(dir);
+            }
+        }
+    }
+    Ok((program, args, journal))
+}
+
+/// Environment variables and their values.
+type Env = Vec<(String, String)>;
+
+/// The file's arguments and environment values, expanded; every problem of either.
+fn expand_args(
+    spec: &ProcessSpec,
+    ex: &dyn Fn(&str) -> Result<String, String>,
+) -> Result<(Vec<String>, Env), Vec<String>> {
+    let mut problems = Vec::new();
+    let mut args = Vec::new();
+    for t in &spec.args {
+        match ex(t) {
+            Ok(v) => args.push(v),
+            Err(e) => problems.push(e),
+        }
+    }
+    let mut env = Vec::new();
+    for (k, t) in &spec.env {
+        match ex(t) {
+            Ok(v) => env.push((k.clone(), v)),
+            Err(e) => problems.push(e),
+        }
+    }
+    if problems.is_empty() {
+        Ok((args, env))
+    } else {
+        Err(problems)
+    }
 }
 
 /// The run directory: `--logs`, or the file's `logs` template under the project (a new one

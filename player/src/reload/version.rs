@@ -1,6 +1,10 @@
 //! The player's side of a reload (docs/reload.md): reading and checking the new version from
 //! its directory, keeping its files beside the journal, reading them back for replay and
 //! `--resume`. The mapping and the verification are [`petrel_nets::reload`]'s.
+//!
+//! A version kept is `project-<hash>/` beside the journal, written whole or not at all. The
+//! compiled project of a version that runs is leaked on purpose ([`leak`]): the engine and the
+//! step record borrow it, and reloads are few.
 
 use petrel_nets::compiled::CompiledProject;
 use petrel_nets::reload::{source_digest, Mapping};
