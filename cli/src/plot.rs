@@ -1,7 +1,7 @@
 //! `petrel plot`: the pictures of a Redermor run (Figure 9 of the paper): the map (survey
 //! areas blue, forbidden areas red, planned routes yellow, the vehicle's track green, events
 //! where they happened) and the depth against time, from a run directory of `petrel up`: the
-//! simulator's true track (`trace.csv`, `petrel bridge --sim-trace`) and the player's journal
+//! simulator's true track (`trace.csv`, `redermor-bridge --trace`) and the player's journal
 //! (the routes PLN gave, the events).
 
 use std::path::{Path, PathBuf};
@@ -19,8 +19,8 @@ pub struct PlotArgs {
     /// The mission file the run flew (its areas, forbidden zones and end area).
     #[arg(long, value_name = "FILE")]
     mission: PathBuf,
-    /// How many times faster than the wall clock the simulator ran (its --sim-speed), to
-    /// place the journal's events on the track.
+    /// How many times faster than the wall clock the simulator ran (redermor-bridge's
+    /// --speed), to place the journal's events on the track.
     #[arg(long, default_value_t = 20.0, value_parser = crate::common::finite)]
     speed: f64,
     /// Where to write map.svg and depth.svg; default: the run directory.
