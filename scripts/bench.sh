@@ -7,7 +7,7 @@
 #                                      # printed only
 #   scripts/bench.sh --short           # a few hundred rounds each, printed only (a smoke run;
 #                                      # the test suite runs the same through cargo test)
-#   scripts/bench.sh --no-vm           # without the vcan part (which boots the qemu VM bench)
+#   scripts/bench.sh --no-vm           # without the vcan part (which boots the qemu VM)
 #
 # It builds `petrel`, the SDK's `echo` example and `petrel-bench` in release mode, then runs
 # `petrel-bench run` with the given options (see `petrel-bench run --help`).

@@ -3,8 +3,9 @@
 # example UAV mission, fly its scripted scenarios in virtual time, then fly it for real: the
 # player and the vehicle's simulated programs (GUI+PLD, DEC) as separate processes exchanging
 # events over iceoryx2 shared memory, until the aircraft lands. Then the AUV mission: the
-# player, the CAN data server on a simulated vehicle bus, and the guidance program, until the
-# vehicle is back at the surface; its recorded bus replays offline to the same events.
+# player, the AUV's CAN data server with its simulated vehicle on the bus, and the guidance
+# program, until the vehicle is back at the surface; its recorded bus replays offline to the
+# same events. The vehicles' programs and simulators are the crates of vehicles/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 # The monitor lays its nets out with Graphviz; its screenshot needs Chromium and its WebDriver.
@@ -19,7 +20,7 @@ if [ "${#need[@]}" -gt 0 ] && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/nul
 fi
 mission=${1:-missions/uav}
 cargo build --release --quiet --bin petrel -p petrel-cli
-cargo build --release --quiet -p petrel-programs --example uav_gui --example uav_dec --example auv_gui
+cargo build --release --quiet -p uav -p auv
 cargo build --release --quiet -p petrel-tests --example monitor_shot
 petrel=target/release/petrel
 echo "== petrel check $mission"
@@ -36,7 +37,7 @@ done
 echo "== nets drawn in target/mission.dot (render: dot -Tsvg target/mission.dot -o mission.svg)"
 
 vehicle="demo$$"
-echo "== live flight on vehicle $vehicle: petrel play + uav_gui + uav_dec over iceoryx2"
+echo "== live flight on vehicle $vehicle: petrel play + uav-gui + uav-dec over iceoryx2"
 pids=()
 cleanup() { for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done; wait 2>/dev/null || true; }
 # Waits until `petrel status` of mission $1 on vehicle $2 mentions $3 (up to 30 s).
@@ -55,8 +56,8 @@ RUST_LOG=${RUST_LOG:-warn} "$petrel" play "$mission" --vehicle "$vehicle" --run-
     --journal "target/journal/$vehicle" &
 pids+=($!)
 until "$petrel" status "$mission" --vehicle "$vehicle" >/dev/null 2>&1; do sleep 0.1; done
-target/release/examples/uav_gui --vehicle "$vehicle" --speed 60 >/dev/null 2>&1 & pids+=($!)
-target/release/examples/uav_dec --vehicle "$vehicle" --speed 60 >/dev/null 2>&1 & pids+=($!)
+target/release/uav-gui --vehicle "$vehicle" --speed 60 >/dev/null 2>&1 & pids+=($!)
+target/release/uav-dec --vehicle "$vehicle" --speed 60 >/dev/null 2>&1 & pids+=($!)
 # The web monitor of the flight (docs/monitor.md), and its screenshot mid-flight in
 # target/screenshots/ when headless Chromium is there (this script changes no tracked file).
 "$petrel" monitor "$mission" --vehicle "$vehicle" --listen 127.0.0.1:0 --run-for 60 \
@@ -95,16 +96,16 @@ for script in "$auv"/scripts/*.script; do
     "$petrel" run "$auv" --script "$script" > "$out"
 done
 dive="dive$$"
-echo "== live dive on vehicle $dive: petrel play + petrel bridge (memory bus, simulated AUV) + auv_gui"
+echo "== live dive on vehicle $dive: petrel play + auv-bridge (memory bus, simulated AUV) + auv-gui"
 pids=()
 RUST_LOG=${RUST_LOG:-warn} "$petrel" play "$auv" --vehicle "$dive" --run-for 60 \
     --journal "target/journal/$dive" &
 pids+=($!)
 until "$petrel" status "$auv" --vehicle "$dive" >/dev/null 2>&1; do sleep 0.1; done
-RUST_LOG=${RUST_LOG:-warn} "$petrel" bridge "$auv" --vehicle "$dive" --bus memory \
+RUST_LOG=${RUST_LOG:-warn} target/release/auv-bridge "$auv" --vehicle "$dive" --bus memory \
     --record "target/$dive-bus.log" 2>/dev/null &
 pids+=($!)
-target/release/examples/auv_gui --vehicle "$dive" &
+target/release/auv-gui --vehicle "$dive" &
 pids+=($!)
 sleep 0.5
 "$petrel" send "$auv" --vehicle "$dive" start_mission
@@ -126,7 +127,7 @@ echo "== the flight recorder: target/journal/$dive"
 # end area. A monitor follows it (screenshots of its overview, a net and the map under
 # target/screenshots/); then `petrel plot` draws the run (its map.toml: areas, routes, track,
 # events; and the depth profile).
-cargo build --release --quiet -p petrel-redermor-live --bin redermor-program
+cargo build --release --quiet -p redermor-live --bin redermor-program --bin redermor-bridge
 run="target/redermor-run"
 rm -rf "$run"
 rv="rdm$$"

@@ -55,7 +55,7 @@ scripts/fuzz.sh run "${PETREL_FUZZ_SECONDS:-5}" 2>&1 | tee -a "$log"
 # Real SocketCAN: this kernel has none, so the CAN bridge's socket tests run on a real vcan0
 # inside a qemu VM (scripts/vcan-vm.sh installs and caches what it needs; on a machine whose
 # kernel has vcan it runs them directly). A failure inside fails the suite.
-echo "== CAN bridge on a real vcan0 (VM bench)"
+echo "== CAN bridge on a real vcan0 (in the VM)"
 for test in socketcan vcan; do
     PETREL_REQUIRE_VCAN=1 scripts/vcan-vm.sh cargo-test -p petrel-can-bridge --test "$test" 2>&1 | tee -a "$log"
 done
@@ -64,10 +64,10 @@ done
 # and 5 with `petrel up --file missions/redermor/vehicle-vcan.toml`, the simulator as its own
 # process on the bus (redermor-sim) and `petrel bridge --bus vcan0` as the data server. Debug
 # binaries (cargo test built most of them; this builds what is missing), the simulator 5 times
-# faster than the wall clock; about 9 minutes under emulation (docs/vcan-bench.md). A failure
+# faster than the wall clock; about 9 minutes under emulation (docs/vcan-vm.md). A failure
 # inside fails the suite.
-echo "== Redermor on a real vcan0 (VM bench)"
-cargo build --locked -p petrel-cli -p petrel-redermor-live
+echo "== Redermor on a real vcan0 (in the VM)"
+cargo build --locked -p petrel-cli -p redermor-live
 PETREL_REQUIRE_VCAN=1 scripts/vcan-vm.sh cargo-test --timeout 900 \
     --include "$PWD/target/debug/petrel" --include "$PWD/target/debug/redermor-program" \
     --include "$PWD/target/debug/redermor-sim" --include "$PWD/missions/redermor" \

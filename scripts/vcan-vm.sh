@@ -10,10 +10,10 @@
 #
 # The VM: Debian's own kernel package (found with `apt-cache depends linux-image-amd64`) booted
 # under qemu TCG with an initramfs of busybox static, the CAN kernel modules, can-utils, the given
-# binaries and their shared libraries. docs/vcan-bench.md explains it all, with measured times.
+# binaries and their shared libraries. docs/vcan-vm.md explains it all, with measured times.
 #
 # Exit code: the command's own (with several, the first non-zero one); 124 when a command or the
-# VM ran out of time; 125 when the bench itself failed (install, boot, vcan setup, panic, lost
+# VM ran out of time; 125 when the VM itself failed (install, boot, vcan setup, panic, lost
 # result); 2 for a usage error.
 set -euo pipefail
 
@@ -91,7 +91,7 @@ NO_COLOR and PETREL_* always are), VCAN_VM_FAST=0 (boot the bzImage with SeaBIOS
 VCAN_VM_APPEND (more kernel command line).
 The commands see VCAN_BENCH=vm or host, and VCAN_IFACES="vcan0 vcan1".
 
-Exit code: the command's (the first non-zero of several); 124 on timeout; 125 when the bench
+Exit code: the command's (the first non-zero of several); 124 on timeout; 125 when the VM
 failed; 2 on a usage error.
 EOF
 }
@@ -783,8 +783,8 @@ execute() {
     fi
 }
 
-# parse_bench_options ARGS...: consumes the bench's own options; sets REST to what follows.
-parse_bench_options() {
+# parse_vm_options ARGS...: consumes the VM runner's own options; sets REST to what follows.
+parse_vm_options() {
     REST=()
     while [ $# -gt 0 ]; do
         case $1 in
@@ -816,7 +816,7 @@ clean)
     log "removed $CACHE"
     ;;
 run)
-    parse_bench_options "$@"
+    parse_vm_options "$@"
     set -- "${REST[@]}"
     [ "${1:-}" = -- ] && shift
     [ $# -gt 0 ] || usage_error "run: no command (run [OPTIONS] -- CMD [ARGS...])"
@@ -827,7 +827,7 @@ run)
     execute
     ;;
 run-tests)
-    parse_bench_options "$@"
+    parse_vm_options "$@"
     set -- "${REST[@]}"
     bins=()
     while [ $# -gt 0 ] && [ "$1" != -- ]; do
@@ -847,7 +847,7 @@ run-tests)
     execute
     ;;
 cargo-test)
-    parse_bench_options "$@"
+    parse_vm_options "$@"
     set -- "${REST[@]}"
     cargo_args=()
     while [ $# -gt 0 ] && [ "$1" != -- ]; do

@@ -232,7 +232,7 @@ pub fn all(s: &crate::measure::Settings) -> Vec<Res<Footprint>> {
         let v = vehicle_name("fpb");
         let d = auv.display().to_string();
         out.push(measure(
-            "data server, AUV (`petrel bridge --bus memory`)",
+            "data server alone, AUV project (`petrel bridge --bus memory`)",
             petrel,
             &["bridge", &d, "--vehicle", &v, "--bus", "memory"],
             "petrel bridge missions/auv --bus memory".to_owned(),

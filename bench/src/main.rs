@@ -3,7 +3,7 @@
 //! `petrel-bench run` measures, in one go on the machine at hand: the transport round trip
 //! (program -> player -> program) per wait strategy beside raw iceoryx2, Unix-socket and TCP
 //! ping-pongs, all measured in alternating blocks; the vehicle path through the CAN data server on the in-memory bus and on vcan0
-//! in the VM bench beside a bare echo; the same round trips under load; the processes'
+//! in the VM beside a bare echo; the same round trips under load; the processes'
 //! footprint; and the round trip with 1, 10 and 50 programs. It writes docs/benchmarks.md's
 //! latency section and CDF plots in docs/bench/. `petrel-bench role ...` are the processes a
 //! measurement starts (this binary again); `petrel-bench vcan` is what runs inside the VM.
@@ -579,7 +579,7 @@ fn count_failures(r: &Report) -> usize {
         + usize::from(!r.footprint.is_empty() && r.ports.is_err())
 }
 
-/// Runs `petrel-bench vcan` inside the VM bench and reads its histograms.
+/// Runs `petrel-bench vcan` inside the VM and reads its histograms.
 fn vcan_in_vm(s: &Settings, repo: &std::path::Path) -> Result<Vec<report::Series>, String> {
     let me = std::env::current_exe().map_err(|e| e.to_string())?;
     let script = repo.join("scripts/vcan-vm.sh");

@@ -313,7 +313,7 @@ impl Report {
         for (name, r) in &self.vehicle_mem {
             lat_row(o, name, r, &base);
         }
-        o.push_str("\n**vcan0 in the VM bench** (`scripts/vcan-vm.sh`: Debian's kernel under qemu TCG, pure emulation, 2 virtual CPUs; probe, echo, data server and player are processes of their own; the bare echo uses the same SocketCAN socket wrapper without the data server): ");
+        o.push_str("\n**vcan0 in the VM** (`scripts/vcan-vm.sh`: Debian's kernel under qemu TCG, pure emulation, 2 virtual CPUs; probe, echo, data server and player are processes of their own; the bare echo uses the same SocketCAN socket wrapper without the data server): ");
         match &self.vehicle_vcan {
             Ok(series) => {
                 o.push_str("emulated CPUs are many times slower than the host, so only the ratios mean anything.\n\n");

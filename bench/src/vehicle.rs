@@ -3,7 +3,7 @@
 //! thruster node would see it; against a bare echo of the same frame on the same bus.
 //!
 //! On the in-memory bus the probe is a thread of the data server's process (the bus lives in
-//! that process); on SocketCAN (vcan0, in the VM bench) the probe, the echo, the data server
+//! that process); on SocketCAN (vcan0, in the VM) the probe, the echo, the data server
 //! and the player are processes of their own.
 
 use std::path::Path;
@@ -290,7 +290,6 @@ pub fn bridge_role(dir: &Path, vehicle: &str, iface: &str, wait: WaitStrategy) -
         bus: Some(iface.to_owned()),
         record: None,
         wait,
-        sim_faults: Default::default(),
         plant: None,
     };
     petrel_can_bridge::serve::serve(&v, config, dbc, opts).map_err(|e| e.to_string())?;

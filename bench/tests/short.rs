@@ -1,5 +1,5 @@
 //! The suite in its short mode, so that it cannot rot: every part runs (the vcan part, which
-//! boots the VM bench, excepted: scripts/test.sh runs the vcan tests there), the report and
+//! boots the VM, excepted: scripts/test.sh runs the vcan tests there), the report and
 //! the plots are written, and every measurement succeeds. No figure is asserted.
 
 use std::process::Command;

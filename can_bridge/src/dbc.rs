@@ -823,6 +823,22 @@ pub struct DecodedMessage {
     pub signals: Vec<DecodedSignal>,
 }
 
+impl DecodedMessage {
+    /// The physical value of the signal named `signal`, if this frame carries it (`dbc`: the
+    /// DBC that decoded it). For the simulators, which read a few signals of a few messages.
+    pub fn value(&self, dbc: &Dbc, signal: &str) -> Option<f64> {
+        let m = dbc.message(self.message)?;
+        self.signals
+            .iter()
+            .find(|s| {
+                m.signals
+                    .get(s.signal.signal)
+                    .is_some_and(|g| g.name == signal)
+            })
+            .map(|s| s.physical)
+    }
+}
+
 /// What a frame turned out to be.
 #[derive(Clone, Debug, PartialEq)]
 pub enum DecodeOutcome {

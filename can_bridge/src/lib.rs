@@ -29,20 +29,23 @@
 //! - [`bus`]: the [`bus::Bus`] trait, [`bus::SocketCanBus`] and [`bus::MemoryBus`].
 //! - [`bridge`]: [`bridge::BridgeCore`], the data server without I/O.
 //! - [`runtime`]: the process loop over a bus and the vehicle's iceoryx2 services.
-//! - [`serve`]: the process `petrel bridge` runs; offline replay of a log.
-//! - [`sim`]: the simulated AUV of the memory bus.
+//! - [`serve`]: the data server as a process; offline replay of a log.
+//! - [`command`]: its command line, `petrel bridge`'s and each vehicle's own data server's
+//!   (`auv-bridge`, `redermor-bridge`, which give [`command::main`] their simulator).
+//! - [`plant`]: the host of a vehicle's simulator on the bus ([`plant::Plant`]; the
+//!   vehicles' simulators live in `vehicles/`, not here).
 //! - [`clock`]: injected time.
 //!
-//! **Who may use `petrel_ipc`**: [`runtime`] and [`serve`] only (and [`bus`] names its fd
+//! **Who may use `petrel_ipc`**: [`runtime`], [`serve`] and [`command`] only (and [`bus`] names its fd
 //! source in a comment). The core (`bridge`, `config`, `event`, `rules`, `faults`, `bus_state`,
-//! `dbc`, `frame`, `log`, `replay`, `clock`, `sim`) works on its own types, so that it builds and
+//! `dbc`, `frame`, `log`, `replay`, `clock`, `plant`) works on its own types, so that it builds and
 //! is tested without the shared-memory transport; its values are `petrel_value::Value`, the one
 //! value type the wire carries too. A unit test holds the line.
 //!
 //! Modules import one another without cycles. In the core, each imports only from those before
 //! it: `frame`, `log`, `bus_state`, `dbc`, `config`, `event`, `rules`, `faults`, `bridge`,
-//! `replay` (`clock` imports nothing); `sim` and `bus` use the frames, the DBC and the states;
-//! `runtime` and `serve` sit on top.
+//! `replay` (`clock` imports nothing); `plant` and `bus` use the frames, the DBC and the states;
+//! `runtime`, `serve` and `command` sit on top.
 #![warn(missing_docs)]
 #![forbid(unsafe_code)]
 
@@ -50,17 +53,18 @@ pub mod bridge;
 pub mod bus;
 pub mod bus_state;
 pub mod clock;
+pub mod command;
 pub mod config;
 pub mod dbc;
 pub mod event;
 pub mod faults;
 pub mod frame;
 pub mod log;
+pub mod plant;
 pub mod replay;
 pub mod rules;
 pub mod runtime;
 pub mod serve;
-pub mod sim;
 
 pub use bridge::{BridgeCore, SignalTable};
 pub use bus::{Bus, MemoryBus, MemoryHub, SocketCanBus};
@@ -89,7 +93,7 @@ mod tests {
         "log",
         "replay",
         "clock",
-        "sim",
+        "plant",
     ];
 
     fn sources(path: &Path, out: &mut Vec<(String, String)>) {

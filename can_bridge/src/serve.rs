@@ -1,18 +1,19 @@
-//! The data server as a process: what `petrel bridge` runs.
+//! The data server as a process: what `petrel bridge` and the vehicles' own data servers run
+//! ([`crate::command`]).
 //!
-//! [`serve`] opens the bus (a SocketCAN interface, or `memory`: an in-process bus with the
-//! simulated AUV of [`crate::sim`], for machines without CAN) and runs the bridge until SIGINT
-//! or SIGTERM; [`replay_log`] feeds a recorded `candump -L` log through the bridge offline and
-//! returns the events it gives.
+//! [`serve`] opens the bus (a SocketCAN interface, or `memory`: an in-process bus, with the
+//! vehicle's simulator as a [`crate::plant::Plant`] when the server has one, for machines
+//! without CAN) and runs the bridge until SIGINT or SIGTERM; [`replay_log`] feeds a recorded
+//! `candump -L` log through the bridge offline and returns the events it gives.
 
 use crate::bridge::BridgeCore;
 use crate::bus::{MemoryHub, SocketCanBus, SocketCanOptions};
 use crate::clock::{Clock, ManualClock, SystemClock};
 use crate::config::CanConfig;
 use crate::dbc::Dbc;
+use crate::plant::{spawn_plant, PlantFactory};
 use crate::replay::{replay_counted, Pacing, Replayed};
 use crate::runtime::{run, RunReport, RuntimeError, RuntimeOptions};
-use crate::sim::{Plant, SimFaults};
 use petrel_ipc::{Vehicle, WaitStrategy};
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
@@ -26,15 +27,10 @@ pub struct ServeOptions {
     pub record: Option<std::path::PathBuf>,
     /// How the reactor waits.
     pub wait: WaitStrategy,
-    /// Faults the simulated vehicle of the memory bus shows.
-    pub sim_faults: SimFaults,
-    /// The simulated vehicle of the memory bus, made from the DBC; `None`: the AUV of
-    /// [`crate::sim`] with `sim_faults`.
+    /// The simulated vehicle of the memory bus, made from the DBC; `None`: the memory bus
+    /// carries the data server alone (a SocketCAN bus never has one: the vehicle is there).
     pub plant: Option<PlantFactory>,
 }
-
-/// Makes the memory bus's simulated vehicle from the project's DBC, or says why it cannot.
-pub type PlantFactory = Box<dyn FnOnce(Arc<Dbc>) -> Result<Box<dyn Plant>, String>>;
 
 /// Why the server could not run.
 #[derive(Debug)]
@@ -106,16 +102,20 @@ pub fn serve(
             .endpoint("mem0")
             .map_err(|e| ServeError::Bus(format!("cannot make a memory bus: {e}")))?;
         let sim_stop = Arc::new(AtomicBool::new(false));
-        let plant: Box<dyn Plant> = match opts.plant {
-            Some(make) => make(dbc)
-                .map_err(|e| ServeError::Bus(format!("cannot make the simulated vehicle: {e}")))?,
-            None => Box::new(crate::sim::AuvPlant::new(dbc, opts.sim_faults)),
+        let sim = match opts.plant {
+            Some(make) => {
+                let plant = make(dbc).map_err(|e| {
+                    ServeError::Bus(format!("cannot make the simulated vehicle: {e}"))
+                })?;
+                Some(spawn_plant(&hub, plant, sim_stop.clone()).map_err(|e| {
+                    ServeError::Bus(format!("cannot start the simulated vehicle: {e}"))
+                })?)
+            }
+            None => None,
         };
-        let sim = crate::sim::spawn_plant(&hub, plant, sim_stop.clone())
-            .map_err(|e| ServeError::Bus(format!("cannot start the simulated vehicle: {e}")))?;
         let result = run(core, move || Ok(bus), clock, vehicle, run_opts, &stop);
         sim_stop.store(true, std::sync::atomic::Ordering::Relaxed);
-        if sim.join().is_err() {
+        if sim.is_some_and(|s| s.join().is_err()) {
             tracing::error!("the simulated vehicle's thread panicked");
         }
         result

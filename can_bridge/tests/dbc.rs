@@ -202,6 +202,22 @@ fn multiplexed_signals_follow_the_switch() {
     );
 }
 
+/// A simulator reads a signal of a decoded frame by its name: those the frame carries, none
+/// that the switch left out or that the message lacks.
+#[test]
+fn a_decoded_signal_is_read_by_its_name() {
+    let dbc = auv();
+    let frame = Frame::data(std_id(0x250), &[0x01, 0xFD, 0x00, 0x9C, 0xFF]).unwrap();
+    let DecodeOutcome::Message(dm) = dbc.decode(&frame) else {
+        panic!("not decoded");
+    };
+    assert!(close(dm.value(&dbc, "temp_a").unwrap(), 25.3));
+    assert!(close(dm.value(&dbc, "temp_b").unwrap(), -10.0));
+    assert_eq!(dm.value(&dbc, "page"), Some(1.0));
+    assert_eq!(dm.value(&dbc, "cell_a"), None, "not selected by the switch");
+    assert_eq!(dm.value(&dbc, "depth"), None, "another message's signal");
+}
+
 #[test]
 fn sixty_four_bits_extended_and_float() {
     let dbc = auv();

@@ -256,7 +256,7 @@ pub fn seconds(text: &str) -> Result<f64, String> {
     petrel_player::script::parse_time(text)
 }
 
-/// Reads an option that is a finite number (`--sim-leak-at`): `nan` and `inf` are refused.
+/// Reads an option that is a finite number (`petrel plot --speed`): `nan` and `inf` are refused.
 pub fn finite(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
         Ok(v) if v.is_finite() => Ok(v),

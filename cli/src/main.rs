@@ -121,7 +121,7 @@ enum Command {
     ///
     /// Frames from the vehicle bus become events for the player (by the rules of the
     /// project's can.toml), calls to the commands program become frames.
-    Bridge(bridge::BridgeArgs),
+    Bridge(petrel_can_bridge::command::BridgeArgs),
     /// Join this computer's part of the vehicle to its other computers over zenoh
     ///
     /// Calls to programs elsewhere, events to a player elsewhere, the player's heartbeat and

@@ -1,9 +1,9 @@
 //! `petrel up` with real processes over real iceoryx2: the UAV mission's vehicle.toml (player,
-//! uav_gui, uav_dec, a timed start), the AUV's (with the CAN data server), crashes and
+//! uav-gui, uav-dec, a timed start), the AUV's (with the CAN data server), crashes and
 //! restarts, timeouts, SIGTERM, computers, and vehicle files with errors. Each test has its own vehicle and run directory, and leaves
 //! nothing in /tmp or /dev/shm, pass or fail.
 
-use petrel_tests::{example_bin, repo, unique_vehicle, Workdir};
+use petrel_tests::{example_bin, repo, unique_vehicle, vehicle_bin, Workdir};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Output};
 use std::time::{Duration, Instant};
@@ -12,11 +12,11 @@ fn petrel() -> Command {
     Command::new(env!("CARGO_BIN_EXE_petrel"))
 }
 
-/// The simulated programs must be built (`cargo test --workspace` builds every example): a
-/// clear failure otherwise, rather than a vehicle that does not come up.
-fn need_examples() {
-    example_bin("uav_gui");
-    example_bin("uav_dec");
+/// The simulated programs must be built (`cargo test --workspace` builds the vehicles'
+/// binaries): a clear failure otherwise, rather than a vehicle that does not come up.
+fn need_uav() {
+    vehicle_bin("uav-gui");
+    vehicle_bin("uav-dec");
 }
 
 /// A copy of the UAV project in `work`, with `vehicle_toml` as its vehicle file.
@@ -213,7 +213,7 @@ fn run_petrel(args: &[&str]) -> Output {
 
 #[test]
 fn up_flies_the_uav_mission_until_landed_and_its_journal_replays() {
-    need_examples();
+    need_uav();
     let work = Workdir::new();
     let vehicle = unique_vehicle("upnom");
     let mut up = Up::start(
@@ -464,7 +464,8 @@ fn a_program_is_ready_only_once_it_receives_its_calls() {
 
 #[test]
 fn the_auv_survey_comes_up_with_its_can_data_server_and_ends_at_its_final_marking() {
-    example_bin("auv_gui");
+    vehicle_bin("auv-gui");
+    vehicle_bin("auv-bridge");
     let work = Workdir::new();
     let vehicle = unique_vehicle("upauv");
     let mut up = Up::start(
@@ -509,7 +510,7 @@ kind = "player"
 name = "gui"
 kind = "program"
 programs = ["GUI", "PLD"]
-executable = "{{target}}/examples/uav_gui"
+executable = "{{target}}/uav-gui"
 # Transits of 1.2 s: a restarted DEC is back before the next waypoint is asked for.
 args = ["--vehicle", "{{vehicle}}", "--speed", "200"]
 
@@ -517,7 +518,7 @@ args = ["--vehicle", "{{vehicle}}", "--speed", "200"]
 name = "dec"
 kind = "program"
 programs = ["DEC"]
-executable = "{{target}}/examples/uav_dec"
+executable = "{{target}}/uav-dec"
 args = ["--vehicle", "{{vehicle}}", "--crash-after-answers", "1"]
 {dec_extra}
 
@@ -530,7 +531,7 @@ event = "start_mission"
 
 #[test]
 fn a_program_that_crashes_is_restarted_by_policy_and_counted() {
-    need_examples();
+    need_uav();
     let work = Workdir::new();
     let dir = uav_copy(
         &work,
@@ -574,7 +575,7 @@ fn a_program_that_crashes_is_restarted_by_policy_and_counted() {
 
 #[test]
 fn a_critical_program_that_crashes_with_restart_never_fails_the_run_naming_it() {
-    need_examples();
+    need_uav();
     let work = Workdir::new();
     let dir = uav_copy(&work, &crashing_dec("restart = \"never\"\ncritical = true"));
     let vehicle = unique_vehicle("upnev");
@@ -599,7 +600,7 @@ fn a_critical_program_that_crashes_with_restart_never_fails_the_run_naming_it() 
 
 #[test]
 fn a_killed_player_resumes_from_its_journal_and_the_mission_ends_by_itself() {
-    need_examples();
+    need_uav();
     let work = Workdir::new();
     let dir = uav_copy(
         &work,
@@ -615,14 +616,14 @@ backoff = "100ms"
 name = "gui"
 kind = "program"
 programs = ["GUI", "PLD"]
-executable = "{target}/examples/uav_gui"
+executable = "{target}/uav-gui"
 args = ["--vehicle", "{vehicle}", "--speed", "100"]
 
 [[process]]
 name = "dec"
 kind = "program"
 programs = ["DEC"]
-executable = "{target}/examples/uav_dec"
+executable = "{target}/uav-dec"
 args = ["--vehicle", "{vehicle}"]
 
 [[send]]
@@ -721,7 +722,7 @@ fn a_timeout_exits_1_with_the_reason() {
 
 #[test]
 fn sigterm_stops_every_process_cleanly_in_reverse_order() {
-    need_examples();
+    need_uav();
     let work = Workdir::new();
     let vehicle = unique_vehicle("upsig");
     let scenario = idle_scenario(&work);
@@ -842,7 +843,7 @@ kind = "player"
 name = "gui"
 kind = "program"
 programs = ["GUI", "PDL"]
-executable = "{target}/examples/uav_gui"
+executable = "{target}/uav-gui"
 after = ["playr"]
 
 [[process]]
@@ -903,23 +904,24 @@ fn petrel_built_as(work: &Workdir, profile: &str) -> PathBuf {
 
 #[test]
 fn a_missing_program_gets_the_cargo_command_that_builds_it_with_petrel_s_profile() {
-    // Redermor's programs are a binary of petrel-redermor-live, the UAV's examples of
-    // petrel-programs; neither is in the fresh target directory the running petrel comes
-    // from. cargo, asked in the repository's workspace, would build into it
-    // (CARGO_TARGET_DIR), so the hint is the one command that fills `{target}`.
+    // Redermor's programs are a binary of redermor-live, the UAV's of uav; neither is in the
+    // fresh target directory the running petrel comes from. cargo, asked in the repository's
+    // workspace, would build into it (CARGO_TARGET_DIR), so the hint is the one command that
+    // fills `{target}`. (An example's hint, `--example NAME`: build_hint's unit test; no
+    // mission of the repository runs an example any more.)
     let work = Workdir::new();
     let cases = [
         (
             "release",
-            "missions/redermor",
+            repo().join("missions/redermor"),
             "redermor-program",
-            "`cargo build --release -p petrel-redermor-live --bin redermor-program`",
+            "`cargo build --release -p redermor-live --bin redermor-program`",
         ),
         (
             "debug",
-            "missions/uav",
-            "examples/uav_gui",
-            "`cargo build -p petrel-programs --example uav_gui`",
+            repo().join("missions/uav"),
+            "uav-gui",
+            "`cargo build -p uav --bin uav-gui`",
         ),
     ];
     for (profile, project, missing, command) in cases {
@@ -927,7 +929,7 @@ fn a_missing_program_gets_the_cargo_command_that_builds_it_with_petrel_s_profile
         let vehicle = unique_vehicle("hint");
         let o = Command::new(&exe)
             .arg("up")
-            .arg(repo().join(project))
+            .arg(&project)
             .args(["--vehicle", &vehicle])
             .arg("--logs")
             .arg(work.path().join(format!("run-{profile}")))

@@ -33,8 +33,9 @@
 //!   unread events would go with the program if it left before the player read them); under
 //!   `petrel up` the player starts first.
 //!
-//! The examples hold a minimal program (`echo`) and the simulated UAV of the ProCoSA mission
-//! (`uav_gui` playing GUI and PLD, `uav_dec` playing DEC).
+//! The example is a minimal program (`echo`); the vehicles' programs built on this SDK live in
+//! vehicles/ (the simulated UAV of the ProCoSA mission: `uav-gui` playing GUI and PLD,
+//! `uav-dec` playing DEC, in vehicles/uav).
 //!
 //! What a restart of the player can still lose: events the old player had received but not yet
 //! processed when it died, and events sent in the instant between its death and the liveness

@@ -1,13 +1,11 @@
 //! The outbox, and the SDK's own errors, with a program and a fake player in this process
 //! (real iceoryx2, one process).
 
-mod common;
-
 use std::time::Duration;
 
-use common::{FakePlayer, TestVehicle};
 use petrel_ipc::{Role, Value};
 use petrel_programs::{Call, PlayerCheck, Program, ProgramConfig, ProgramError};
+use petrel_tests::programs::{FakePlayer, TestVehicle};
 
 fn config(capacity: usize) -> ProgramConfig {
     ProgramConfig {

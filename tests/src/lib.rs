@@ -1,5 +1,6 @@
 //! Helpers for Petrel's cross-crate and cross-process tests.
 
+pub mod programs;
 pub mod web;
 
 use std::path::{Path, PathBuf};
@@ -276,11 +277,20 @@ impl Drop for Player {
     }
 }
 
-/// An example program of `petrel-programs` (`uav_gui`, `uav_dec`, `auv_gui`, `echo`).
+/// An example of this build: the SDK's demos (`echo` of `petrel-programs`), the tests' own.
 pub fn example_bin(name: &str) -> PathBuf {
     artifact(
         profile_dir().join("examples").join(name),
         &format!("the example program `{name}`"),
+    )
+}
+
+/// A vehicle's program of this build, a binary of a crate of vehicles/ (`uav-gui`, `uav-dec`,
+/// `ugv`, `auv-gui`, `auv-bridge`, `redermor-program`, `redermor-bridge`...).
+pub fn vehicle_bin(name: &str) -> PathBuf {
+    artifact(
+        profile_dir().join(name),
+        &format!("the vehicle's program `{name}`"),
     )
 }
 

@@ -1,13 +1,13 @@
 //! The AUV mission (`missions/auv`) flown by real processes over real iceoryx2: `petrel play`,
-//! `petrel bridge --bus memory` (the CAN data server on an in-process bus with the simulated
+//! `auv-bridge --bus memory` (the CAN data server on an in-process bus with the simulated
 //! AUV, which obeys the commands only while the heartbeat comes) and the guidance program
-//! `auv_gui`, which commands the thrusters through the data server and reads its signals.
+//! `auv-gui`, which commands the thrusters through the data server and reads its signals.
 
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use petrel_tests::{example_bin, petrel_bin, repo, unique_vehicle, Player, Processes, TempProject};
+use petrel_tests::{petrel_bin, repo, unique_vehicle, vehicle_bin, Player, Processes, TempProject};
 
 fn marked(s: &serde_json::Value, net: &str, place: &str) -> bool {
     s["marking"][net]
@@ -44,8 +44,7 @@ fn start_vehicle(
     stderr: &Path,
     bridge_flags: &[&str],
 ) -> Processes {
-    let bridge = Command::new(petrel_bin())
-        .arg("bridge")
+    let bridge = Command::new(vehicle_bin("auv-bridge"))
         .arg(project)
         .args(["--vehicle", vehicle, "--bus", "memory", "--record"])
         .arg(log)
@@ -54,13 +53,13 @@ fn start_vehicle(
         .stdout(Stdio::null())
         .stderr(std::fs::File::create(stderr).unwrap())
         .spawn()
-        .expect("petrel bridge starts");
-    let gui = Command::new(example_bin("auv_gui"))
+        .expect("auv-bridge starts");
+    let gui = Command::new(vehicle_bin("auv-gui"))
         .args(["--vehicle", vehicle])
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
-        .expect("auv_gui starts");
+        .expect("auv-gui starts");
     let processes = Processes(vec![gui, bridge]);
     let v = petrel_ipc::Vehicle::new(vehicle).unwrap();
     let deadline = Instant::now() + Duration::from_secs(20);
@@ -120,7 +119,7 @@ fn dive(
     let s = player.wait_for(60.0, &done);
     // SIGTERM: the data server stops in good order (exit 0) and flushes its recording.
     let codes = vehicle_processes.stop();
-    assert_eq!(codes, [Some(0), Some(0)], "auv_gui, petrel bridge");
+    assert_eq!(codes, [Some(0), Some(0)], "auv-gui, auv-bridge");
     // Before leaving, the data server saw the player acknowledge every event it sent.
     let report = std::fs::read_to_string(&bridge_err).unwrap();
     assert!(
@@ -167,7 +166,7 @@ fn the_survey_dives_surveys_and_surfaces_through_the_can_bus() {
 
 #[test]
 fn a_leak_at_depth_aborts_the_mission_and_the_vehicle_surfaces() {
-    let (s, bus_events) = dive(&["--sim-leak-at", "5"], |s| marked(s, "SAFETY", "surfaced"));
+    let (s, bus_events) = dive(&["--leak-at", "5"], |s| marked(s, "SAFETY", "surfaced"));
     assert!(marked(&s, "SAFETY", "surfaced"), "{s}");
     assert!(
         s["marking"].get("PHASES").is_none(),

@@ -9,7 +9,7 @@
 //! The step of each kill comes from a seed printed at the start; `PETREL_FAULT_SEED=N` replays
 //! a run. One kill per process and mission keeps the suite fast (about 10 s a mission).
 
-use petrel_tests::{example_bin, petrel_bin, repo, unique_vehicle, Player, Workdir};
+use petrel_tests::{petrel_bin, repo, unique_vehicle, vehicle_bin, Player, Workdir};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -70,11 +70,11 @@ fn uav() -> Mission {
         dir: repo().join("missions/uav"),
         processes: vec![
             Process {
-                label: "uav_gui",
+                label: "uav-gui",
                 program: "GUI",
                 programs: &["GUI", "PLD"],
                 spawn: |vehicle, _| {
-                    let mut c = Command::new(example_bin("uav_gui"));
+                    let mut c = Command::new(vehicle_bin("uav-gui"));
                     // A slower flight (about 3 s) spreads the steps the kill falls among.
                     c.args(["--vehicle", vehicle, "--speed", "300"])
                         .stderr(Stdio::null());
@@ -82,11 +82,11 @@ fn uav() -> Mission {
                 },
             },
             Process {
-                label: "uav_dec",
+                label: "uav-dec",
                 program: "DEC",
                 programs: &["DEC"],
                 spawn: |vehicle, _| {
-                    let mut c = Command::new(example_bin("uav_dec"));
+                    let mut c = Command::new(vehicle_bin("uav-dec"));
                     c.args(["--vehicle", vehicle]).stderr(Stdio::null());
                     c
                 },
@@ -102,13 +102,12 @@ fn auv() -> Mission {
         dir: repo().join("missions/auv"),
         processes: vec![
             Process {
-                label: "petrel bridge",
+                label: "auv-bridge",
                 program: "CAN",
                 programs: &["CAN"],
                 spawn: |vehicle, stderr| {
-                    let mut c = Command::new(petrel_bin());
-                    c.arg("bridge")
-                        .arg(repo().join("missions/auv"))
+                    let mut c = Command::new(vehicle_bin("auv-bridge"));
+                    c.arg(repo().join("missions/auv"))
                         .args(["--vehicle", vehicle, "--bus", "memory"])
                         .env("RUST_LOG", "warn")
                         .stderr(std::fs::File::create(stderr).unwrap());
@@ -116,11 +115,11 @@ fn auv() -> Mission {
                 },
             },
             Process {
-                label: "auv_gui",
+                label: "auv-gui",
                 program: "GUI",
                 programs: &["GUI"],
                 spawn: |vehicle, _| {
-                    let mut c = Command::new(example_bin("auv_gui"));
+                    let mut c = Command::new(vehicle_bin("auv-gui"));
                     c.args(["--vehicle", vehicle]).stderr(Stdio::null());
                     c
                 },

@@ -569,7 +569,7 @@ fn the_ugv_pair_on_three_computers_passes_the_bottleneck_one_at_a_time() {
     }
     stranger.state = work.path().join("stranger");
     let journal = work.path().join("journal");
-    let ugv = example_bin("ugv");
+    let ugv = petrel_tests::vehicle_bin("ugv");
     let mut procs = Processes(vec![s.spawn(
         &petrel_bin(),
         &[
@@ -1006,9 +1006,9 @@ fn past_the_lease_every_call_and_event_is_delivered_in_order_or_failed_to_its_se
 }
 
 /// missions/redermor copied with `vehicle` (a vehicle file of it) as its vehicle.toml, free
-/// ports for the gateways, and the bench files read from the repository.
+/// ports for the gateways, and the simulator's files read from the repository.
 fn redermor_project(vehicle: &str) -> petrel_tests::TempProject {
-    let bench = repo().join("missions/redermor/bench");
+    let sim = repo().join("missions/redermor/sim");
     let file = std::fs::read_to_string(repo().join("missions/redermor").join(vehicle))
         .expect("the vehicle file");
     let file = ["7457", "7458", "7459"].iter().fold(file, |t, p| {
@@ -1027,7 +1027,7 @@ fn redermor_project(vehicle: &str) -> petrel_tests::TempProject {
             "can.toml" => text.replace(r#"timeout = "1s""#, r#"timeout = "30s""#),
             _ => text,
         };
-        text.replace("{project}/bench/", &format!("{}/", bench.display()))
+        text.replace("{project}/sim/", &format!("{}/", sim.display()))
     })
 }
 

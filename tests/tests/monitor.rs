@@ -526,16 +526,16 @@ fn the_can_data_server_panel_shows_its_bus_and_signals() {
     let vehicle = unique_vehicle("moncan");
     let player = Player::start(&auv, &vehicle);
     let work = petrel_tests::Workdir::new();
-    let bridge =
-        petrel_tests::Processes(vec![std::process::Command::new(petrel_tests::petrel_bin())
-            .arg("bridge")
-            .arg(&auv)
-            .args(["--vehicle", &vehicle, "--bus", "memory", "--record"])
-            .arg(work.path().join("bus.log"))
-            .env("RUST_LOG", "error")
-            .stdout(std::process::Stdio::null())
-            .spawn()
-            .expect("petrel bridge starts")]);
+    let bridge = petrel_tests::Processes(vec![std::process::Command::new(
+        petrel_tests::vehicle_bin("auv-bridge"),
+    )
+    .arg(&auv)
+    .args(["--vehicle", &vehicle, "--bus", "memory", "--record"])
+    .arg(work.path().join("bus.log"))
+    .env("RUST_LOG", "error")
+    .stdout(std::process::Stdio::null())
+    .spawn()
+    .expect("auv-bridge starts")]);
     let dir = auv.display().to_string();
     let monitor = Monitor::start(&[&dir, "--vehicle", &vehicle]);
     let b = Browser::start();

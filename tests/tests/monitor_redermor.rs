@@ -30,9 +30,9 @@ struct Flight {
 
 impl Flight {
     fn start() -> Flight {
-        let bench = repo().join("missions/redermor/bench");
+        let sim = repo().join("missions/redermor/sim");
         let project = TempProject::copy(&repo().join("missions/redermor"), |_, text| {
-            text.replace("{project}/bench/", &format!("{}/", bench.display()))
+            text.replace("{project}/sim/", &format!("{}/", sim.display()))
         });
         let vehicle = unique_vehicle("monrdm");
         let child = Command::new(petrel_bin())

@@ -2,9 +2,9 @@
 //! player, the CAN data server on the in-memory bus with the Redermor simulator (20 times
 //! faster than the wall clock) and the programs PLN, NAV (GDD, GUI, IDC) and EVT, all real
 //! processes over iceoryx2. Each scenario checks the final marking, the events in the journal
-//! and a property of the vehicle's true track (the simulator's `--sim-trace`).
+//! and a property of the vehicle's true track (the simulator's `--trace`).
 //!
-//! The bench mission is missions/redermor/bench/mission.toml: alpha (8 m deep) beyond the buoy
+//! The mission is missions/redermor/sim/mission.toml: alpha (8 m deep) beyond the buoy
 //! field, bravo (6 m above the seabed, 30 m deep), the end area south-east.
 
 mod redermor_flight;
@@ -80,14 +80,14 @@ fn scenario_1_nominal_two_areas_surveyed_then_the_end_area() {
 /// A slow or loaded vehicle computer: the simulator three times faster than in vehicle.toml, so
 /// that every wall-clock delay of the processes (NAV's control step, the player's answer to
 /// `route_done`, the stop) is three times longer in the vehicle's time, as under the VM
-/// bench's emulation. NAV still surfaces the vehicle where its route to the end area ended
+/// VM's emulation. NAV still surfaces the vehicle where its route to the end area ended
 /// and stops it there (before NAV did so, it surfaced on the move and coasted on, ending 15 m
 /// outside the end area).
 #[test]
 fn scenario_1_on_a_slow_vehicle_computer_still_ends_in_the_end_area() {
     let f = fly_with(
         "vehicle.toml",
-        &[("\"--sim-speed\", \"20\"", "\"--sim-speed\", \"60\"")],
+        &[("\"--speed\", \"20\"", "\"--speed\", \"60\"")],
         "nominal",
         false,
     );

@@ -7,11 +7,11 @@
 //!
 //! Where there is no vcan0 (this project's machines: a kernel without SocketCAN), each test
 //! says why it is skipped and passes; with `PETREL_REQUIRE_VCAN=1` that is a failure instead.
-//! The test suite runs them in the qemu bench (docs/vcan-bench.md), with the binaries they
+//! The test suite runs them in the qemu VM (docs/vcan-vm.md), with the binaries they
 //! start and the mission's files:
 //!
 //! ```sh
-//! cargo build -p petrel-cli -p petrel-redermor-live
+//! cargo build -p petrel-cli -p redermor-live
 //! PETREL_REQUIRE_VCAN=1 scripts/vcan-vm.sh cargo-test --timeout 900 \
 //!     --include "$PWD/target/debug/petrel" --include "$PWD/target/debug/redermor-program" \
 //!     --include "$PWD/target/debug/redermor-sim" --include "$PWD/missions/redermor" \
@@ -29,7 +29,7 @@ use std::sync::{Mutex, MutexGuard};
 
 use redermor_flight::{check_alarm, check_leak, check_nominal_route, fly_with, Flight};
 
-/// The vehicle file of the SocketCAN bench (its interface is vcan0).
+/// The vehicle file on SocketCAN (its interface is vcan0).
 const VEHICLE_FILE: &str = "vehicle-vcan.toml";
 
 /// One flight at a time on vcan0: two data servers on one bus would read each other's
@@ -54,7 +54,7 @@ fn vcan0_or_skip(test: &str) -> Option<MutexGuard<'static, ()>> {
         "PETREL_REQUIRE_VCAN is set but there is no vcan0 here"
     );
     eprintln!(
-        "{test}: skipped: no SocketCAN interface vcan0 in this kernel; run it in the qemu bench \
+        "{test}: skipped: no SocketCAN interface vcan0 in this kernel; run it in the qemu VM \
          (tests/tests/redermor_vcan.rs says how, scripts/test.sh does it)"
     );
     None

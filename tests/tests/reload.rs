@@ -4,7 +4,7 @@
 //! events sent while a reload is under way.
 
 use petrel_tests::{
-    example_bin, petrel, repo, unique_vehicle, Player, Processes, TempProject, Workdir,
+    petrel, repo, unique_vehicle, vehicle_bin, Player, Processes, TempProject, Workdir,
 };
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
@@ -14,7 +14,7 @@ const SPEED: &str = "20";
 
 fn programs(vehicle: &str) -> Processes {
     let spawn = |bin: &str, extra: &[&str]| {
-        Command::new(example_bin(bin))
+        Command::new(vehicle_bin(bin))
             .args(["--vehicle", vehicle])
             .args(extra)
             .stdout(Stdio::null())
@@ -23,8 +23,8 @@ fn programs(vehicle: &str) -> Processes {
             .expect("a UAV program starts")
     };
     Processes(vec![
-        spawn("uav_gui", &["--speed", SPEED]),
-        spawn("uav_dec", &[]),
+        spawn("uav-gui", &["--speed", SPEED]),
+        spawn("uav-dec", &[]),
     ])
 }
 

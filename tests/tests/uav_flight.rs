@@ -1,23 +1,23 @@
 //! The UAV mission flown by real processes over real iceoryx2: `petrel play`, and the GUI/PLD
 //! and DEC programs of `petrel-programs`, each its own process.
 
-use petrel_tests::{example_bin, repo, unique_vehicle, Player, Processes};
+use petrel_tests::{repo, unique_vehicle, vehicle_bin, Player, Processes};
 use std::process::{Command, Stdio};
 
 fn programs(vehicle: &str, gui_flags: &[&str]) -> Processes {
-    let gui = Command::new(example_bin("uav_gui"))
+    let gui = Command::new(vehicle_bin("uav-gui"))
         .args(["--vehicle", vehicle])
         .args(gui_flags)
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
-        .expect("uav_gui starts");
-    let dec = Command::new(example_bin("uav_dec"))
+        .expect("uav-gui starts");
+    let dec = Command::new(vehicle_bin("uav-dec"))
         .args(["--vehicle", vehicle])
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
-        .expect("uav_dec starts");
+        .expect("uav-dec starts");
     Processes(vec![gui, dec])
 }
 

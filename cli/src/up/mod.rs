@@ -600,23 +600,36 @@ fn resolve_process(spec: &ProcessSpec, places: &Places) -> Result<Planned, Vec<S
 }
 
 /// A player's or a bridge's command line: the running petrel, `play|bridge DIR --vehicle V`,
-/// its `--wait`, and a player's journal (the directory, also returned).
+/// its `--wait`, and a player's journal (the directory, also returned). A bridge with an
+/// `executable` is the vehicle's own data server (built on petrel-can-bridge, with its
+/// simulator): `EXECUTABLE DIR --vehicle V`, `petrel bridge`'s arguments.
 fn petrel_command(
     spec: &ProcessSpec,
     places: &Places,
     ex: &dyn Fn(&str) -> Result<String, String>,
 ) -> Result<(PathBuf, Vec<String>, Option<PathBuf>), String> {
-    let command = if spec.kind == Kind::Player {
-        "play"
-    } else {
-        "bridge"
+    let mut args = Vec::new();
+    let program = match (&spec.executable, spec.kind) {
+        (Some(text), Kind::Bridge) => {
+            resolve_executable(&ex(text)?, places.project_dir, &spec.name, places.target)?
+        }
+        _ => {
+            args.push(
+                if spec.kind == Kind::Player {
+                    "play"
+                } else {
+                    "bridge"
+                }
+                .to_string(),
+            );
+            places.petrel.to_path_buf()
+        }
     };
-    let mut args = vec![
-        command.to_string(),
+    args.extend([
         places.project_dir.display().to_string(),
         "--vehicle".to_string(),
         places.vehicle.to_string(),
-    ];
+    ]);
     if let Some(w) = &spec.wait {
         args.extend(["--wait".to_string(), w.clone()]);
     }
@@ -634,7 +647,7 @@ fn petrel_command(
             }
         }
     }
-    Ok((places.petrel.to_path_buf(), args, journal))
+    Ok((program, args, journal))
 }
 
 /// Environment variables and their values.

@@ -57,8 +57,9 @@ impl Flight {
     }
 }
 
-pub fn bench() -> PathBuf {
-    repo().join("missions/redermor/bench")
+/// The simulator's files: the mission, the scenarios, the operator's requests.
+pub fn sim_files() -> PathBuf {
+    repo().join("missions/redermor/sim")
 }
 
 pub fn read_trace(path: &Path) -> Vec<Point> {
@@ -76,14 +77,14 @@ pub fn read_trace(path: &Path) -> Vec<Point> {
         .collect()
 }
 
-/// Flies scenario `scenario` (bench/SCENARIO.toml, and bench/SCENARIO.requests for the
+/// Flies scenario `scenario` (sim/SCENARIO.toml, and sim/SCENARIO.requests for the
 /// operator when `requests`) with `petrel up` on the in-memory bus (vehicle.toml).
 pub fn fly(scenario: &str, requests: bool) -> Flight {
     fly_with("vehicle.toml", &[], scenario, requests)
 }
 
 /// Flies scenario `scenario` with `petrel up --file VEHICLE_FILE` (a vehicle file of
-/// missions/redermor: vehicle.toml, or vehicle-vcan.toml for the SocketCAN bench), with each
+/// missions/redermor: vehicle.toml, or vehicle-vcan.toml on SocketCAN), with each
 /// `(from, to)` of `edits` replaced in it.
 pub fn fly_with(
     vehicle_file: &str,
@@ -109,7 +110,7 @@ fn fly_and(
     requests: bool,
     kill: Option<(&str, f64)>,
 ) -> Flight {
-    let bench = bench();
+    let sim = sim_files();
     let project = TempProject::copy(&repo().join("missions/redermor"), |name, text| {
         if name != vehicle_file {
             return text;
@@ -121,13 +122,13 @@ fn fly_and(
         }
         if requests {
             text = text.replace(
-                r#""--role", "EVT", "--mission", "{project}/bench/mission.toml"]"#,
+                r#""--role", "EVT", "--mission", "{project}/sim/mission.toml"]"#,
                 &format!(
-                    r#""--role", "EVT", "--mission", "{{project}}/bench/mission.toml", "--requests", "{{project}}/bench/{scenario}.requests"]"#
+                    r#""--role", "EVT", "--mission", "{{project}}/sim/mission.toml", "--requests", "{{project}}/sim/{scenario}.requests"]"#
                 ),
             );
         }
-        text.replace("{project}/bench/", &format!("{}/", bench.display()))
+        text.replace("{project}/sim/", &format!("{}/", sim.display()))
     });
     let logs = project.path().join("logs");
     let vehicle = unique_vehicle("rdm");
@@ -290,8 +291,8 @@ pub fn end_area_margin(p: &Point) -> f64 {
     (p.x - 150.0).min(220.0 - p.x).min(p.y + 40.0).min(-p.y)
 }
 
-/// The vehicle's last position is in the end area; says where it is either way (the VM
-/// bench's runs report it).
+/// The vehicle's last position is in the end area; says where it is either way (the VM's
+/// runs report it).
 pub fn assert_ends_in_the_end_area(f: &Flight) {
     let last = f.trace.last().expect("a trace");
     let margin = end_area_margin(last);

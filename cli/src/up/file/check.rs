@@ -244,7 +244,7 @@ fn process(
                 p.kind.get_ref()
             ),
             "not a kind",
-            "the kinds are player (petrel play), bridge (petrel bridge), program (an executable running programs of the manifest) and command (any other executable)",
+            "the kinds are player (petrel play), bridge (the CAN data server: petrel bridge, or the vehicle's own data server as `executable`), program (an executable running programs of the manifest) and command (any other executable)",
         );
         return None;
     };
@@ -286,18 +286,19 @@ fn process(
     })
 }
 
-/// `executable`: required for a program or a command, refused for a player or a bridge (the
-/// running `petrel` is theirs).
+/// `executable`: required for a program or a command, refused for a player (the running
+/// `petrel` is its), optional for a bridge (the vehicle's own data server; `petrel bridge`
+/// without it).
 fn executable(c: &mut VehicleChecker, p: &RawProcess, kind: Kind) -> Option<String> {
     let pname = p.name.get_ref();
     match (&p.executable, kind) {
-        (Some(e), Kind::Player | Kind::Bridge) => {
+        (Some(e), Kind::Player) => {
             c.not_for_kind(
                 c.span(e),
                 "executable",
                 pname,
                 kind,
-                "a player or a bridge is the running `petrel` itself; for another build, use kind = \"command\" with executable = \"...\" and its arguments",
+                "a player is the running `petrel` itself; for another build, use kind = \"command\" with executable = \"...\" and its arguments",
             );
             None
         }
@@ -830,7 +831,7 @@ name = "gui"
 kind = "program"
 programs = ["GUI", "PLD"]
 computer = "avionics"
-executable = "{target}/examples/uav_gui"
+executable = "{target}/uav-gui"
 args = ["--vehicle", "{vehicle}"]
 env = { RUST_LOG = "info" }
 
@@ -858,6 +859,39 @@ after = []
             }
         );
         assert_eq!(v.processes[1].stop_grace, Duration::from_secs(2));
+    }
+
+    /// A bridge may be the vehicle's own data server (its simulator with it); a player is
+    /// always the running petrel.
+    #[test]
+    fn a_bridge_may_name_its_executable_and_a_player_may_not() {
+        let (v, d, _) = check(
+            r#"
+[[process]]
+name = "player"
+kind = "player"
+
+[[process]]
+name = "can"
+kind = "bridge"
+executable = "{target}/auv-bridge"
+args = ["--bus", "memory", "--leak-at", "5"]
+"#,
+        );
+        assert!(d.is_empty(), "{d:?}");
+        let can = &v.unwrap().processes[1];
+        assert_eq!(can.executable.as_deref(), Some("{target}/auv-bridge"));
+        let (v, d, _) = check(
+            "[[process]]\nname = \"player\"\nkind = \"player\"\nexecutable = \"{target}/petrel\"\n",
+        );
+        assert!(v.is_none());
+        assert_eq!(codes(&d), ["E0805"]);
+        // An empty one is refused as any process's.
+        let (v, d, _) = check(
+            "[[process]]\nname = \"p\"\nkind = \"player\"\n[[process]]\nname = \"can\"\nkind = \"bridge\"\nexecutable = \" \"\n",
+        );
+        assert!(v.is_none());
+        assert_eq!(codes(&d), ["E0806"]);
     }
 
     #[test]

@@ -33,7 +33,8 @@ pub const VEHICLE_TOML: &str = "vehicle.toml";
 pub enum Kind {
     /// `petrel play` on this project: ready when its heartbeat comes.
     Player,
-    /// `petrel bridge` on this project (the CAN data server): ready when its heartbeat comes.
+    /// The CAN data server on this project, `petrel bridge` or the vehicle's own data server
+    /// (`executable`, with the same arguments): ready when its heartbeat comes.
     Bridge,
     /// An executable that joins the vehicle as the manifest's programs it names: ready when
     /// the node of each is alive.
@@ -99,10 +100,11 @@ pub struct ProcessSpec {
     pub name: String,
     /// What it is.
     pub kind: Kind,
-    /// The executable (template), for programs and commands.
+    /// The executable (template), for programs and commands; for a bridge, the vehicle's own
+    /// data server (`None`: `petrel bridge`).
     pub executable: Option<String>,
     /// Arguments (templates). For a player or a bridge they follow `petrel play|bridge DIR
-    /// --vehicle V`.
+    /// --vehicle V` (a bridge's own executable: `EXECUTABLE DIR --vehicle V`).
     pub args: Vec<String>,
     /// Environment variables set for it (values are templates).
     pub env: Vec<(String, String)>,
