@@ -11,7 +11,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use petrel_nets::plural::count;
+use petrel_diag::plural::count;
 
 use crate::config::load_project_can;
 use crate::plant::PlantFactory;

@@ -256,14 +256,6 @@ pub fn seconds(text: &str) -> Result<f64, String> {
     petrel_player::script::parse_time(text)
 }
 
-/// Reads an option that is a finite number (`petrel plot --speed`): `nan` and `inf` are refused.
-pub fn finite(text: &str) -> Result<f64, String> {
-    match text.parse::<f64>() {
-        Ok(v) if v.is_finite() => Ok(v),
-        _ => Err(format!("`{text}` is not a finite number")),
-    }
-}
-
 /// Parses a wait strategy option (`block`, `spin`, `spin-then-block:<microseconds>`).
 pub fn wait_strategy(text: &str) -> Result<petrel_ipc::WaitStrategy, Outcome> {
     text.parse().map_err(Outcome::Usage)

@@ -312,7 +312,7 @@ impl RedermorPlant {
             ("y", s.position.y),
             ("depth", s.depth.max(0.0)),
         ];
-        if let Ok(f) = self.dbc.encode(bench::TRUTH_MESSAGE, &truth) {
+        if let Ok(f) = self.dbc.encode(bus::TRUTH_MESSAGE, &truth) {
             frames.push(f);
         }
         for s in newest.into_iter().rev() {
