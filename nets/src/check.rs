@@ -1708,7 +1708,10 @@ impl<'p> Checker<'p> {
                 Some(e) => {
                     event = Some(e);
                     let decl = self.event_decl(e);
-                    if !trigger.bindings.is_empty() && trigger.bindings.len() != decl.params.len() {
+                    if !trigger.bindings.is_empty()
+                        && trigger.bindings.len() != decl.params.len()
+                        && !decl.params_unread
+                    {
                         let expected = decl
                             .params
                             .iter()
@@ -2049,9 +2052,13 @@ impl<'p> Checker<'p> {
                     );
                     return None;
                 };
-                let params = &decl.functions[fid].params;
+                let f = &decl.functions[fid];
+                if f.params_unread {
+                    // Its parameters are unknown (E0103 said why): nothing to check against.
+                    return None;
+                }
                 let what = format!("function `{program}.{function}`");
-                let args = self.args(s, &what, params, args, *span)?;
+                let args = self.args(s, &what, &f.params, args, *span)?;
                 c::Action::Call {
                     program: pid,
                     function: fid as u32,
@@ -2077,7 +2084,12 @@ impl<'p> Checker<'p> {
                     Some(n) => Some(self.net_ref(s.net, tpl, n, true)?),
                     None => None,
                 };
-                let params = &self.event_decl(eid).params;
+                let decl = self.event_decl(eid);
+                if decl.params_unread {
+                    // Its parameters are unknown (E0103 said why): nothing to check against.
+                    return None;
+                }
+                let params = &decl.params;
                 let what = format!("event `{event}`");
                 let args = self.args(s, &what, params, args, *span)?;
                 c::Action::Emit {

@@ -103,6 +103,13 @@ fn manifest_values_categories_types_timers() {
     }
 }
 
+/// Before: each call of `NAV.goto` and the emission of `report` gave an E0401 ("takes 1
+/// argument(s), 2 given") and the trigger an E0403 after the E0103 of the bad type.
+#[test]
+fn a_bad_type_gives_one_error_not_one_per_use() {
+    assert_eq!(golden("manifest_types"), ["E0103", "E0103"]);
+}
+
 #[test]
 fn manifest_that_is_not_toml() {
     assert_eq!(golden("manifest_toml"), ["E0101"]);

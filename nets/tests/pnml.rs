@@ -748,12 +748,14 @@ fn sample_project() -> Project {
             category,
             params: vec![param(&format!("x{i}"), *ty), param("flag", Type::Bool)],
             description: (i % 2 == 0).then(|| format!("event {i}: \"<&>\"\nsecond line")),
+            params_unread: false,
             internal: false,
         })
         .chain([EventDecl {
             name: n("tick"),
             category: Category::Nominal,
             params: vec![],
+            params_unread: false,
             description: Some(String::new()),
             internal: false,
         }])
@@ -824,6 +826,7 @@ fn sample_project() -> Project {
                     FunctionDecl {
                         name: n("goto"),
                         answers: Vec::new(),
+                        params_unread: false,
                         params: vec![
                             param("x", Type::Float),
                             param("path", Type::FloatList),
@@ -833,6 +836,7 @@ fn sample_project() -> Project {
                     FunctionDecl {
                         name: n("stop"),
                         answers: Vec::new(),
+                        params_unread: false,
                         params: vec![],
                     },
                 ],
@@ -843,6 +847,7 @@ fn sample_project() -> Project {
                 functions: vec![FunctionDecl {
                     name: n("show"),
                     answers: Vec::new(),
+                    params_unread: false,
                     params: vec![param("n", Type::Int)],
                 }],
             },
