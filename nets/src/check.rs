@@ -42,6 +42,8 @@ pub fn check(project: &Project) -> (Option<c::CompiledProject>, Diagnostics) {
     };
     let compiled = ck.run();
     let mut d = ck.d;
+    crate::meant_event::immediate_transitions_meant_events(project, &mut d);
+    let mut d = crate::follow_on::link_to_missing_files(project, d);
     apply_allows(project, &mut d, AllowPass::Check);
     d.sort();
     let compiled = if d.has_errors() { None } else { compiled };
