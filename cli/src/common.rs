@@ -234,7 +234,7 @@ pub fn operator_event(
         petrel_player::script::parse_script(&format!("0 {text}"), c).map_err(|errors| {
             errors
                 .into_iter()
-                .map(|(_, e)| e)
+                .map(|e| e.message)
                 .collect::<Vec<_>>()
                 .join("; ")
         })?;

@@ -33,7 +33,7 @@ pub fn run(a: RunArgs) -> Outcome {
         Err(errors) => {
             let list: Vec<String> = errors
                 .iter()
-                .map(|(n, e)| format!("{}:{n}: {e}", script_path.display()))
+                .map(|e| format!("{}:{e}", script_path.display()))
                 .collect();
             return Outcome::Usage(format!("the script has errors:\n{}", list.join("\n")));
         }

@@ -674,7 +674,9 @@ fn run_plays_the_mission_scripts_in_virtual_time_as_json_lines() {
     let o = petrel(&["run", &uav(), "--script", &bad.display().to_string()]);
     assert_eq!(o.status.code(), Some(2));
     assert!(
-        stderr(&o).contains("bad.script:1: unknown event `start_mision`"),
+        stderr(&o).contains(
+            "bad.script:1:3: unknown event `start_mision`: did you mean `start_mission`?"
+        ),
         "{}",
         stderr(&o)
     );
@@ -698,7 +700,7 @@ fn run_plays_the_mission_scripts_in_virtual_time_as_json_lines() {
     let o = petrel(&["run", &uav(), "--script", &bad.display().to_string()]);
     assert_eq!(o.status.code(), Some(2));
     assert!(
-        stderr(&o).contains("bad.script:3: `expect refused` checks the event of the last timed line, and line 2 is a `wait`"),
+        stderr(&o).contains("bad.script:3:8: `expect refused` checks the event of the last timed line, and line 2 is a `wait`"),
         "{}",
         stderr(&o)
     );
@@ -900,11 +902,11 @@ fn run_says_what_each_failed_expectation_expected_and_found() {
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     let err = stderr(&o);
     for line in [
-        "s.script:2: unknown program `NOPE`",
-        "s.script:3: `request(\"r1\")` is not a call such as `PROGRAM.function(1, _)`",
-        "s.script:4: expected `timer NAME` or `timer NAME expires at SECONDS`",
-        "s.script:5: unknown place `R1.nowhere` in the formula",
-        "s.script:6: `not always` does not read",
+        "s.script:2:16: unknown program `NOPE`",
+        "s.script:3:35: `request(\"r1\")` is not a call such as `PROGRAM.function(1, _)`",
+        "s.script:4:8: expected `timer NAME` or `timer NAME expires at SECONDS`",
+        "s.script:5:15: unknown place `R1.nowhere` in the formula",
+        "s.script:6:8: `not always` does not read",
     ] {
         assert!(err.contains(line), "{line}:\n{err}");
     }

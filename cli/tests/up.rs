@@ -872,6 +872,7 @@ event = "start_misson"
         }
         assert!(err.contains("did you mean `PLD`?"), "{err}");
         assert!(err.contains("did you mean `player`?"), "{err}");
+        assert!(err.contains("did you mean `start_mission`?"), "{err}");
     }
     // The same findings for tools.
     let o = run_petrel(&["check", "--format", "json", &dir]);

@@ -42,6 +42,8 @@ pub fn check(project: &Project) -> (Option<c::CompiledProject>, Diagnostics) {
     };
     let compiled = ck.run();
     let mut d = ck.d;
+    crate::meant_event::immediate_transitions_meant_events(project, &mut d);
+    let mut d = crate::follow_on::link_to_missing_files(project, d);
     apply_allows(project, &mut d, AllowPass::Check);
     d.sort();
     let compiled = if d.has_errors() { None } else { compiled };
@@ -1708,7 +1710,10 @@ impl<'p> Checker<'p> {
                 Some(e) => {
                     event = Some(e);
                     let decl = self.event_decl(e);
-                    if !trigger.bindings.is_empty() && trigger.bindings.len() != decl.params.len() {
+                    if !trigger.bindings.is_empty()
+                        && trigger.bindings.len() != decl.params.len()
+                        && !decl.params_unread
+                    {
                         let expected = decl
                             .params
                             .iter()
@@ -2049,9 +2054,13 @@ impl<'p> Checker<'p> {
                     );
                     return None;
                 };
-                let params = &decl.functions[fid].params;
+                let f = &decl.functions[fid];
+                if f.params_unread {
+                    // Its parameters are unknown (E0103 said why): nothing to check against.
+                    return None;
+                }
                 let what = format!("function `{program}.{function}`");
-                let args = self.args(s, &what, params, args, *span)?;
+                let args = self.args(s, &what, &f.params, args, *span)?;
                 c::Action::Call {
                     program: pid,
                     function: fid as u32,
@@ -2077,7 +2086,12 @@ impl<'p> Checker<'p> {
                     Some(n) => Some(self.net_ref(s.net, tpl, n, true)?),
                     None => None,
                 };
-                let params = &self.event_decl(eid).params;
+                let decl = self.event_decl(eid);
+                if decl.params_unread {
+                    // Its parameters are unknown (E0103 said why): nothing to check against.
+                    return None;
+                }
+                let params = &decl.params;
                 let what = format!("event `{event}`");
                 let args = self.args(s, &what, params, args, *span)?;
                 c::Action::Emit {

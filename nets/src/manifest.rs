@@ -207,8 +207,11 @@ impl Reader<'_> {
         })
     }
 
-    fn params(&mut self, list: &[Spanned<String>], text: &str) -> Vec<Param> {
-        list.iter().filter_map(|p| self.param(p, text)).collect()
+    /// The parameters that read, and whether one did not (its error reported).
+    fn params(&mut self, list: &[Spanned<String>], text: &str) -> (Vec<Param>, bool) {
+        let read: Vec<Param> = list.iter().filter_map(|p| self.param(p, text)).collect();
+        let unread = read.len() != list.len();
+        (read, unread)
     }
 
     /// A TOML value written as an argument (an instance's): the same literals as in a net.
@@ -427,11 +430,12 @@ pub fn parse_manifest(file: FileId, text: &str, diags: &mut Diagnostics) -> Opti
                 Category::Nominal
             }
         };
-        let params = r.params(&v.params, text);
+        let (params, params_unread) = r.params(&v.params, text);
         m.events.push(EventDecl {
             name,
             category,
             params,
+            params_unread,
             description: v.description.clone(),
             internal: v.internal,
         });
@@ -486,11 +490,12 @@ pub fn parse_manifest(file: FileId, text: &str, diags: &mut Diagnostics) -> Opti
                 );
                 continue;
             };
-            let params = r.params(&params, text);
+            let (params, params_unread) = r.params(&params, text);
             let answers = answers.iter().map(|a| r.name(a, "event", text)).collect();
             functions.push(FunctionDecl {
                 name: fname,
                 params,
+                params_unread,
                 answers,
             });
         }

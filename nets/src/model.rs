@@ -130,6 +130,7 @@ pub fn builtin_events() -> &'static [EventDecl] {
                     ty: *t,
                 })
                 .collect(),
+            params_unread: false,
             description: Some(description.to_string()),
             internal: false,
         };
@@ -199,6 +200,10 @@ pub struct EventDecl {
     pub category: Category,
     /// Parameters, in order.
     pub params: Vec<Param>,
+    /// A parameter did not read (E0103: no type, an unknown type): the count and the types
+    /// of the parameters are unknown, and the uses of the declaration are not checked against
+    /// `params` (which holds only the parameters that read), so that one typo gives one error.
+    pub params_unread: bool,
     /// Free text for people.
     pub description: Option<String>,
     /// Only the nets emit it (`internal = true`): no program or operator sends it, so the
@@ -213,6 +218,10 @@ pub struct FunctionDecl {
     pub name: Name,
     /// Parameters, in order.
     pub params: Vec<Param>,
+    /// A parameter did not read (E0103: no type, an unknown type): the count and the types
+    /// of the parameters are unknown, and the uses of the declaration are not checked against
+    /// `params` (which holds only the parameters that read), so that one typo gives one error.
+    pub params_unread: bool,
     /// The events the program answers a call with (`answers = [...]`): they come only after a
     /// call to a function that lists them (the verifier's model of the program).
     pub answers: Vec<Name>,

@@ -78,6 +78,21 @@ pub fn load(dir: &Path) -> Result<LoadedProject, LoadError> {
     let mut project = Project::default();
     let mut file_ids = Vec::new();
     if let Some(manifest) = parse_manifest(manifest_file, &text, &mut diagnostics) {
+        // A net file lying in the project but not listed is most likely forgotten, or the
+        // listed one renamed: E0104 and W0101 then name each other.
+        let unlisted: Vec<String> = match std::fs::read_dir(dir) {
+            Ok(entries) => {
+                let mut extra: Vec<String> = entries
+                    .filter_map(|e| e.ok())
+                    .map(|e| e.file_name().to_string_lossy().into_owned())
+                    .filter(|n| n.ends_with(".pn") && !manifest.files.iter().any(|f| &f.path == n))
+                    .collect();
+                extra.sort();
+                extra
+            }
+            Err(_) => Vec::new(),
+        };
+        let mut unread: Vec<&str> = Vec::new();
         for f in &manifest.files {
             // Never read (and so never let `fmt` rewrite) a file outside the project.
             let path = match petrel_diag::paths::confine(dir, &f.path) {
@@ -103,6 +118,13 @@ pub fn load(dir: &Path) -> Result<LoadedProject, LoadError> {
                     } else {
                         format!("cannot be read: {e}")
                     };
+                    unread.push(&f.path);
+                    let renamed = match close_file(&f.path, &unlisted) {
+                        Some(n) => format!(
+                            "did you mean \"{n}\"? It is in the project directory and not listed (W0101); "
+                        ),
+                        None => String::new(),
+                    };
                     diagnostics.push(
                         Diagnostic::error(
                             "E0104",
@@ -111,22 +133,24 @@ pub fn load(dir: &Path) -> Result<LoadedProject, LoadError> {
                         )
                         .label("named here")
                         .help(format!(
-                            "create it, or correct the path: paths are relative to the project directory {}",
+                            "{renamed}create it, or correct the path: paths are relative to the project directory {}",
                             dir.display()
                         )),
                     );
                 }
             }
         }
-        // A net file lying in the project but not listed is most likely forgotten.
-        if let Ok(entries) = std::fs::read_dir(dir) {
-            let mut extra: Vec<String> = entries
-                .filter_map(|e| e.ok())
-                .map(|e| e.file_name().to_string_lossy().into_owned())
-                .filter(|n| n.ends_with(".pn") && !manifest.files.iter().any(|f| &f.path == n))
-                .collect();
-            extra.sort();
-            for n in extra {
+        {
+            for n in unlisted {
+                let listed: Vec<String> = unread.iter().map(|u| u.to_string()).collect();
+                let help = match close_file(&n, &listed) {
+                    Some(u) => format!(
+                        "the manifest lists \"{u}\", which could not be read (E0104): if \"{n}\" is that file renamed, correct the entry"
+                    ),
+                    None => format!(
+                        "add \"{n}\" to `files` in [project], or move it out of the project"
+                    ),
+                };
                 diagnostics.push(
                     Diagnostic::warning(
                         "W0101",
@@ -134,9 +158,7 @@ pub fn load(dir: &Path) -> Result<LoadedProject, LoadError> {
                         format!("net file `{n}` is in the project directory but not in `files`"),
                     )
                     .label("the manifest's file list")
-                    .help(format!(
-                        "add \"{n}\" to `files` in [project], or move it out of the project"
-                    )),
+                    .help(help),
                 );
             }
         }
@@ -266,4 +288,14 @@ pub fn from_sources(
     let (compiled, found) = check::check(&project);
     d.extend(found);
     (project, compiled, d, sources)
+}
+
+/// The one of `files` whose name is close to `name` (a file renamed, or misspelt in the
+/// manifest), by the same measure as the "did you mean" of names.
+fn close_file<'a>(name: &str, files: &'a [String]) -> Option<&'a str> {
+    let best = files
+        .iter()
+        .map(|f| (petrel_diag::names::distance(name, f), f.as_str()))
+        .min()?;
+    (best.0 <= 2.max(name.len() / 3)).then_some(best.1)
 }

@@ -17,7 +17,8 @@ fn case_dir(name: &str) -> PathBuf {
 fn report(name: &str) -> (String, serde_json::Value, Vec<&'static str>) {
     let dir = case_dir(name);
     let (loaded, compiled, d) = load_and_check(&dir).expect("case project reads");
-    assert!(compiled.is_none(), "case {name} must not compile");
+    // A case of errors does not compile; a case of warnings only (W0108) does.
+    assert_eq!(compiled.is_none(), d.has_errors(), "case {name}");
     let prefix = format!("{}/", dir.display());
     let text = d
         .render_human(&loaded.sources)
@@ -95,12 +96,48 @@ fn manifest_naming_a_missing_file() {
     assert_eq!(golden("missing_file"), ["E0104"]);
 }
 
+/// Before: a renamed net file gave W0101, E0104, E0202 and E0208, none saying it followed
+/// from the others.
+#[test]
+fn a_renamed_net_file_and_what_follows_from_it_name_each_other() {
+    let codes = golden("renamed_file");
+    assert_eq!(codes, ["W0101", "E0104", "E0202", "E0208"]);
+    let expected = std::fs::read_to_string(case_dir("renamed_file").join("expected.txt")).unwrap();
+    assert!(
+        expected.contains("did you mean \"phase.pn\"?"),
+        "{expected}"
+    );
+    assert!(
+        expected.contains("if \"phase.pn\" is that file renamed"),
+        "{expected}"
+    );
+    assert_eq!(
+        expected
+            .matches("this may follow from net file `phases.pn`")
+            .count(),
+        2
+    );
+}
+
 #[test]
 fn manifest_values_categories_types_timers() {
     let codes = golden("manifest_values");
     for code in ["E0102", "E0103", "E0407"] {
         assert!(codes.contains(&code), "{code} missing from {codes:?}");
     }
+}
+
+/// Before: a transition written without `on EVENT` checked clean, silently immediate.
+#[test]
+fn an_immediate_transition_named_like_an_unused_event() {
+    assert_eq!(golden("immediate"), ["W0108", "W0108"]);
+}
+
+/// Before: each call of `NAV.goto` and the emission of `report` gave an E0401 ("takes 1
+/// argument(s), 2 given") and the trigger an E0403 after the E0103 of the bad type.
+#[test]
+fn a_bad_type_gives_one_error_not_one_per_use() {
+    assert_eq!(golden("manifest_types"), ["E0103", "E0103"]);
 }
 
 #[test]

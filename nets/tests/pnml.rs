@@ -749,12 +749,14 @@ fn sample_project() -> Project {
             category,
             params: vec![param(&format!("x{i}"), *ty), param("flag", Type::Bool)],
             description: (i % 2 == 0).then(|| format!("event {i}: \"<&>\"\nsecond line")),
+            params_unread: false,
             internal: false,
         })
         .chain([EventDecl {
             name: n("tick"),
             category: Category::Nominal,
             params: vec![],
+            params_unread: false,
             description: Some(String::new()),
             internal: false,
         }])
@@ -825,6 +827,7 @@ fn sample_project() -> Project {
                     FunctionDecl {
                         name: n("goto"),
                         answers: Vec::new(),
+                        params_unread: false,
                         params: vec![
                             param("x", Type::Float),
                             param("path", Type::FloatList),
@@ -834,6 +837,7 @@ fn sample_project() -> Project {
                     FunctionDecl {
                         name: n("stop"),
                         answers: Vec::new(),
+                        params_unread: false,
                         params: vec![],
                     },
                 ],
@@ -844,6 +848,7 @@ fn sample_project() -> Project {
                 functions: vec![FunctionDecl {
                     name: n("show"),
                     answers: Vec::new(),
+                    params_unread: false,
                     params: vec![param("n", Type::Int)],
                 }],
             },

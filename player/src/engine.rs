@@ -179,6 +179,9 @@ pub trait Sink {
     /// Invariant `name` of the manifest stopped holding after the step; an
     /// `invariant_violated` event is queued.
     fn invariant_violated(&mut self, _name: &str) {}
+    /// The engine raised a built-in event about a step (`safety_violation`, `livelock`,
+    /// `invariant_violated`), with its parameters; it is queued like an emitted event.
+    fn raised(&mut self, _event: EventId, _params: &[Value]) {}
 }
 
 /// A sink that ignores everything.
@@ -887,6 +890,12 @@ impl<'p> Engine<'p> {
         }
     }
 
+    /// Queues a built-in event the engine raises about a step, telling the sink first.
+    fn raise(&mut self, event: EventId, params: Vec<Value>, sink: &mut impl Sink) {
+        sink.raised(event, &params);
+        self.queue_produced(event, params, None, Origin::Raised);
+    }
+
     /// After a step: the cascade ends when no produced event is left; at the bound, the
     /// produced events still queued are dropped (counted as refused) and `livelock` is raised,
     /// once per cascade (docs/semantics.md, "Zero-time cascades").
@@ -920,7 +929,7 @@ impl<'p> Engine<'p> {
                         None => (String::new(), String::new()),
                     };
                     let params = vec![Value::Text(net), Value::Text(transition)];
-                    self.queue_produced(e, params, None, Origin::Raised);
+                    self.raise(e, params, sink);
                 }
             }
         }
@@ -951,7 +960,7 @@ impl<'p> Engine<'p> {
                 if let Some(e) = self.invariant_violated {
                     let mut params = self.param_buffer();
                     params.push(Value::Text(inv.name.clone()));
-                    self.queue_produced(e, params, None, Origin::Raised);
+                    self.raise(e, params, sink);
                 }
             }
             self.invariant_held[k] = holds;
@@ -965,7 +974,7 @@ impl<'p> Engine<'p> {
                     Value::Text(n.transitions[t as usize].name.clone()),
                     Value::Text(place),
                 ];
-                self.queue_produced(e, params, None, Origin::Raised);
+                self.raise(e, params, sink);
             }
         }
         if let (Some((net, t)), Some(e)) = (livelock, self.livelock) {
@@ -974,7 +983,7 @@ impl<'p> Engine<'p> {
                 Value::Text(n.name.clone()),
                 Value::Text(n.transitions[t as usize].name.clone()),
             ];
-            self.queue_produced(e, params, None, Origin::Raised);
+            self.raise(e, params, sink);
         }
     }
 

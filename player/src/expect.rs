@@ -5,6 +5,7 @@
 //! expect [not] NET.place | NET.transition | global.place     marked / fired since the line
 //! expect [not] active NET | inactive NET
 //! expect [not] processed | unused | refused                  the last timed line's event
+//! expect [not] refused EVENT [since start]                   any step of EVENT refused
 //! expect always FORMULA | never FORMULA                      now and after every later step
 //! expect [not] timer NAME [expires at SECONDS]               running (with that deadline)
 //! expect [not] call P.f(args) [since start]                  at least one such call
@@ -37,6 +38,14 @@ pub enum Expectation {
     Inactive(String),
     /// `processed`, `unused`, `refused`: what became of the last timed line's event.
     Outcome(Outcome),
+    /// `refused EVENT`: a step of this event was refused since the last timed line (or the
+    /// start): the line's own event, a timer's, one a net emitted or the engine raised.
+    Refused {
+        /// The event.
+        event: EventId,
+        /// Where counting starts.
+        since: Since,
+    },
     /// `call P.f(args)` or `emit EVENT(args)`: at least one since the last timed line (or the
     /// start).
     Seen {
@@ -166,6 +175,9 @@ pub fn parse_expect(rest: &str, p: &CompiledProject) -> Result<(bool, Expectatio
     if let Some(o) = Outcome::from_name(rest) {
         return Ok((not, Expectation::Outcome(o)));
     }
+    if let Some(text) = strip_word(rest, "refused") {
+        return parse_refused(text, p).map(|what| (not, what));
+    }
     for (word, never) in [("always", false), ("never", true)] {
         if let Some(text) = strip_word(rest, word) {
             if not {
@@ -215,9 +227,15 @@ pub fn parse_expect(rest: &str, p: &CompiledProject) -> Result<(bool, Expectatio
 
 fn known_net(p: &CompiledProject, net: &str) -> Result<String, String> {
     let net = net.trim();
-    p.net_id(net)
-        .map(|_| net.to_string())
-        .ok_or_else(|| format!("unknown net `{net}`"))
+    p.net_id(net).map(|_| net.to_string()).ok_or_else(|| {
+        let hint = suggest(net, p.nets.iter().map(|n| n.name.as_str()));
+        format!("unknown net `{net}`: {hint}")
+    })
+}
+
+/// The "did you mean" hint for a name of the project a script misspelt.
+fn suggest<'a>(name: &str, declared: impl IntoIterator<Item = &'a str>) -> String {
+    petrel_diag::names::suggest(name, declared, petrel_diag::names::Candidates::Declared)
 }
 
 /// `NET.place`, `NET.transition` or `global.place`.
@@ -231,7 +249,8 @@ fn parse_name(rest: &str, p: &CompiledProject) -> Result<Expectation, String> {
     };
     if net == "global" {
         if !p.globals.iter().any(|g| g.name == name) {
-            return Err(format!("no global place `{name}`"));
+            let hint = suggest(name, p.globals.iter().map(|g| g.name.as_str()));
+            return Err(format!("no global place `{name}`: {hint}"));
         }
     } else {
         let n = known_net(p, net)?;
@@ -242,7 +261,14 @@ fn parse_name(rest: &str, p: &CompiledProject) -> Result<Expectation, String> {
         if !decl.places.iter().any(|x| x.name == name)
             && !decl.transitions.iter().any(|x| x.name == name)
         {
-            return Err(format!("net `{net}` has no place or transition `{name}`"));
+            let names = decl.places.iter().map(|x| x.name.as_str());
+            let hint = suggest(
+                name,
+                names.chain(decl.transitions.iter().map(|x| x.name.as_str())),
+            );
+            return Err(format!(
+                "net `{net}` has no place or transition `{name}`: {hint}"
+            ));
         }
     }
     Ok(Expectation::Name(net.to_string(), name.to_string()))
@@ -285,6 +311,28 @@ fn parse_always(text: &str, never: bool, p: &CompiledProject) -> Result<Expectat
     })
 }
 
+/// `EVENT` or `EVENT since start`, after `refused`.
+fn parse_refused(text: &str, p: &CompiledProject) -> Result<Expectation, String> {
+    let (name, since) = match text.split_whitespace().collect::<Vec<_>>().as_slice() {
+        [name] => (*name, Since::LastLine),
+        [name, "since", "start"] => (*name, Since::Start),
+        _ => {
+            return Err(format!(
+                "expected `refused`, `refused EVENT` or `refused EVENT since start`, found \
+                 `refused {text}`"
+            ))
+        }
+    };
+    let event = p.event_id(name).ok_or_else(|| unknown_event(name, p))?;
+    Ok(Expectation::Refused { event, since })
+}
+
+/// `unknown event `x``, with the close name the script may have meant.
+pub(crate) fn unknown_event(name: &str, p: &CompiledProject) -> String {
+    let hint = suggest(name, p.events.iter().map(|e| e.name.as_str()));
+    format!("unknown event `{name}`: {hint}")
+}
+
 /// `NAME` or `NAME expires at SECONDS`.
 fn parse_timer(text: &str, p: &CompiledProject) -> Result<Expectation, String> {
     let words: Vec<&str> = text.split_whitespace().collect();
@@ -301,7 +349,10 @@ fn parse_timer(text: &str, p: &CompiledProject) -> Result<Expectation, String> {
         .timers
         .iter()
         .position(|t| t.name == name)
-        .ok_or_else(|| format!("unknown timer `{name}`"))?;
+        .ok_or_else(|| {
+            let hint = suggest(name, p.timers.iter().map(|t| t.name.as_str()));
+            format!("unknown timer `{name}`: {hint}")
+        })?;
     Ok(Expectation::Timer {
         timer: timer as TimerId,
         expires,
@@ -475,12 +526,19 @@ fn parse_call(text: &str, p: &CompiledProject) -> Result<Item, String> {
         .programs
         .iter()
         .position(|x| x.name == program.text)
-        .ok_or_else(|| format!("unknown program `{program}`"))?;
+        .ok_or_else(|| {
+            let hint = suggest(&program.text, p.programs.iter().map(|x| x.name.as_str()));
+            format!("unknown program `{program}`: {hint}")
+        })?;
     let func = p.programs[prog]
         .functions
         .iter()
         .position(|f| f.name == function.text)
-        .ok_or_else(|| format!("program `{program}` has no function `{function}`"))?;
+        .ok_or_else(|| {
+            let names = p.programs[prog].functions.iter().map(|f| f.name.as_str());
+            let hint = suggest(&function.text, names);
+            format!("program `{program}` has no function `{function}`: {hint}")
+        })?;
     let params = &p.programs[prog].functions[func].params;
     let args = expected_args(&args, params, &format!("{program}.{function}"))?;
     Ok(Item::Call {
@@ -510,7 +568,7 @@ fn parse_emit(text: &str, p: &CompiledProject) -> Result<Item, String> {
     }
     let id = p
         .event_id(&event.text)
-        .ok_or_else(|| format!("unknown event `{event}`"))?;
+        .ok_or_else(|| unknown_event(&event.text, p))?;
     // No parentheses (or empty ones): any parameters.
     let args = if args.is_empty() {
         None
@@ -542,6 +600,10 @@ pub(crate) struct Observed<'a, 'p> {
     pub emits_from: usize,
     /// The last timed line's event and what became of it (with the refusal's reason).
     pub outcome: Option<(&'a str, Outcome, Option<&'a str>)>,
+    /// Every refused step since the start: its event and why.
+    pub refusals: &'a [(EventId, String)],
+    /// Index in `refusals` of the first refusal since the last timed line.
+    pub refusals_from: usize,
 }
 
 /// One call or emission seen, as the item matching sees it.
@@ -764,6 +826,27 @@ pub(crate) fn check(what: &Expectation, not: bool, seen: &Observed) -> Result<()
                 match reason {
                     Some(r) => format!("{outcome}: {r}"),
                     None => outcome.to_string(),
+                },
+            )
+        }
+        Expectation::Refused { event, since } => {
+            let from = match since {
+                Since::LastLine => seen.refusals_from,
+                Since::Start => 0,
+            };
+            let window = &seen.refusals[from..];
+            let name = &p.events[*event as usize].name;
+            let found: Vec<String> = window
+                .iter()
+                .map(|(e, why)| format!("{} ({why})", p.events[*e as usize].name))
+                .collect();
+            (
+                window.iter().any(|(e, _)| e == event),
+                format!("{neg}refused {name} {}", seen.window(*since)),
+                if found.is_empty() {
+                    format!("no refusal {}", seen.window(*since))
+                } else {
+                    format!("refused {}", found.join(", "))
                 },
             )
         }

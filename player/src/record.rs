@@ -36,7 +36,8 @@ pub struct StepRecord<'p> {
     pub actions: Vec<String>,
     /// Calls made, with their arguments.
     pub calls: Vec<(ProgramId, FunctionId, Vec<Value>)>,
-    /// Events emitted by nets, with their arguments (queued, not yet processed).
+    /// Events emitted by nets and built-in events raised by the engine (`safety_violation`,
+    /// `livelock`, `invariant_violated`), with their arguments (queued, not yet processed).
     pub emits: Vec<(EventId, Vec<Value>)>,
     /// Nets activated, in order.
     pub activated: Vec<NetId>,
@@ -353,6 +354,11 @@ impl Sink for StepRecord<'_> {
     }
     fn invariant_violated(&mut self, name: &str) {
         self.actions.push(format!("invariant {name} broken"));
+    }
+    fn raised(&mut self, event: EventId, params: &[Value]) {
+        // The action's text is already there (`refused NET.t: ...`, `livelock: ...`,
+        // `invariant NAME broken`): only the event, for a script's `expect emit`.
+        self.emits.push((event, params.to_vec()));
     }
     fn cascade_stopped(&mut self, steps: u32, dropped: u64) {
         self.actions.push(format!(

@@ -74,8 +74,27 @@ enum LastTimed {
     Unknown,
 }
 
-/// Reads a script; every problem is reported as (line, message).
-pub fn parse_script(text: &str, project: &CompiledProject) -> Result<Script, Vec<(usize, String)>> {
+/// A line of a script that does not read.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ScriptError {
+    /// The line, from 1.
+    pub line: usize,
+    /// The column, from 1, in characters: where the name or word the message is about starts
+    /// (else the start of what follows `expect`, or of the timed line).
+    pub column: usize,
+    /// What is wrong, and what to write.
+    pub message: String,
+}
+
+impl std::fmt::Display for ScriptError {
+    /// `LINE:COLUMN: message`, to follow a file name.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}:{}: {}", self.line, self.column, self.message)
+    }
+}
+
+/// Reads a script; every line that does not read is reported.
+pub fn parse_script(text: &str, project: &CompiledProject) -> Result<Script, Vec<ScriptError>> {
     let mut lines = Vec::new();
     let mut errors = Vec::new();
     let mut last_time = 0.0f64;
@@ -94,6 +113,11 @@ pub fn parse_script(text: &str, project: &CompiledProject) -> Result<Script, Vec
         let expect = line
             .strip_prefix("expect")
             .filter(|r| r.is_empty() || r.starts_with(char::is_whitespace));
+        let start = raw.len() - raw.trim_start().len();
+        let body = match expect {
+            Some(rest) => start + line.len() - rest.trim_start().len(),
+            None => start,
+        };
         let result = if let Some(rest) = expect {
             parse_expect(rest.trim(), project).and_then(|(not, what)| {
                 outcome_has_event(&what, last_timed)?;
@@ -110,7 +134,11 @@ pub fn parse_script(text: &str, project: &CompiledProject) -> Result<Script, Vec
         };
         match result {
             Ok(l) => lines.push((n, l)),
-            Err(e) => errors.push((n, e)),
+            Err(message) => errors.push(ScriptError {
+                line: n,
+                column: column(raw, body, &message),
+                message,
+            }),
         }
     }
     if errors.is_empty() {
@@ -118,6 +146,17 @@ pub fn parse_script(text: &str, project: &CompiledProject) -> Result<Script, Vec
     } else {
         Err(errors)
     }
+}
+
+/// The column (from 1, in characters) a message about `raw` points at: the first name or word
+/// the message quotes in backticks, where it stands in the line at or after byte `body`; else
+/// `body`.
+fn column(raw: &str, body: usize, message: &str) -> usize {
+    let quoted = message.split('`').nth(1).filter(|q| !q.is_empty());
+    let at = quoted
+        .and_then(|q| raw.get(body..)?.find(q).map(|i| body + i))
+        .unwrap_or(body);
+    raw[..at].chars().count() + 1
 }
 
 /// `expect processed`/`unused`/`refused` speak of the last timed line's event: there must be
@@ -181,7 +220,7 @@ fn parse_timed(line: &str, p: &CompiledProject, last: &mut f64) -> Result<Line, 
         ));
     };
     let Some(id) = p.event_id(&event.text) else {
-        return Err(format!("unknown event `{}`", event.text));
+        return Err(crate::expect::unknown_event(&event.text, p));
     };
     let decl = &p.events[id as usize];
     if decl.params.len() != args.len() {
@@ -274,6 +313,8 @@ pub fn run_script(
         calls_from: 0,
         emits: Vec::new(),
         emits_from: 0,
+        refusals: Vec::new(),
+        refusals_from: 0,
         outcome: None,
         awaiting: false,
         always: Vec::new(),
@@ -315,6 +356,10 @@ struct Runner<'p, F: FnMut(&serde_json::Value)> {
     /// Every emission since the start, and where the last timed line's emissions begin.
     emits: Vec<(EventId, Vec<Value>)>,
     emits_from: usize,
+    /// Every refused step since the start (event, reason), and where the last timed line's
+    /// begin.
+    refusals: Vec<(EventId, String)>,
+    refusals_from: usize,
     /// The last timed line's event, what became of it, and why if it was refused.
     outcome: Option<(String, Outcome, Option<String>)>,
     /// The last timed line's event was queued and its step is the next one.
@@ -333,6 +378,7 @@ impl<F: FnMut(&serde_json::Value)> Runner<'_, F> {
         self.fired.clear();
         self.calls_from = self.calls.len();
         self.emits_from = self.emits.len();
+        self.refusals_from = self.refusals.len();
         self.outcome = None;
         let target = (time * 1e6).round() as Micros;
         while let Some(d) = self.engine.next_deadline().filter(|&d| d <= target) {
@@ -358,6 +404,9 @@ impl<F: FnMut(&serde_json::Value)> Runner<'_, F> {
             }
             Err(refusal) => {
                 let reason = refusal.to_string();
+                if let Some(e) = self.engine.project().event_id(name) {
+                    self.refusals.push((e, reason.clone()));
+                }
                 self.outcome = Some((name.clone(), Outcome::Refused, Some(reason.clone())));
                 self.record(
                     Some((name.clone(), params.clone())),
@@ -382,6 +431,8 @@ impl<F: FnMut(&serde_json::Value)> Runner<'_, F> {
                 .outcome
                 .as_ref()
                 .map(|(e, o, r)| (e.as_str(), *o, r.as_deref())),
+            refusals: &self.refusals,
+            refusals_from: self.refusals_from,
         };
         if let Err(message) = check(what, not, &seen) {
             self.failure = Some((n, message));
@@ -409,6 +460,9 @@ impl<F: FnMut(&serde_json::Value)> Runner<'_, F> {
             let name = &self.engine.project().events[step.event as usize].name;
             let reason = (outcome == Outcome::Refused)
                 .then(|| Refusal::AfterCatastrophic(name.clone()).to_string());
+            if let Some(r) = &reason {
+                self.refusals.push((step.event, r.clone()));
+            }
             if std::mem::take(&mut self.awaiting) {
                 self.outcome = Some((name.clone(), outcome, reason.clone()));
             }

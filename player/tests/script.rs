@@ -104,7 +104,8 @@ fn fails_at(text: &str, line: usize) -> String {
 
 /// The script does not read; the errors are returned, as (line, message).
 fn errors(text: &str) -> Vec<(usize, String)> {
-    parse_script(text, &project()).expect_err(text)
+    let e = parse_script(text, &project()).expect_err(text);
+    e.into_iter().map(|e| (e.line, e.message)).collect()
 }
 
 fn one_error(text: &str, line: usize, needle: &str) {
@@ -481,7 +482,7 @@ fn error_of(text: &str) -> String {
         Ok(s) => panic!("`{text}` was accepted as {:?}", s.lines),
         Err(e) => {
             assert_eq!(e.len(), 1, "{e:?}");
-            e[0].1.clone()
+            e[0].message.clone()
         }
     }
 }
@@ -550,4 +551,82 @@ fn nesting_is_bounded_without_overflowing_the_stack() {
         .join()
         .expect("no stack overflow");
     assert!(e.contains("nested more than"), "{e}");
+}
+
+/// Before: `expect refused EVENT` did not read; a refusal of an event a net emitted after a
+/// catastrophic one was visible only in the JSON lines.
+#[test]
+fn a_refusal_of_any_step_is_expectable_with_its_event() {
+    // `panic` emits `boom` (catastrophic, processed) and `ack`, refused after it.
+    passes("0 go\n1 panic\nexpect processed\nexpect refused ack\nexpect not refused boom\n");
+    passes("0 go\n1 panic\n2 wait\nexpect not refused ack\nexpect refused ack since start\n");
+    // The line's own event, refused, is one too.
+    passes("0 go\n1 panic\n2 tick(1)\nexpect refused\nexpect refused tick\n");
+    let msg = fails_at("0 go\n1 panic\nexpect refused go\n", 3);
+    assert!(
+        msg.starts_with("expected refused go since line 2\n  found: refused ack (")
+            && msg.contains("catastrophic"),
+        "{msg}"
+    );
+    one_error(
+        "0 go\nexpect refused ak\n",
+        2,
+        "unknown event `ak`: did you mean `ack`?",
+    );
+    one_error(
+        "0 go\nexpect refused ack now\n",
+        2,
+        "expected `refused`, `refused EVENT`",
+    );
+}
+
+const SAFETY_NETS: &str = r#"
+net A {
+    place idle = 1
+    place full = 1
+    transition fill on go: idle -> full
+}
+"#;
+
+/// Before: `expect emit safety_violation` found nothing: only events emitted by nets were
+/// counted, not the built-in events the engine raises about a step.
+#[test]
+fn the_built_in_events_the_engine_raises_are_expectable_as_emissions() {
+    let (_, c, d, _) = from_sources(MANIFEST, &[("a.pn", SAFETY_NETS)]);
+    assert!(!d.has_errors(), "{d:?}");
+    let p = c.unwrap();
+    let text = "0 go\nexpect emit safety_violation(\"A\", \"fill\", _)\n\
+                expect 1 emits safety_violation\nexpect not emit livelock\n";
+    let script = parse_script(text, &p).unwrap_or_else(|e| panic!("{e:?}"));
+    let out = run_script(&p, &script, |_| {});
+    assert!(out.failure.is_none(), "{:?}", out.failure);
+}
+
+/// Before: an unknown name had no hint and an error no column.
+#[test]
+fn a_misspelt_name_gets_a_hint_and_the_error_its_column() {
+    let e = parse_script("  0 pingg(\"a\", 1)\nexpect  timer tt\n", &project()).unwrap_err();
+    let shown: Vec<String> = e.iter().map(ToString::to_string).collect();
+    assert_eq!(
+        shown,
+        [
+            "1:5: unknown event `pingg`: did you mean `ping`?",
+            "2:15: unknown timer `tt`: did you mean `t`?",
+        ]
+    );
+    one_error("expect A.runing\n", 1, "did you mean `running`?");
+    one_error(
+        "expect active AA\n",
+        1,
+        "unknown net `AA`: did you mean `A`?",
+    );
+    one_error("expect call P.aa()\n", 1, "did you mean `a`?");
+    one_error(
+        "expect call PP.a()\n",
+        1,
+        "unknown program `PP`: did you mean `P`?",
+    );
+    // Nothing quoted that stands in the line: the column of what follows `expect`.
+    let e = parse_script("0 go\n  expect  2 calls\n", &project()).unwrap_err();
+    assert_eq!((e[0].line, e[0].column), (2, 11), "{e:?}");
 }

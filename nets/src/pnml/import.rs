@@ -554,6 +554,7 @@ impl Rebuild<'_, '_> {
                 name: self.name(e, "name"),
                 category,
                 params: self.params(e),
+                params_unread: false,
                 description: e.child("description").map(|d| d.text.clone()),
                 internal: self.flag(e, "internal"),
             });
@@ -564,6 +565,7 @@ impl Rebuild<'_, '_> {
                 .map(|f| FunctionDecl {
                     name: self.name(f, "name"),
                     params: self.params(f),
+                    params_unread: false,
                     answers: f
                         .children("answer")
                         .map(|a| self.name(a, "event"))

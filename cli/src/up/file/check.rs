@@ -795,6 +795,41 @@ mod tests {
         d.iter().map(|x| x.code).collect()
     }
 
+    /// Before: a misspelt event of `[link]` or `[[send]]` had no "did you mean".
+    #[test]
+    fn a_misspelt_event_gets_a_hint() {
+        let manifest = r#"
+[project]
+name = "p"
+files = ["a.pn"]
+start = ["A"]
+[events]
+go = { category = "nominal" }
+link_lost = { category = "communication", params = ["computer: text"] }
+link_back = { category = "communication", params = ["computer: text"] }
+"#;
+        let nets = "net A {\n place i = 1\n transition t on go: i -> i\n transition l on link_lost(c): i -> i\n transition b on link_back(c): i -> i\n}\n";
+        let (_, c, d, _) = petrel_nets::project::from_sources(manifest, &[("a.pn", nets)]);
+        let c = c.unwrap_or_else(|| panic!("{d:?}"));
+        let text = "[computers.a]\ngateway = \"tcp/127.0.0.1:7447\"\n[computers.b]\n\
+                    [link]\nlost_event = \"link_lots\"\nrestored_event = \"link_back\"\n\
+                    [[send]]\nat = \"1s\"\nevent = \"g0\"\n";
+        let mut sources = SourceMap::default();
+        let file = sources.add("vehicle.toml", text);
+        let mut d = Diagnostics::new();
+        assert!(check_file(file, text, Some(&c), None, &mut d).is_none());
+        assert_eq!(codes(&d), ["E0809", "E0812"], "{d:?}");
+        let shown = d.render_human(&sources);
+        assert!(
+            shown.contains("`link_lots` is not an event of the project: did you mean `link_lost`?"),
+            "{shown}"
+        );
+        assert!(
+            shown.contains("unknown event `g0`: did you mean `go`?"),
+            "{shown}"
+        );
+    }
+
     #[test]
     fn substitutions_expand_and_escape() {
         let var = |n: &str| (n == "vehicle").then(|| "uav1".to_string());

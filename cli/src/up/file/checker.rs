@@ -101,14 +101,22 @@ impl<'a> VehicleChecker<'a> {
         let name = e.get_ref();
         if let Some(project) = self.project {
             let found = project.events.iter().find(|ev| &ev.name == name);
-            let ok = found.is_some_and(|ev| {
+            let link = |ev: &&petrel_nets::compiled::Event| {
                 ev.category == petrel_nets::model::Category::Communication
                     && ev.params.len() == 1
                     && ev.params[0].1 == petrel_nets::model::Type::Text
-            });
-            if !ok {
+            };
+            if !found.is_some_and(|ev| link(&ev)) {
                 let why = match found {
-                    None => format!("`{name}` is not an event of the project"),
+                    None => {
+                        // The hint is among the events that could be link events.
+                        let hint = petrel_diag::names::suggest(
+                            name,
+                            project.events.iter().filter(link).map(|e| e.name.as_str()),
+                            petrel_diag::names::Candidates::Declared,
+                        );
+                        format!("`{name}` is not an event of the project: {hint}")
+                    }
                     Some(_) => format!(
                         "`{name}` is not of category communication with one `text` parameter"
                     ),
