@@ -23,7 +23,10 @@ use std::process::Command;
 /// What the page asks: write a file, or run a command and find these lines in its output.
 #[derive(Debug, PartialEq)]
 enum Step {
-    File { path: String, text: String },
+    File {
+        path: String,
+        text: String,
+    },
     Run {
         command: String,
         exit: i32,
@@ -39,7 +42,10 @@ fn steps(page: &str) -> Vec<Step> {
         let Some(info) = line.strip_prefix("```") else {
             continue;
         };
-        let body: Vec<&str> = lines.by_ref().take_while(|l| !l.starts_with("```")).collect();
+        let body: Vec<&str> = lines
+            .by_ref()
+            .take_while(|l| !l.starts_with("```"))
+            .collect();
         let file = info
             .split_whitespace()
             .find_map(|w| w.strip_prefix("file="));
@@ -83,8 +89,7 @@ fn line_matches(shown: &str, line: &str) -> bool {
         return shown == line;
     }
     let (first, last) = (parts[0], parts[parts.len() - 1]);
-    if !line.starts_with(first) || line.len() < first.len() + last.len() || !line.ends_with(last)
-    {
+    if !line.starts_with(first) || line.len() < first.len() + last.len() || !line.ends_with(last) {
         return false;
     }
     let mut rest = &line[first.len()..line.len() - last.len()];
@@ -100,12 +105,11 @@ fn line_matches(shown: &str, line: &str) -> bool {
 /// The first shown line (not `...`) that the output lacks, in order; `None` when all are there.
 fn missing_line<'a>(shown: &'a [String], output: &str) -> Option<&'a str> {
     let mut output = output.lines();
-    for s in shown.iter().filter(|s| s.trim() != "...") {
-        if !output.by_ref().any(|l| line_matches(s, l)) {
-            return Some(s);
-        }
-    }
-    None
+    shown
+        .iter()
+        .filter(|s| s.trim() != "...")
+        .find(|s| !output.by_ref().any(|l| line_matches(s, l)))
+        .map(String::as_str)
 }
 
 #[test]
@@ -136,7 +140,10 @@ fn the_convention_reads_files_commands_and_elisions() {
         missing_line(&shown, "end 12 s here\nok\n"),
         Some("end ... here")
     );
-    assert_eq!(missing_line(&shown, "ok\nend here, late\n"), Some("end ... here"));
+    assert_eq!(
+        missing_line(&shown, "ok\nend here, late\n"),
+        Some("end ... here")
+    );
     assert!(!line_matches("a...b", "ab-"));
     assert!(line_matches("a...b...c", "a1b2c"));
     assert!(!line_matches("a...b...c", "a1c2b"));
