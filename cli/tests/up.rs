@@ -245,6 +245,11 @@ fn up_flies_the_uav_mission_until_landed_and_its_journal_replays() {
         out.contains(&format!("journal: {}", journal.display())),
         "{out}"
     );
+    // The UAV project has a map (missions/uav/map.toml): the end names `petrel plot`.
+    assert!(
+        out.contains(&format!("map: `petrel plot {}`", up.run.display())),
+        "{out}"
+    );
     assert_vehicle_left_clean(&vehicle);
     let r = run_petrel(&["replay", &journal.display().to_string()]);
     assert_eq!(
@@ -717,6 +722,8 @@ fn a_timeout_exits_1_with_the_reason() {
         "{err}"
     );
     assert!(summary_line(&out, "player").contains("exited(0)"), "{out}");
+    // This copy has no map.toml: nothing to plot, and `petrel plot` is not offered.
+    assert!(!out.contains("petrel plot"), "{out}");
     assert_vehicle_left_clean(&vehicle);
 }
 

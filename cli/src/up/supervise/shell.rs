@@ -589,6 +589,15 @@ impl Supervisor {
                 j.display()
             ));
         }
+        // A project with a map says where the vehicle's positions come from: the run can be
+        // drawn (docs/monitor.md, "The map").
+        let recorded = procs.iter().any(|p| p.plan.journal.is_some());
+        if recorded && self.plan.project_dir.join("map.toml").is_file() {
+            text.push_str(&format!(
+                "map: `petrel plot {}` draws the run on the project's map.toml (map.svg)\n",
+                self.plan.run_dir.display()
+            ));
+        }
         // Not `common::out`, which ends the process quietly on a closed pipe: the exit code
         // must still say whether a process failed.
         let _ = std::io::stdout().lock().write_all(text.as_bytes());
