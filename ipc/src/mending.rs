@@ -89,8 +89,10 @@ impl Mending {
     }
 
     /// Before a look: when a retry is due, calls `change_list` (which makes the list of
-    /// publishers change), so that the look connects again.
-    pub(crate) fn before_look(&self, change_list: impl FnOnce()) {
+    /// publishers change, and says whether it could), so that the look connects again. A list
+    /// that could not be changed (no publisher slot free...) is a failed retry: the next one
+    /// comes after the backoff, never dropped.
+    pub(crate) fn before_look(&self, change_list: impl FnOnce() -> bool) {
         if !self.idle() {
             self.before_look_at(Instant::now(), change_list);
         }
@@ -104,12 +106,14 @@ impl Mending {
     }
 
     /// [`before_look`](Self::before_look) at time `now`.
-    fn before_look_at(&self, now: Instant, change_list: impl FnOnce()) {
+    fn before_look_at(&self, now: Instant, change_list: impl FnOnce() -> bool) {
         self.note_failure(now);
         if self.due.get().is_some_and(|due| due <= now) {
             self.due.set(None);
             self.retries.set(self.retries.get() + 1);
-            change_list();
+            if !change_list() {
+                self.failed.store(true, Ordering::Relaxed);
+            }
         }
     }
 
@@ -160,11 +164,17 @@ mod tests {
         assert_eq!(m.due.get(), Some(t0 + FIRST_RETRY));
         // Not due yet: no retry.
         let mut changed = 0;
-        m.before_look_at(t0, || changed += 1);
+        m.before_look_at(t0, || {
+            changed += 1;
+            true
+        });
         assert_eq!(changed, 0);
         // Due: the list is changed once; the look fails again: twice the wait.
         let t1 = t0 + FIRST_RETRY;
-        m.before_look_at(t1, || changed += 1);
+        m.before_look_at(t1, || {
+            changed += 1;
+            true
+        });
         assert_eq!(changed, 1);
         fail(&m);
         m.after_look_at(t1);
@@ -173,19 +183,39 @@ mod tests {
         let mut t = t1;
         for _ in 0..20 {
             t = m.due.get().unwrap();
-            m.before_look_at(t, || changed += 1);
+            m.before_look_at(t, || {
+                changed += 1;
+                true
+            });
             fail(&m);
             m.after_look_at(t);
         }
         assert_eq!(m.due.get(), Some(t + LAST_RETRY));
         // A retry whose look meets no failure ends the mending; the next failure starts over.
         let t = m.due.get().unwrap();
-        m.before_look_at(t, || changed += 1);
+        m.before_look_at(t, || {
+            changed += 1;
+            true
+        });
         m.after_look_at(t);
         assert_eq!(m.due(), None);
         assert_eq!(m.retries(), changed);
         fail(&m);
         m.after_look_at(t);
         assert_eq!(m.due.get(), Some(t + FIRST_RETRY));
+    }
+
+    #[test]
+    fn a_list_that_could_not_change_is_a_failed_retry_tried_again() {
+        let m = Mending::new();
+        let t0 = Instant::now();
+        fail(&m);
+        m.after_look_at(t0);
+        let t1 = t0 + FIRST_RETRY;
+        // The list could not change: the look meets no failure (nothing was tried), yet the
+        // connection is still missing: a retry comes again, after twice the wait.
+        m.before_look_at(t1, || false);
+        m.after_look_at(t1);
+        assert_eq!(m.due.get(), Some(t1 + FIRST_RETRY * 2));
     }
 }

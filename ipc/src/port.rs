@@ -1222,14 +1222,14 @@ impl<M: Message> Receiver<M> {
     /// Makes the service's list of senders change, so that this receiver's next look connects
     /// again to the senders iceoryx2 could not connect it to ([`crate::mending`]): a publisher
     /// of its own, made and dropped (no notifier: no one hears of it).
-    fn change_senders(&self) {
-        let made = self
-            .factory
+    /// Returns whether the list changed (the publisher could be made).
+    fn change_senders(&self) -> bool {
+        self.factory
             .publisher_builder()
             .initial_max_slice_len(1)
             .max_loaned_samples(1)
-            .create();
-        drop(made);
+            .create()
+            .is_ok()
     }
 
     /// When this receiver must look again to mend a connection iceoryx2 could not make.
